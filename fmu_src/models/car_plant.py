@@ -1,0 +1,36 @@
+"""FMU model file: CarPlant, the nonlinear two-track truth model of every car observer.
+
+Interface per CONTRACT.md; the maths is in ``car_plant.py``; the vehicle parameters come from
+the plant data file baked into the FMU.
+"""
+from ..car_plant import CarPlantModel
+from ..spec import ModelSpec, Var
+
+SPEC = ModelSpec(
+    description="Nonlinear two-track lateral/yaw/roll car model with Magic Formula tires, "
+                "load transfer and tire relaxation (latobs truth model)",
+    runtime=CarPlantModel,
+    inputs=(
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
+        Var("vx", "m/s", "prescribed longitudinal speed"),
+        Var("bank_angle", "rad", "road bank angle (> 0: gravity pulls towards -y)"),
+    ),
+    outputs=(
+        Var("beta", "rad", "sideslip angle atan(vy/vx)"),
+        Var("vy", "m/s", "lateral velocity"),
+        Var("yaw_rate", "rad/s", "yaw rate"),
+        Var("ay", "m/s2", "lateral acceleration sensed at the CG (tire forces / m)"),
+        Var("roll_angle", "rad", "roll angle, > 0 leaning right"),
+        Var("roll_rate", "rad/s", "roll rate"),
+        Var("Fyf", "N", "front axle lateral force (body y)"),
+        Var("Fyr", "N", "rear axle lateral force (body y)"),
+        Var("alpha_f", "rad", "front slip angle (mean of the two wheels)"),
+        Var("alpha_r", "rad", "rear slip angle (mean of the two wheels)"),
+    ),
+    parameters=(
+        Var("mu", "1", "peak friction coefficient (dry 1.0, wet 0.8, snow 0.3, ice 0.1)", start=1.0),
+        Var("scale_f", "1", "front cornering stiffness scale factor", start=1.0),
+        Var("scale_r", "1", "rear cornering stiffness scale factor", start=1.0),
+        Var("sigma", "m", "tire relaxation length (<= 0: no relaxation)", start=0.5),
+    ),
+)

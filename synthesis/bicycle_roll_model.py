@@ -1,0 +1,100 @@
+"""Linear design model of paper 000 (Menhour, Koenig, d'Andrea-Novel, ECC 2014), eq. (1)-(2).
+
+State x = [beta (rad), r yaw rate (rad/s), phi roll angle (rad), phidot roll rate (rad/s)],
+input u = delta (road-wheel angle, rad, > 0 steers left), unknown input w = phi_r (road bank
+angle, rad), measurement y = [r, phi, phidot].
+
+Derived from first principles (ERRATA.md section 000), linear tires (eq. 2):
+    lateral   m (Vx (beta' + r) - hr phi'') = Fyf + Fyr - m g phi_r
+    yaw       Iz r' = lf Fyf - lr Fyr
+    roll      Ix phi'' = hr (Fyf + Fyr) + (m g hr - Kr) phi - br phi'        (about the CG)
+    Fyf = Cf (delta - beta - lf r / Vx),   Fyr = -Cr (beta - lr r / Vx)
+Departures from the printed eq. (1), each re-derived here and checked by
+tests/test_design_model.py against the linearisation of the nonlinear CarPlant:
+  * A(1,4) = -hr br / (Ix Vx)        (printed: -hr Lr / (Ix Vx))
+  * A(2,2) = -C_a2 / (Iz Vx)         (printed: Ix instead of Iz)
+  * B(4)   = hr Cf / Ix              (printed H(4) = Cf / Ix: the roll moment of the front
+                                      force acts on the lever hr, like every other term of row 4;
+                                      ERRATA.md calls B right, the re-derivation does not)
+Every entry is a polynomial in 1/Vx; ``lpv_coefficients`` returns the coefficient matrices so
+that the runtime can evaluate the model at any speed without knowing the vehicle.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .params import G, Vehicle
+
+STATES = ("beta", "yaw_rate", "roll_angle", "roll_rate")
+STATE_UNITS = ("rad", "rad/s", "rad", "rad/s")
+INPUTS = ("delta",)
+UNKNOWN_INPUTS = ("bank_angle",)
+OUTPUTS = ("yaw_rate", "roll_angle", "roll_rate")
+REQUIRED = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr")
+
+C = np.array([[0.0, 1.0, 0.0, 0.0],
+              [0.0, 0.0, 1.0, 0.0],
+              [0.0, 0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class LinearModel:
+    """x' = A x + B u + F w, y = C x at one speed."""
+
+    A: np.ndarray
+    B: np.ndarray
+    F: np.ndarray
+    C: np.ndarray
+    vx: float
+
+
+def lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: float | None = None) -> dict[str, list[np.ndarray]]:
+    """Coefficient matrices M_k with M(Vx) = sum_k M_k Vx**-k, for M in A (k<=2), B, F (k<=1).
+
+    ``Cf``/``Cr`` (N/rad, per axle) override the vehicle's stiffnesses (tire modes).
+    """
+    p = vehicle.require(REQUIRED, "the paper-000 design model (bicycle + roll)")
+    m, Iz, Ix, lf, lr, hr, Kr, br = (p[k] for k in ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br"))
+    Cf = p["Cf"] if Cf is None else float(Cf)
+    Cr = p["Cr"] if Cr is None else float(Cr)
+    if not (Cf > 0 and Cr > 0):
+        raise ValueError(f"cornering stiffnesses must be > 0 N/rad, got Cf={Cf}, Cr={Cr}")
+    Ieq = Ix + m * hr**2                       # paper: I_eq = I_x + m h_r^2
+    Ca0 = Cf + Cr                              # C_alpha,0
+    Ca1 = lf * Cf - lr * Cr                    # C_alpha,1
+    Ca2 = lf**2 * Cf + lr**2 * Cr              # C_alpha,2
+    Ca3 = hr * (m * G * hr - Kr)               # C_alpha,3
+
+    A0 = np.array([[0.0, -1.0, 0.0, 0.0],
+                   [-Ca1 / Iz, 0.0, 0.0, 0.0],
+                   [0.0, 0.0, 0.0, 1.0],
+                   [-Ca0 * hr / Ix, 0.0, (m * G * hr - Kr) / Ix, -br / Ix]])
+    A1 = np.array([[-Ieq * Ca0 / (Ix * m), 0.0, Ca3 / Ix, -hr * br / Ix],   # A(1,4): ERRATA, printed hr*Lr
+                   [0.0, -Ca2 / Iz, 0.0, 0.0],                              # A(2,2): ERRATA, printed Ix
+                   [0.0, 0.0, 0.0, 0.0],
+                   [0.0, -Ca1 * hr / Ix, 0.0, 0.0]])
+    A2 = np.zeros((4, 4))
+    A2[0, 1] = -Ieq * Ca1 / (Ix * m)
+    B0 = np.array([[0.0], [lf * Cf / Iz], [0.0], [hr * Cf / Ix]])         # B(4): re-derived, printed Cf/Ix
+    B1 = np.array([[Ieq * Cf / (Ix * m)], [0.0], [0.0], [0.0]])
+    F0 = np.zeros((4, 1))
+    F1 = np.array([[-G], [0.0], [0.0], [0.0]])                            # F = [-g/Vx, 0, 0, 0]^T
+    return {"A": [A0, A1, A2], "B": [B0, B1], "F": [F0, F1]}
+
+
+def evaluate(coeffs: dict[str, list[np.ndarray]], vx: float) -> LinearModel:
+    """The model at speed ``vx`` (m/s) from its 1/Vx coefficients."""
+    if not vx > 0:
+        raise ValueError(f"the design model needs a speed > 0 m/s, got vx={vx}")
+    inv = 1.0 / vx
+    A = sum(M * inv**k for k, M in enumerate(coeffs["A"]))
+    B = sum(M * inv**k for k, M in enumerate(coeffs["B"]))
+    F = sum(M * inv**k for k, M in enumerate(coeffs["F"]))
+    return LinearModel(A=A, B=B, F=F, C=C.copy(), vx=float(vx))
+
+
+def model(vehicle: Vehicle, vx: float, Cf: float | None = None, Cr: float | None = None) -> LinearModel:
+    """Paper 000's model (1) at speed ``vx`` (m/s)."""
+    return evaluate(lpv_coefficients(vehicle, Cf, Cr), vx)

@@ -1,0 +1,145 @@
+"""Independent certificate of a design file: numpy/scipy only, never the LMI solver.
+
+A certificate re-evaluates the numbers that will be packaged (the design file's model
+coefficients and gains), not the solver's internal state:
+  * the stored model equals the model re-derived from the stored vehicle parameters;
+  * per mode and design speed: closed-loop eigenvalues inside the pole region, the H-infinity
+    norm from bank angle to sideslip error by Hamiltonian bisection (``hinf.py``, no P) <= gamma,
+    cross-checked by a dense frequency sweep; the slowest pole seen by the bank estimate;
+  * the common Lyapunov matrix P of the file decreases along every mode (switching proof);
+  * largest gain, cond(P), and the runtime's RK4 step (stable, accurate on every closed loop).
+A design whose certificate fails is never packaged (``latobs.packaging`` re-runs it).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from . import bicycle_roll_model as brm
+from . import hinf
+from .params import parse_vehicle
+from .pi_hinf_000 import closed_loop
+
+REL_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Check:
+    name: str
+    value: float
+    limit: float
+    passed: bool
+    sense: str = "<="          # value <= limit, or ">=" for a lower bound
+    detail: str = ""
+
+
+def _le(name, value, limit, detail=""):
+    return Check(name, float(value), float(limit), bool(value <= limit), "<=", detail)
+
+
+def _ge(name, value, limit, detail=""):
+    return Check(name, float(value), float(limit), bool(value >= limit), ">=", detail)
+
+
+def _rk4_factor(z: np.ndarray) -> np.ndarray:
+    return 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24
+
+
+def certify(data: dict) -> tuple[bool, list[Check]]:
+    """Certify a design dict. Returns (certified, checks)."""
+    paper = data.get("paper")
+    if paper == "000":
+        checks = _certify_000(data)
+    else:
+        raise ValueError(f"design {data.get('name')!r}: no certificate for paper {paper!r}")
+    return all(c.passed for c in checks) and bool(checks), checks
+
+
+def _certify_000(d: dict) -> list[Check]:
+    checks: list[Check] = []
+    T, N, C = (np.asarray(d["structure"][k]) for k in ("T", "N", "C"))
+    P = np.asarray(d["P"])
+    gamma = float(d["gamma"])
+    a, R = d["region"]["alpha"], d["region"]["radius"]
+    opts = d["options"]
+    checks.append(_le("T + N C = I (eq. 6)", np.max(np.abs(T + N @ C - np.eye(T.shape[0]))), 1e-12))
+
+    vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
+    model_err = 0.0
+    for mode in d["modes"]:
+        ref = brm.lpv_coefficients(vehicle, mode["Cf"], mode["Cr"])
+        for key, mats in ref.items():
+            for k, M in enumerate(mats):
+                stored = np.asarray(mode["model"][key][k])
+                model_err = max(model_err, float(np.max(np.abs(stored - M)) / max(1.0, np.max(np.abs(M)))))
+    checks.append(_le("model equals the model re-derived from the vehicle parameters", model_err, 1e-12))
+
+    max_step = float(d["runtime"]["max_step"])
+    worst = {"hinf": 0.0, "sweep_gap": 0.0, "alpha": -math.inf, "radius": 0.0, "lyap": -math.inf,
+             "bank": -math.inf, "rk4_amp": 0.0, "rk4_err": 0.0}
+    for mode in d["modes"]:
+        K_P, K_I = np.asarray(mode["gains"]["K_P"]), np.asarray(mode["gains"]["K_I"])
+        for v in mode["design_speeds"]:
+            where = f"mode {mode['index']} at {v * 3.6:.1f} km/h"
+            Acl, Fa, La = closed_loop(mode["model"], K_P, K_I, T, C, v)
+            reg = hinf.pole_region(Acl, a, R)
+            checks.append(_le(f"max Re(eig) < -alpha, {where}", reg["max_real_part"], -a))
+            checks.append(_le(f"max |eig| < radius, {where}", reg["max_modulus"], R))
+            hn = hinf.hinf_norm(Acl, Fa, La).norm
+            sweep, _ = hinf.frequency_sweep_peak(Acl, Fa, La)
+            checks.append(_le(f"H-inf bank->beta error (Hamiltonian) <= gamma, {where}", hn, gamma * (1 + REL_TOL)))
+            gap = abs(hn - sweep) / max(hn, 1e-300)
+            checks.append(_le(f"Hamiltonian and frequency sweep agree, {where}", gap, 1e-3))
+            lyap = float(np.max(np.linalg.eigvalsh(Acl.T @ P + P @ Acl)))
+            checks.append(_le(f"common P decreases (max eig of Acl'P + P Acl), {where}", lyap, 0.0))
+            n = Acl.shape[0]
+            e_w = np.zeros((1, n)); e_w[0, -1] = 1.0
+            pole, _w = hinf.slowest_pole_seen_by(Acl, Fa, e_w)
+            checks.append(_le(f"slowest pole of the bank estimate, {where}", pole.real, -a))
+            lam = np.linalg.eigvals(Acl) * max_step
+            amp = float(np.max(np.abs(_rk4_factor(lam))))
+            err = float(np.max(np.abs(_rk4_factor(lam) - np.exp(lam))))
+            checks.append(_le(f"runtime RK4 step {max_step * 1e3:.3g} ms stable (max |R(h lambda)|), {where}", amp, 1.0 - 1e-9))
+            checks.append(_le(f"runtime RK4 one-step error |R(h lambda) - exp(h lambda)|, {where}", err, 1e-6))
+    if opts.get("switching") == "tire":
+        # the runtime evaluates the tire modes' models at the measured speed: check between grid speeds
+        lo, hi = d["modes"][0]["model_speed"]["range"]
+        worst_re = -math.inf
+        for mode in d["modes"]:
+            K_P, K_I = np.asarray(mode["gains"]["K_P"]), np.asarray(mode["gains"]["K_I"])
+            for v in np.linspace(lo, hi, 61):
+                Acl, _, _ = closed_loop(mode["model"], K_P, K_I, T, C, float(v))
+                worst_re = max(worst_re, float(np.max(np.linalg.eigvals(Acl).real)))
+        checks.append(_le("max Re(eig) on a 61-point speed grid between the design speeds (frozen speed)", worst_re, 0.0))
+    gains = max(max(np.max(np.abs(m["gains"]["K_P"])), np.max(np.abs(m["gains"]["K_I"]))) for m in d["modes"])
+    checks.append(_le("largest gain entry", gains, opts.get("gain_limit", 1e4)))
+    checks.append(_le("cond(P)", np.linalg.cond(P), opts.get("cond_limit", 1e7)))
+    checks.append(_le("P symmetric: max |P - P'|", float(np.max(np.abs(P - P.T))), 0.0))
+    checks.append(_ge("P positive definite: min eig(P)", float(np.min(np.linalg.eigvalsh(P))), 1e-12))
+    return checks
+
+
+def as_dicts(checks: list[Check]) -> list[dict]:
+    return [asdict(c) for c in checks]
+
+
+def summary(data: dict) -> dict:
+    """Headline figures of a certified paper-000 design (for notes and reports)."""
+    out = {"gamma": data["gamma"], "per_mode": []}
+    for mode in data["modes"]:
+        K_P, K_I = np.asarray(mode["gains"]["K_P"]), np.asarray(mode["gains"]["K_I"])
+        T, C = np.asarray(data["structure"]["T"]), np.asarray(data["structure"]["C"])
+        for v in mode["design_speeds"]:
+            Acl, Fa, La = closed_loop(mode["model"], K_P, K_I, T, C, v)
+            e_w = np.zeros((1, Acl.shape[0])); e_w[0, -1] = 1.0
+            out["per_mode"].append({
+                "mode": mode["index"], "label": mode["label"], "speed_kmh": round(v * 3.6, 3),
+                "hinf": hinf.hinf_norm(Acl, Fa, La).norm,
+                "slowest_bank_pole": hinf.slowest_pole_seen_by(Acl, Fa, e_w)[0].real,
+                "slowest_pole": float(np.max(np.linalg.eigvals(Acl).real)),
+                "largest_gain": float(max(np.max(np.abs(K_P)), np.max(np.abs(K_I)))),
+            })
+    out["cond_P"] = float(np.linalg.cond(np.asarray(data["P"])))
+    return out

@@ -1,0 +1,75 @@
+"""Catalogue of the observer designs: name -> paper, default vehicle, design options.
+
+``run(name, vehicle)`` is the design-time pipeline of one observer: parameters -> design model
+-> LMI design -> independent certificate -> design dict (written by ``design_file.write``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
+
+from . import certificate, pi_hinf_000
+from .params import Vehicle, load_vehicle
+
+
+class CertificateError(RuntimeError):
+    """A design solved but failed its independent certificate; it must not be packaged."""
+
+
+@dataclass(frozen=True)
+class DesignEntry:
+    name: str
+    paper: str
+    default_vehicle: str
+    description: str
+    options: Callable[[str], object]       # artefact name -> options of the paper's design
+    solve: Callable[[Vehicle, object], dict]
+
+
+def _solve_000(vehicle: Vehicle, opts) -> dict:
+    return pi_hinf_000.to_design_dict(pi_hinf_000.design(vehicle, opts))
+
+
+DESIGNS: dict[str, DesignEntry] = {
+    "SideslipBankObserver": DesignEntry(
+        "SideslipBankObserver", "000", "sedan",
+        "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25)",
+        lambda name: pi_hinf_000.DesignOptions(name=name, switching="speed"), _solve_000),
+    "SideslipBankObserverTire": DesignEntry(
+        "SideslipBankObserverTire", "000", "sedan",
+        "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / 0.5 C1 at alpha* = 0.5 deg (eq. 27)",
+        lambda name: pi_hinf_000.DesignOptions(name=name, switching="tire"), _solve_000),
+}
+
+
+def get(name: str) -> DesignEntry:
+    if name not in DESIGNS:
+        raise KeyError(f"unknown design {name!r}; known: {', '.join(DESIGNS)}")
+    return DESIGNS[name]
+
+
+def artefact_name(name: str, vehicle: str | None) -> str:
+    """CONTRACT: a build for a vehicle other than the design's default is named NAME_V."""
+    entry = get(name)
+    return name if vehicle in (None, entry.default_vehicle) else f"{name}_{vehicle}"
+
+
+def run(name: str, vehicle: str | None = None, **overrides) -> dict:
+    """Design and certify; returns the design dict with ``certified`` and ``checks``.
+
+    Raises ``pi_hinf_000.DesignError`` when the LMIs are infeasible and ``CertificateError``
+    (carrying the failed checks) when the certificate fails.
+    """
+    entry = get(name)
+    veh = load_vehicle(vehicle or entry.default_vehicle)
+    opts = replace(entry.options(artefact_name(name, veh.name)), **overrides)
+    data = entry.solve(veh, opts)
+    ok, checks = certificate.certify(data)
+    data["certified"] = ok
+    data["checks"] = certificate.as_dicts(checks)
+    if not ok:
+        failed = [c for c in checks if not c.passed]
+        raise CertificateError(
+            f"design {data['name']} failed its certificate ({len(failed)} of {len(checks)} checks): "
+            + "; ".join(f"{c.name}: {c.value:.6g} > {c.limit:.6g}" for c in failed[:5]))
+    return data
