@@ -63,8 +63,11 @@ class LatobsSlave(_PythonFmuSlave):
         self._y = {v.name: float(v.start) for v in spec.outputs}
         self._y.update({v.name: int(v.start) for v in spec.integer_outputs})
         self._data = self._load_data()
+        defaults = getattr(spec.runtime, "parameter_defaults", None)   # data-dependent start values
+        if defaults is not None and self._data:
+            self._p.update({k: float(x) for k, x in defaults(self._data).items() if k in self._p})
         for v in spec.parameters:
-            self.register_variable(Real(v.name, start=v.start, description=f"{v.description} [{v.unit}]",
+            self.register_variable(Real(v.name, start=self._p[v.name], description=f"{v.description} [{v.unit}]",
                                         causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
                                         initial=Fmi2Initial.exact,
                                         getter=self._getter(self._p, v.name), setter=self._param_setter(v.name)))

@@ -28,10 +28,9 @@ from . import __version__
 from .synthesis import certificate, design_file
 from .synthesis.params import load_vehicle
 
-FMU_SRC = Path(__file__).resolve().parent.parent / "fmu_src"
-if not (FMU_SRC / "framework.py").exists():  # installed (non-editable): the package itself
-    import latobs.fmu_src as _fs
-    FMU_SRC = Path(_fs.__file__).resolve().parent
+from . import fmu_src as _fmu_src  # the runtime's sources are copied, not run, here
+
+FMU_SRC = Path(_fmu_src.__file__).resolve().parent
 
 
 class PackagingError(RuntimeError):

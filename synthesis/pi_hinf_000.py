@@ -88,6 +88,7 @@ class ModeModel:
     scheduling: dict
     Cf: float
     Cr: float
+    stiffness_scale: float = 1.0        # Cf, Cr = scale * the vehicle's
 
 
 @dataclass
@@ -142,7 +143,7 @@ def mode_models(vehicle: Vehicle, opts: DesignOptions) -> list[ModeModel]:
                              {"variable": "max(|alpha_f|, |alpha_r|)", "unit": "rad",
                               "range": [0.0, math.radians(opts.alpha_star_deg)] if scale == 1.0
                               else [math.radians(opts.alpha_star_deg), None]},
-                             scale * Cf, scale * Cr))
+                             scale * Cf, scale * Cr, scale))
     return out
 
 
@@ -186,8 +187,9 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
     Gam = [cp.Variable((na, ny)) for _ in modes]
     g = cp.Variable(nonneg=True)
     eps = opts.margin
-    cons = [P >> eps * np.eye(na)]
-    tags = ["P > 0"]
+    families: dict[str, list] = {"H-infinity LMI (20)": [], f"alpha-stability (Re < -{opts.alpha:g})": [],
+                                 f"disk (|lambda| < {opts.radius:g})": []}
+    hinf_key, alpha_key, disk_key = families
     for i, v, Aa, Ca, Fa, La in vertices:
         As, Cs, Fs, Ls = Si @ Aa @ S / tau, Ca @ S, Si @ Fa / tau, La @ S
         PA = P @ As + Gam[i] @ Cs                     # P A_cl in scaled coordinates
@@ -196,25 +198,23 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         M = cp.bmat([[lyap, P @ Fs, Ls.T],
                      [(P @ Fs).T, -g * np.eye(nw), np.zeros((nw, 1))],
                      [Ls, np.zeros((1, nw)), -np.eye(1)]])
-        where = f"mode {i + 1} ({modes[i].label}) at Vx = {v:.3f} m/s"
-        cons += [(M + M.T) / 2 << -eps * np.eye(na + nw + 1)]
-        tags.append(f"LMI (20), H-infinity, {where}")
-        cons += [lyap + 2 * a_s * P << -eps * np.eye(na)]
-        tags.append(f"alpha-stability (Re < -{opts.alpha}), {where}")
+        families[hinf_key].append((M + M.T) / 2 << -eps * np.eye(na + nw + 1))
+        families[alpha_key].append(lyap + 2 * a_s * P << -eps * np.eye(na))
         D = cp.bmat([[-R_s * P, PA], [PA.T, -R_s * P]])
-        cons += [(D + D.T) / 2 << -eps * np.eye(2 * na)]
-        tags.append(f"disk (|lambda| < {opts.radius}), {where}")
-    prob = cp.Problem(cp.Minimize(g), cons)
+        families[disk_key].append((D + D.T) / 2 << -eps * np.eye(2 * na))
+    base = [P >> eps * np.eye(na)]
+    prob = cp.Problem(cp.Minimize(g), base + [c for cs in families.values() for c in cs])
     t0 = time.perf_counter()
     try:
         prob.solve(solver=cp.CLARABEL)
-    except cp.error.SolverError as exc:
-        raise DesignError(f"design {opts.name}: Clarabel failed on the LMIs of Theorem 2 + pole region: {exc}") from exc
+        status = prob.status
+    except cp.error.SolverError:
+        status = "solver_error"
     seconds = time.perf_counter() - t0
-    if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or P.value is None:
-        raise DesignError(
-            f"design {opts.name}: LMIs infeasible (Clarabel status {prob.status}); constraints: "
-            + "; ".join(tags[1:4]) + f" ... ({len(tags)} in all). Try a smaller alpha or a larger radius.")
+    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or P.value is None:
+        raise DesignError(f"design {opts.name}: no solution (Clarabel: {status}) of Theorem 2 + pole region "
+                          f"on a common P over {len(vertices)} mode/speed vertices; "
+                          + _diagnose(base, families, opts))
     Pb = P.value
     P_orig = Si.T @ Pb @ Si / tau
     P_orig = (P_orig + P_orig.T) / 2
@@ -223,9 +223,31 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
     return Design(options=opts, vehicle=vehicle, T=T, N=N, C=C, modes=modes, P=P_orig,
                   K_P=[K[:n, :] for K in Ka], K_I=[K[n:, :] for K in Ka],
                   gamma=float(math.sqrt(max(g.value, 0.0))),
-                  solver={"name": "CLARABEL", "status": str(prob.status), "seconds": round(seconds, 4),
-                          "lmis": len(tags), "time_scale_per_s": tau,
+                  solver={"name": "CLARABEL", "status": str(status), "seconds": round(seconds, 4),
+                          "lmis": 1 + sum(len(c) for c in families.values()), "time_scale_per_s": tau,
                           "state_scaling": np.diag(S).tolist()})
+
+
+def _diagnose(base: list, families: dict, opts: DesignOptions) -> str:
+    """Name the LMI family that is infeasible on its own (feasibility problems, Clarabel)."""
+    import cvxpy as cp
+
+    def feasible(cons) -> bool:
+        prob = cp.Problem(cp.Minimize(0), base + cons)
+        try:
+            prob.solve(solver=cp.CLARABEL)
+        except cp.error.SolverError:
+            return False
+        return prob.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+    region = [name for name in families if not name.startswith("H-infinity")]
+    relax = f"Relax the pole region (alpha = {opts.alpha:g} 1/s, radius = {opts.radius:g} rad/s)."
+    alone = [name for name in region if not feasible(families[name])]
+    if alone:
+        return "infeasible on its own: " + " and ".join(alone) + ". " + relax
+    if not feasible([c for name in region for c in families[name]]):
+        return "the pole-region LMIs are infeasible together: " + " + ".join(region) + ". " + relax
+    return "the pole region is feasible; adding the H-infinity LMI (20) is not. " + relax
 
 
 def closed_loop(coeffs: dict, K_P, K_I, T, C, vx: float):
@@ -267,7 +289,7 @@ def to_design_dict(design: Design) -> dict:
                        else {"kind": "measured", "range": [min(speeds), max(speeds)]})
         modes.append({"index": i + 1, "label": mm.label, "scheduling": mm.scheduling,
                       "model_speed": model_speed, "design_speeds": list(mm.speeds),
-                      "Cf": mm.Cf, "Cr": mm.Cr, "model": mm.coeffs,
+                      "stiffness_scale": mm.stiffness_scale, "Cf": mm.Cf, "Cr": mm.Cr, "model": mm.coeffs,
                       "gains": {"K_P": design.K_P[i], "K_I": design.K_I[i]}})
     return {
         "schema": "latobs.design/1",

@@ -1,0 +1,517 @@
+"""Nonlinear car plant: two-track lateral / yaw / roll model, the truth model of every car observer.
+
+Pure Python (``math`` only): this module runs inside an FMU on machines that have nothing but a
+Python interpreter. No FMI code here; the glue (``framework.py``) drives :class:`CarPlantModel`
+through the runtime protocol of ``spec.py``.
+
+Axes and signs
+--------------
+Body (road-plane) axes x forward, y left, z up. ``delta`` > 0 steers left (both front wheels
+the same road-wheel angle, no Ackermann). Roll angle ``phi`` > 0 is a rotation about +x, i.e.
+the body leans to the RIGHT; a positive total lateral tire force (left turn) rolls the body to
+phi > 0. Road bank ``phi_r`` (input ``bank_angle``) > 0 gives a gravity component
+-g sin(phi_r) along body +y (the sign of the design model, F = [-g/Vx, 0, 0, 0]^T).
+
+States (SI): ``vy`` (m/s) lateral velocity of the body-frame point on the roll axis below the
+CG, ``yaw_rate`` r (rad/s), ``roll_angle`` phi (rad), ``roll_rate`` phidot (rad/s) and, when the
+tire relaxation is on, the four wheel lateral forces Fy_fl, Fy_fr, Fy_rl, Fy_rr (N, wheel frame).
+
+Equations (S = sum of the tire forces along body y, Mz their yaw moment about the CG)
+---------------------------------------------------------------------------------------
+Front wheel i at (lf, +-t/2) carries (-Fy_i sin delta, Fy_i cos delta) in body axes, a rear
+wheel at (-lr, +-t/2) carries (0, Fy_i); the moment of (Fx, Fy) at (x, y) is x Fy - y Fx:
+
+    S  = (Fy_fl + Fy_fr) cos(delta) + Fy_rl + Fy_rr
+    Mz = lf (Fy_fl + Fy_fr) cos(delta) + (t/2)(Fy_fl - Fy_fr) sin(delta) - lr (Fy_rl + Fy_rr)
+
+(E1) roll about the CG (the roll-axis reaction, lateral S and vertical m g cos(phi_r), acts
+     hr below the CG; gravity acts at the CG and has no moment about it):
+        Ix phi'' = hr S cos(phi) + m g cos(phi_r) hr sin(phi) - Kr phi - br phidot
+(E2) lateral Newton for the CG, whose lateral offset from the roll axis is -hr sin(phi):
+        m (vy' + vx r - hr (phi'' cos(phi) - phidot^2 sin(phi))) = S - m g sin(phi_r)
+     (phi'' is taken from E1 first, then vy' from E2)
+(E3) yaw:  Iz r' = Mz
+(E4) slip angle of the wheel at (xw, yw), from the planar motion of the body frame:
+        alpha = delta_w - atan2(vy + r xw, vx - r yw),   delta_w = delta front, 0 rear,
+     evaluated in wheel axes as alpha = -atan(v_w / max(u_w, V_SLIP_MIN)) with
+     u_w = (vx - r yw) cos(delta_w) + (vy + r xw) sin(delta_w) (along the wheel) and
+     v_w = (vy + r xw) cos(delta_w) - (vx - r yw) sin(delta_w) (across it): identical for
+     u_w >= V_SLIP_MIN, and never a division by zero.
+(E5) vertical loads per wheel (clamped so that every Fz >= 0 and each axle keeps its total):
+        static        m g cos(phi_r) l_other / (2 L),                     L = lf + lr
+        longitudinal  -+ m ax h_cg / (2 L) (front -, rear +: braking, ax < 0, loads the front),
+                      h_cg = h_rc + hr
+        lateral       dFz_axle = (m l_other/L * ay_eff * h_rc + share_axle (Kr phi + br phidot)) / t,
+                      left wheels -dFz, right wheels +dFz; share_f = roll_share_f,
+                      share_r = 1 - roll_share_f; ay_eff = S / m.
+(E6) simplified Magic Formula per wheel
+        Fy_ss = mu Fz sin(C atan(B a - E (B a - atan(B a))))
+     C = mf_C, E = mf_E; B is fixed per axle so that mu Fz_static B C = scale * C_axle / 2 with
+     Fz_static the flat-road static wheel load: at nominal load the wheel's linear cornering
+     stiffness is exactly C_axle/2 (times the scale parameter) for ANY mu.
+(E7) relaxation (sigma > 0):  Fy' = (max(vx, V_RELAX_MIN) / sigma) (Fy_ss - Fy);
+     sigma <= 0: algebraic tires, Fy = Fy_ss (the tire states are not integrated).
+
+At straight driving with linear tires and no relaxation, E1-E4 linearise exactly to the design
+model of ``synthesis/bicycle_roll_model.py`` (beta = vy/vx); tests/test_car_plant.py checks it.
+
+Modelling assumptions
+---------------------
+* One rigid sprung body of mass m (the unsprung masses are ignored: the whole mass rolls), rolling
+  about a fixed roll axis parallel to x at height h_rc above the ground at the CG (same height
+  front and rear); the CG is hr above the roll axis. Roll stiffness Kr and damping br are linear.
+* Longitudinal speed vx is prescribed (input); no longitudinal tire forces are modelled (the
+  body-x components of the front lateral forces are taken up by the implied drive/brake forces).
+  The longitudinal acceleration ax (only used for load transfer) is the finite difference of the
+  vx inputs of consecutive ``step`` calls, 0 on the first call, clamped to +-AX_MAX.
+* Vertical accelerations of the CG (hr cos(phi) changing) and pitch are ignored: the roll-axis
+  vertical reaction is m g cos(phi_r). The in-plane terms of order r^2 y_cg and the Coriolis
+  term of the CG lateral offset are neglected; yaw inertia is constant (no roll-yaw product).
+* Slip angles come from the planar (road-plane) motion only: roll rate, roll steer, compliance
+  steer and camber thrust are ignored; no Ackermann, no self-aligning moment.
+* Load transfer (E5): the geometric part uses the roll-centre height h_rc for both axles and
+  the axle's mass share; the elastic part splits Kr phi + br phidot by roll_share_f.
+  ay_eff = S/m is the CURRENT value: with relaxation S comes from the states (no algebraic
+  loop); with algebraic tires the loop is solved by one fixed-point iteration (pass 1 with
+  ay_eff = 0, pass 2 with ay_eff = S_pass1/m). Because Fy is proportional to Fz at a given slip
+  (B fixed per axle), lateral transfer only changes an axle's force through the small left/right
+  slip difference and through wheel lift-off, so the loop gain is small.
+  Clamping: the longitudinal transfer is limited so that neither axle goes below zero load, and
+  each axle's lateral transfer to +-(its wheel load), so every Fz >= 0 and sum(Fz) stays
+  m g cos(phi_r) (the spec's "clamp each Fz >= 0", done without creating load). Hence
+  |S| <= mu m g cos(phi_r) with algebraic tires.
+* Road bank enters as gravity only (E1, E2, E5); the bank is a body-frame input (the road's
+  slope across the car's x axis), not a map of the road.
+
+Numerics and input clamping (documented departures, the step never raises for finite inputs)
+---------------------------------------------------------------------------------------------
+* Classical RK4, inputs held over a ``step`` call; ``step(h)`` uses n = ceil(h/1e-3 - 1e-9) equal
+  substeps (<= 1 ms), more if an estimate of the fastest mode (relaxation rate vx/sigma, tire
+  stiffness / speed, roll) times the substep exceeds 1 (only for unusual parameters: tiny sigma,
+  huge stiffness scales).
+* vx < 0 is clamped to 0, vx > VX_MAX to VX_MAX (warning). Below V_SLIP_MIN the slip-angle
+  denominator is floored (E4, the wheel's velocity along its own heading, max(u_w, V_SLIP_MIN))
+  and the relaxation rate uses max(vx, V_RELAX_MIN) (E7): the model is meant for vx >= 5 m/s
+  and is only kept finite and damped below 1 m/s (a warning is issued on entering that range).
+  Flooring the wheel-frame velocity (not the body vx) makes the tires act as stiff lateral
+  dampers at standstill: a car at vx = 0 with steered wheels does not start to yaw, and on a
+  bank it creeps downhill at about m g sin(phi_r) V_SLIP_MIN / (Cf + Cr) (mm/s). The sideslip
+  output uses the same floor: beta = atan(vy / max(vx, V_SLIP_MIN)).
+* |delta| is clamped to DELTA_MAX, |bank_angle| to BANK_MAX (warning on entering the clamp).
+* h <= 0: no integration (negative h gives a warning).
+* If the state ever became non-finite the call is undone and an "error" event issued.
+
+Validity limit: spin-out
+------------------------
+Because vx is prescribed in BODY axes, a car that spins (e.g. a sine-with-dwell at 6.5 x the
+0.3 g angle at 80 km/h on this sedan) cannot lose forward speed: once every tire slides near
+90 deg slip the yaw rate is hardly damped and the term -vx r keeps feeding vy (it grows about
+linearly, finite but unphysical). A warning event is issued when the mean rear slip angle
+|alpha_r| first exceeds ALPHA_SPIN (the rear is then far past its force peak; |beta| is not used
+because tight low-speed turns have a large kinematic sideslip); results after it are outside the
+model's validity.
+"""
+from __future__ import annotations
+
+import math
+
+G = 9.81  # m/s^2; must equal latobs.synthesis.params.G (checked by the tests)
+
+_atan = math.atan
+_sin = math.sin
+_cos = math.cos
+
+_REQUIRED = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr", "sigma", "track",
+             "h_rc", "roll_share_f", "mf_C", "mf_E", "mu")
+
+
+class CarPlantModel:
+    """Nonlinear two-track lateral/yaw/roll car with Magic-Formula tires (see module docstring).
+
+    ``CarPlantModel(data, params)`` with ``data = {"vehicle": Vehicle.as_dict()}`` and ``params``
+    the FMU parameters (missing or None entries take their defaults):
+
+    * ``mu``      (1)    peak friction coefficient; default the vehicle's ``mu``.
+    * ``scale_f`` (1)    front cornering stiffness scale factor; default 1.0.
+    * ``scale_r`` (1)    rear cornering stiffness scale factor; default 1.0.
+    * ``sigma``   (m)    tire relaxation length; default the vehicle's ``sigma``; <= 0 disables
+                         the relaxation (algebraic tires).
+
+    ``PARAMETERS`` holds the defaults for the representative sedan; ``parameter_defaults(data)``
+    gives the defaults for a given vehicle (use it for the FMU start values).
+    """
+
+    PARAMETERS = {"mu": 1.0, "scale_f": 1.0, "scale_r": 1.0, "sigma": 0.5}
+    PARAMETER_INFO = {
+        "mu": ("1", "peak tire-road friction coefficient (default: the vehicle's mu)"),
+        "scale_f": ("1", "front cornering stiffness scale factor"),
+        "scale_r": ("1", "rear cornering stiffness scale factor"),
+        "sigma": ("m", "tire relaxation length (default: the vehicle's sigma); <= 0 disables relaxation"),
+    }
+    STATE_NAMES = ("vy", "yaw_rate", "roll_angle", "roll_rate", "Fy_fl", "Fy_fr", "Fy_rl", "Fy_rr")
+    STATE_UNITS = ("m/s", "rad/s", "rad", "rad/s", "N", "N", "N", "N")
+    INPUTS = {"delta": ("rad", "road-wheel steering angle, > 0 steers left"),
+              "vx": ("m/s", "longitudinal speed (prescribed)"),
+              "bank_angle": ("rad", "road bank angle; > 0 gives -g sin(bank) along body +y")}
+    OUTPUTS = {"beta": ("rad", "sideslip angle atan(vy/vx) at the roll axis below the CG"),
+               "vy": ("m/s", "lateral velocity at the roll axis below the CG"),
+               "yaw_rate": ("rad/s", "yaw rate"),
+               "ay": ("m/s^2", "lateral specific force at the CG, road-plane accelerometer: sum Fy / m"),
+               "roll_angle": ("rad", "roll angle, > 0 leans right"),
+               "roll_rate": ("rad/s", "roll rate"),
+               "Fyf": ("N", "front tire forces along body y (both wheels)"),
+               "Fyr": ("N", "rear tire forces along body y (both wheels)"),
+               "alpha_f": ("rad", "mean front slip angle"),
+               "alpha_r": ("rad", "mean rear slip angle")}
+
+    H_MAX = 1e-3          # s, largest internal RK4 step
+    VX_MAX = 100.0        # m/s, larger vx inputs are clamped
+    V_SLIP_MIN = 1.0      # m/s, floor of the wheel longitudinal velocity in the slip angle
+    V_RELAX_MIN = 1.0     # m/s, floor of the speed in the relaxation rate (spec's v_floor)
+    AX_MAX = 15.0         # m/s^2, clamp of the finite-difference longitudinal acceleration
+    DELTA_MAX = 0.8       # rad, clamp of the road-wheel angle (~46 deg)
+    BANK_MAX = 0.6        # rad, clamp of the road bank angle (~34 deg)
+    ALPHA_SPIN = 0.5      # rad, |alpha_r| beyond which a "spun out" warning is issued (rear far past peak)
+
+    # ------------------------------------------------------------------ construction
+    @staticmethod
+    def _vehicle_values(data) -> dict:
+        try:
+            vehicle = data["vehicle"]
+            params = vehicle["parameters"]
+        except (KeyError, TypeError) as exc:
+            raise ValueError("CarPlant data must be {'vehicle': {'parameters': {...}}}") from exc
+        name = vehicle.get("name", "?") if isinstance(vehicle, dict) else "?"
+        vals = {}
+        for k in _REQUIRED:
+            if k not in params:
+                raise ValueError(f"CarPlant: vehicle {name!r} lacks parameter {k!r}")
+            entry = params[k]
+            v = entry.get("value") if isinstance(entry, dict) else entry
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"CarPlant: vehicle {name!r} parameter {k!r} must be a finite number, got {v!r}")
+            vals[k] = float(v)
+        for k in ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "Cf", "Cr", "track", "mu", "mf_C"):
+            if not vals[k] > 0:
+                raise ValueError(f"CarPlant: vehicle {name!r} parameter {k!r} must be > 0, got {vals[k]}")
+        if vals["br"] < 0:
+            raise ValueError(f"CarPlant: vehicle {name!r} parameter 'br' must be >= 0, got {vals['br']}")
+        if not 0.0 <= vals["roll_share_f"] <= 1.0:
+            raise ValueError(f"CarPlant: vehicle {name!r} parameter 'roll_share_f' must be in [0, 1], "
+                             f"got {vals['roll_share_f']}")
+        if vals["mf_C"] > 2.0:
+            raise ValueError(f"CarPlant: vehicle {name!r} parameter 'mf_C' must be <= 2 (force sign "
+                             f"flips beyond), got {vals['mf_C']}")
+        if vals["mf_E"] > 1.0:
+            raise ValueError(f"CarPlant: vehicle {name!r} parameter 'mf_E' must be <= 1 (non-monotonic "
+                             f"Magic Formula argument), got {vals['mf_E']}")
+        if not vals["Kr"] > vals["m"] * G * vals["hr"]:
+            raise ValueError(f"CarPlant: vehicle {name!r} parameter 'Kr' = {vals['Kr']} must exceed "
+                             f"m g hr = {vals['m'] * G * vals['hr']:.6g} (statically unstable roll)")
+        return vals
+
+    @classmethod
+    def parameter_defaults(cls, data) -> dict:
+        """The FMU parameter defaults for the vehicle in ``data`` (mu and sigma from the vehicle)."""
+        v = cls._vehicle_values(data)
+        return {"mu": v["mu"], "scale_f": 1.0, "scale_r": 1.0, "sigma": v["sigma"]}
+
+    def __init__(self, data: dict, params: dict | None = None):
+        v = self._vehicle_values(data)
+        params = dict(params or {})
+        unknown = sorted(set(params) - set(self.PARAMETERS))
+        if unknown:
+            raise ValueError(f"CarPlant: unknown parameter(s) {', '.join(unknown)}; "
+                             f"known: {', '.join(self.PARAMETERS)}")
+        defaults = {"mu": v["mu"], "scale_f": 1.0, "scale_r": 1.0, "sigma": v["sigma"]}
+        p = {}
+        for k, d in defaults.items():
+            val = params.get(k)
+            val = d if val is None else val
+            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+                raise ValueError(f"CarPlant: parameter {k!r} must be a finite number, got {val!r}")
+            p[k] = float(val)
+        for k in ("mu", "scale_f", "scale_r"):
+            if not p[k] > 0:
+                raise ValueError(f"CarPlant: parameter {k!r} must be > 0, got {p[k]}")
+        self.params = p
+        self.vehicle = v
+
+        m, lf, lr = v["m"], v["lf"], v["lr"]
+        L = lf + lr
+        t = v["track"]
+        self._m, self._Iz, self._Ix = m, v["Iz"], v["Ix"]
+        self._lf, self._lr, self._hr = lf, lr, v["hr"]
+        self._Kr, self._br = v["Kr"], v["br"]
+        self._t2 = 0.5 * t
+        self._mu = p["mu"]
+        self._sigma = p["sigma"]
+        self._relax = p["sigma"] > 0.0
+        self._C, self._E = v["mf_C"], v["mf_E"]
+        # flat-road static wheel loads (N) and the per-axle Magic Formula B (E6)
+        self._Wf = m * G * lr / (2.0 * L)
+        self._Wr = m * G * lf / (2.0 * L)
+        self._Cf_eff = p["scale_f"] * v["Cf"]       # N/rad, per axle
+        self._Cr_eff = p["scale_r"] * v["Cr"]
+        self._Bf = 0.5 * self._Cf_eff / (self._mu * self._Wf * self._C)
+        self._Br = 0.5 * self._Cr_eff / (self._mu * self._Wr * self._C)
+        # load transfer coefficients (E5)
+        self._kx = m * (v["h_rc"] + v["hr"]) / (2.0 * L)      # N per m/s^2, per wheel
+        self._kyf = m * lr / L * v["h_rc"] / t               # N per m/s^2, front axle
+        self._kyr = m * lf / L * v["h_rc"] / t
+        self._ef = v["roll_share_f"] / t                     # 1/m, share of the roll moment
+        self._er = (1.0 - v["roll_share_f"]) / t
+        # estimate of the fastest mode per unit 1/speed (algebraic tires) and roll, for substeps
+        hr, Ix, Iz = v["hr"], v["Ix"], v["Iz"]
+        Ca0 = 2.0 * (self._Cf_eff + self._Cr_eff)  # x2: lateral load transfer can double a wheel's load
+        Ca2 = 2.0 * (self._Cf_eff * lf * lf + self._Cr_eff * lr * lr)
+        self._lam_alg = Ca0 * (1.0 / m + hr * hr / Ix) + Ca2 / Iz        # 1/s per 1/(m/s)
+        self._lam_osc = math.sqrt(self._lam_alg)                         # relaxation oscillation scale
+        self._lam_roll = v["br"] / Ix + math.sqrt(v["Kr"] / Ix)
+
+        self.x = [0.0] * 8
+        self.events: list = []
+        self._vx_prev = None
+        self._flags = set()
+        self._last_u = (0.0, 0.0, 0.0, 0.0)  # delta, vx, bank, ax used for the outputs
+        self.y: dict = {}
+        self._update_outputs()
+
+    # ------------------------------------------------------------------ the physics
+    def _rhs(self, vy, r, phi, phid, F1, F2, F3, F4, delta, vx, phir, ax, aux=False):
+        """Right-hand side E1-E7; inputs already clamped. Returns 8 derivatives (or aux data)."""
+        lf, lr, t2 = self._lf, self._lr, self._t2
+        sd = _sin(delta)
+        cd = _cos(delta)
+        # E4: slip angles from the wheel-frame velocity (u along the wheel, v across it); the
+        # wheel's longitudinal velocity is floored at V_SLIP_MIN. For u >= V_SLIP_MIN this is
+        # exactly alpha = delta_w - atan2(vy + r xw, vx - r yw).
+        vmin = self.V_SLIP_MIN
+        ul = vx - r * t2              # body-x velocity of the left wheels (yw = +t/2)
+        ur = vx + r * t2              # right wheels (yw = -t/2)
+        vf = vy + r * lf              # body-y velocity of the front wheels
+        vr = vy - r * lr              # rear wheels
+        u1 = ul * cd + vf * sd
+        u2 = ur * cd + vf * sd
+        a1 = -_atan((vf * cd - ul * sd) / (u1 if u1 > vmin else vmin))
+        a2 = -_atan((vf * cd - ur * sd) / (u2 if u2 > vmin else vmin))
+        a3 = -_atan(vr / (ul if ul > vmin else vmin))
+        a4 = -_atan(vr / (ur if ur > vmin else vmin))
+        # E6: normalised forces per unit load, f = mu sin(C atan(Ba - E(Ba - atan Ba)))
+        C, E, mu = self._C, self._E, self._mu
+        Bf, Br = self._Bf, self._Br
+        x = Bf * a1
+        f1 = mu * _sin(C * _atan(x - E * (x - _atan(x))))
+        x = Bf * a2
+        f2 = mu * _sin(C * _atan(x - E * (x - _atan(x))))
+        x = Br * a3
+        f3 = mu * _sin(C * _atan(x - E * (x - _atan(x))))
+        x = Br * a4
+        f4 = mu * _sin(C * _atan(x - E * (x - _atan(x))))
+        # E5: vertical loads
+        cphr = _cos(phir)
+        Fzf = self._Wf * cphr
+        Fzr = self._Wr * cphr
+        dx = self._kx * ax
+        if dx > Fzf:
+            dx = Fzf
+        elif dx < -Fzr:
+            dx = -Fzr
+        Fzf -= dx
+        Fzr += dx
+        Mroll = self._Kr * phi + self._br * phid
+        m = self._m
+        if self._relax:
+            S = (F1 + F2) * cd + F3 + F4
+            passes = 1
+        else:
+            S = 0.0
+            passes = 2
+        for _ in range(passes):
+            ay = S / m
+            dFf = self._kyf * ay + self._ef * Mroll
+            if dFf > Fzf:
+                dFf = Fzf
+            elif dFf < -Fzf:
+                dFf = -Fzf
+            dFr = self._kyr * ay + self._er * Mroll
+            if dFr > Fzr:
+                dFr = Fzr
+            elif dFr < -Fzr:
+                dFr = -Fzr
+            s1 = (Fzf - dFf) * f1   # steady-state forces, left wheels -dFz, right +dFz
+            s2 = (Fzf + dFf) * f2
+            s3 = (Fzr - dFr) * f3
+            s4 = (Fzr + dFr) * f4
+            if not self._relax:
+                F1, F2, F3, F4 = s1, s2, s3, s4
+                S = (F1 + F2) * cd + F3 + F4
+        # body forces and moments
+        Ffs = F1 + F2
+        Mz = lf * Ffs * cd + t2 * (F1 - F2) * sd - lr * (F3 + F4)
+        # E1 then E2, E3
+        sphi = _sin(phi)
+        cphi = _cos(phi)
+        hr = self._hr
+        phidd = (hr * S * cphi + m * G * cphr * hr * sphi - Mroll) / self._Ix
+        vyd = S / m - G * _sin(phir) - vx * r + hr * (phidd * cphi - phid * phid * sphi)
+        rd = Mz / self._Iz
+        if aux:
+            return {"S": S, "Fyf": Ffs * cd, "Fyr": F3 + F4, "alpha_f": 0.5 * (a1 + a2),
+                    "alpha_r": 0.5 * (a3 + a4), "F": (F1, F2, F3, F4),
+                    "Fz": (Fzf - dFf, Fzf + dFf, Fzr - dFr, Fzr + dFr)}
+        if self._relax:
+            vrel = vx if vx > self.V_RELAX_MIN else self.V_RELAX_MIN
+            k = vrel / self._sigma
+            return (vyd, rd, phid, phidd, k * (s1 - F1), k * (s2 - F2), k * (s3 - F3), k * (s4 - F4))
+        return (vyd, rd, phid, phidd, 0.0, 0.0, 0.0, 0.0)
+
+    def _clamp_inputs(self, u, warn: bool):
+        def note(key, active, msg):
+            if not warn:
+                return
+            if active:
+                if key not in self._flags:
+                    self._flags.add(key)
+                    self.events.append(("warning", msg))
+            else:
+                self._flags.discard(key)
+
+        delta = float(u["delta"])
+        vx = float(u["vx"])
+        phir = float(u["bank_angle"])
+        note("vx<0", vx < 0.0, f"CarPlant: vx = {vx} m/s < 0 clamped to 0 (forward driving only)")
+        note("vx>max", vx > self.VX_MAX, f"CarPlant: vx = {vx} m/s clamped to {self.VX_MAX} m/s")
+        vx = min(max(vx, 0.0), self.VX_MAX)
+        note("vx<min", vx < self.V_SLIP_MIN,
+             f"CarPlant: vx = {vx} m/s below {self.V_SLIP_MIN} m/s: slip angles and relaxation "
+             f"regularised (model meant for vx >= 5 m/s)")
+        note("delta", abs(delta) > self.DELTA_MAX,
+             f"CarPlant: |delta| = {abs(delta)} rad clamped to {self.DELTA_MAX} rad")
+        delta = min(max(delta, -self.DELTA_MAX), self.DELTA_MAX)
+        note("bank", abs(phir) > self.BANK_MAX,
+             f"CarPlant: |bank_angle| = {abs(phir)} rad clamped to {self.BANK_MAX} rad")
+        phir = min(max(phir, -self.BANK_MAX), self.BANK_MAX)
+        return delta, vx, phir
+
+    # ------------------------------------------------------------------ public API
+    def derivatives(self, x, u, ax: float = 0.0) -> list:
+        """State derivative d/dt [vy, r, phi, phidot, Fy_fl, Fy_fr, Fy_rl, Fy_rr] (SI units).
+
+        ``x`` has 8 entries (or 4 with algebraic tires, sigma <= 0: the tire entries are then
+        ignored and their derivatives are 0); ``u`` = {delta, vx, bank_angle}; ``ax`` (m/s^2)
+        the longitudinal acceleration used for the load transfer. Inputs are clamped as in
+        ``step`` (silently). A pure function of its arguments.
+        """
+        delta, vx, phir = self._clamp_inputs(u, warn=False)
+        ax = min(max(float(ax), -self.AX_MAX), self.AX_MAX)
+        xs = list(x) + [0.0] * (8 - len(x))
+        d = self._rhs(*xs[:8], delta, vx, phir, ax)
+        return list(d[:len(x)]) if len(x) == 4 else list(d)
+
+    def tire_state(self, x=None, u=None, ax: float = 0.0) -> dict:
+        """Diagnostics at state ``x`` (default: current) and inputs ``u`` (default: last step's):
+        total force S, wheel forces F (wheel frame) and loads Fz (fl, fr, rl, rr), slip angles."""
+        if u is None:
+            delta, vx, phir, ax = self._last_u
+        else:
+            delta, vx, phir = self._clamp_inputs(u, warn=False)
+            ax = min(max(float(ax), -self.AX_MAX), self.AX_MAX)
+        xs = list(self.x if x is None else x)
+        xs += [0.0] * (8 - len(xs))
+        return self._rhs(*xs[:8], delta, vx, phir, ax, aux=True)
+
+    @property
+    def ax(self) -> float:
+        """Longitudinal acceleration (m/s^2) used by the last ``step`` (vx finite difference)."""
+        return self._last_u[3]
+
+    def step(self, h: float, u: dict) -> None:
+        """Advance ``h`` seconds with inputs ``u`` (delta, vx, bank_angle) held; RK4, <= 1 ms substeps."""
+        h = float(h)
+        delta, vx, phir = self._clamp_inputs(u, warn=True)
+        if not h > 0.0:
+            if h < 0.0:
+                self.events.append(("warning", f"CarPlant: step size h = {h} s < 0 ignored"))
+            return
+        # E5: ax from consecutive vx inputs
+        ax = 0.0 if self._vx_prev is None else (vx - self._vx_prev) / h
+        if ax > self.AX_MAX or ax < -self.AX_MAX:
+            if "ax" not in self._flags:
+                self._flags.add("ax")
+                self.events.append(("warning", f"CarPlant: longitudinal acceleration {ax:.4g} m/s^2 "
+                                               f"(from vx inputs) clamped to +-{self.AX_MAX}"))
+            ax = min(max(ax, -self.AX_MAX), self.AX_MAX)
+        else:
+            self._flags.discard("ax")
+        self._vx_prev = vx
+        self._last_u = (delta, vx, phir, ax)
+
+        # substeps: <= H_MAX, and fastest-mode estimate * substep <= 1
+        vs = vx if vx > self.V_SLIP_MIN else self.V_SLIP_MIN
+        if self._relax:
+            vrel = vx if vx > self.V_RELAX_MIN else self.V_RELAX_MIN
+            lam = vrel / self._sigma + self._lam_osc / math.sqrt(self._sigma) + self._lam_roll
+        else:
+            lam = self._lam_alg / vs + self._lam_roll
+        n = max(math.ceil(h / self.H_MAX - 1e-9), math.ceil(h * lam - 1e-9), 1)
+        dt = h / n
+        x0 = list(self.x)
+        rhs = self._rhs
+        s0, s1, s2, s3, s4, s5, s6, s7 = self.x
+        hd = 0.5 * dt
+        d6 = dt / 6.0
+        for _ in range(n):
+            k1 = rhs(s0, s1, s2, s3, s4, s5, s6, s7, delta, vx, phir, ax)
+            k2 = rhs(s0 + hd * k1[0], s1 + hd * k1[1], s2 + hd * k1[2], s3 + hd * k1[3],
+                     s4 + hd * k1[4], s5 + hd * k1[5], s6 + hd * k1[6], s7 + hd * k1[7],
+                     delta, vx, phir, ax)
+            k3 = rhs(s0 + hd * k2[0], s1 + hd * k2[1], s2 + hd * k2[2], s3 + hd * k2[3],
+                     s4 + hd * k2[4], s5 + hd * k2[5], s6 + hd * k2[6], s7 + hd * k2[7],
+                     delta, vx, phir, ax)
+            k4 = rhs(s0 + dt * k3[0], s1 + dt * k3[1], s2 + dt * k3[2], s3 + dt * k3[3],
+                     s4 + dt * k3[4], s5 + dt * k3[5], s6 + dt * k3[6], s7 + dt * k3[7],
+                     delta, vx, phir, ax)
+            s0 += d6 * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0])
+            s1 += d6 * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1])
+            s2 += d6 * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2])
+            s3 += d6 * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3])
+            if self._relax:
+                s4 += d6 * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4])
+                s5 += d6 * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5])
+                s6 += d6 * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6])
+                s7 += d6 * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7])
+        new = [s0, s1, s2, s3, s4, s5, s6, s7]
+        if not all(math.isfinite(v) for v in new):
+            self.events.append(("error", "CarPlant: state became non-finite; step undone"))
+            self.x = x0
+        else:
+            self.x = new
+        self._update_outputs()
+
+    def _update_outputs(self) -> None:
+        delta, vx, phir, ax = self._last_u
+        a = self._rhs(*self.x, delta, vx, phir, ax, aux=True)
+        if not self._relax:
+            self.x[4:8] = list(a["F"])  # algebraic tires: report the current forces as states
+        vy, r, phi, phid = self.x[:4]
+        vs = vx if vx > self.V_SLIP_MIN else self.V_SLIP_MIN
+        y = self.y
+        y["beta"] = _atan(vy / vs)
+        y["vy"] = vy
+        y["yaw_rate"] = r
+        y["ay"] = a["S"] / self._m
+        y["roll_angle"] = phi
+        y["roll_rate"] = phid
+        y["Fyf"] = a["Fyf"]
+        y["Fyr"] = a["Fyr"]
+        y["alpha_f"] = a["alpha_f"]
+        y["alpha_r"] = a["alpha_r"]
+        spun = abs(y["alpha_r"]) > self.ALPHA_SPIN
+        if spun and "spin" not in self._flags:
+            self._flags.add("spin")
+            self.events.append(("warning", f"CarPlant: |alpha_r| = {abs(y['alpha_r']):.3g} rad > {self.ALPHA_SPIN} rad: "
+                                           f"the car has spun out; with prescribed vx the model is not valid "
+                                           f"beyond this (the body keeps sliding sideways)"))
+        elif not spun:
+            self._flags.discard("spin")

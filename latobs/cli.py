@@ -1,0 +1,161 @@
+"""Command line ``latobs`` (CONTRACT.md): list, design, build, validate, demo."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+DEFAULT_OUT = Path("build")
+
+
+class CliError(RuntimeError):
+    """A user-facing failure: printed without a traceback, exit code 2."""
+
+
+def _cmd_list(args) -> int:
+    from .packaging import OBSERVERS, PLANTS
+    from .synthesis import designs
+    from .synthesis.params import load_vehicle, vehicle_names
+    from .validation.scenarios import SCENARIOS
+
+    print("designs (observer FMUs):")
+    for name, e in designs.DESIGNS.items():
+        print(f"  {name:28s} paper {e.paper}, default vehicle {e.default_vehicle}: {e.description}")
+    print("plants:")
+    for name, k in PLANTS.items():
+        print(f"  {name:28s} default vehicle {k.default_vehicle}")
+    print("vehicles:")
+    for name in vehicle_names():
+        v = load_vehicle(name)
+        print(f"  {name:28s} {v.kind}: {v.description}")
+    print("scenarios:")
+    for name, s in SCENARIOS.items():
+        print(f"  {name:28s} {s.duration:g} s: {s.description}")
+    assert set(OBSERVERS) == set(designs.DESIGNS)
+    return 0
+
+
+def design_one(name: str, vehicle: str | None, out: Path) -> Path:
+    """Design, certify and write ``out/NAME[_V].design.json``; prints the headline figures."""
+    from .synthesis import certificate, design_file, designs
+
+    data = designs.run(name, vehicle)
+    path = design_file.write(data, out)
+    s = certificate.summary(data)
+    print(f"{data['name']}: certified, gamma = {s['gamma']:.4g}, cond(P) = {s['cond_P']:.3g}, "
+          f"Clarabel {data['solver']['status']} in {data['solver']['seconds']:.2f} s -> {path}")
+    for m in s["per_mode"]:
+        print(f"  mode {m['mode']} @ {m['speed_kmh']:5.1f} km/h: H-inf bank->beta error {m['hinf']:.4g}, "
+              f"slowest bank pole {m['slowest_bank_pole']:.3f} 1/s, largest gain {m['largest_gain']:.4g}")
+    return path
+
+
+def _cmd_design(args) -> int:
+    design_one(args.name, args.vehicle, Path(args.out))
+    return 0
+
+
+def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "python") -> list[Path]:
+    """Design + package the named FMUs (default: every observer and plant)."""
+    from . import packaging
+    from .synthesis import designs
+
+    if backend != "python":
+        raise CliError(f"backend {backend!r} is not available yet: only the pythonfmu backend ('python') "
+                       "is implemented")
+    names = names or [*designs.DESIGNS, *packaging.PLANTS]
+    unknown = [n for n in names if n not in designs.DESIGNS and n not in packaging.PLANTS]
+    if unknown:
+        raise CliError(f"unknown FMU(s) {', '.join(unknown)}; known: "
+                       f"{', '.join([*designs.DESIGNS, *packaging.PLANTS])}")
+    built = []
+    for name in names:
+        if name in designs.DESIGNS:
+            path = packaging.package_design(design_one(name, vehicle, out), out)
+        else:
+            path = packaging.package_plant(name, vehicle, out)
+        print(f"built {path}")
+        built.append(path)
+    return built
+
+
+def _cmd_build(args) -> int:
+    build(args.names, args.vehicle, Path(args.out), args.backend)
+    return 0
+
+
+def _cmd_validate(args) -> int:
+    from .validate import run_validation
+
+    run_validation(args.scenario, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
+                   plant_parameters=dict(_kv(p) for p in args.plant_param), noise=args.noise, seed=args.seed,
+                   tag=args.tag)
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from .demo import demo
+
+    demo(Path(args.out))
+    return 0
+
+
+def _kv(text: str) -> tuple[str, float]:
+    if "=" not in text:
+        raise CliError(f"--plant-param wants NAME=VALUE, got {text!r}")
+    k, v = text.split("=", 1)
+    try:
+        return k.strip(), float(v)
+    except ValueError as exc:
+        raise CliError(f"--plant-param {k}: {v!r} is not a number") from exc
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="latobs", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="designs, plants, vehicles and scenarios").set_defaults(func=_cmd_list)
+    d = sub.add_parser("design", help="solve the LMIs, certify, write NAME.design.json")
+    d.add_argument("name")
+    d.add_argument("--vehicle")
+    d.add_argument("--out", default=str(DEFAULT_OUT))
+    d.set_defaults(func=_cmd_design)
+    b = sub.add_parser("build", help="design and package FMUs (default: every observer and plant)")
+    b.add_argument("names", nargs="*")
+    b.add_argument("--vehicle")
+    b.add_argument("--backend", choices=("python", "c"), default="python")
+    b.add_argument("--out", default=str(DEFAULT_OUT))
+    b.set_defaults(func=_cmd_build)
+    v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
+    v.add_argument("scenario")
+    v.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable)")
+    v.add_argument("--out", default=str(DEFAULT_OUT))
+    v.add_argument("--fmu-dir", default=str(DEFAULT_OUT), help="where the FMUs are (built if missing)")
+    v.add_argument("--plant-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="CarPlant parameter, e.g. scale_f=0.8 or mu=0.3 (repeatable)")
+    v.add_argument("--noise", action="store_true", help="add the default sensor noise and bias")
+    v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--tag", default="", help="suffix of the output folder (SCENARIO_TAG)")
+    v.set_defaults(func=_cmd_validate)
+    m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
+    m.add_argument("--out", default=str(DEFAULT_OUT))
+    m.set_defaults(func=_cmd_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    from .packaging import PackagingError
+    from .synthesis.designs import CertificateError
+    from .synthesis.params import VehicleParameterError
+    from .synthesis.pi_hinf_000 import DesignError
+
+    try:
+        return args.func(args)
+    except (CliError, CertificateError, DesignError, PackagingError, VehicleParameterError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"latobs {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,132 @@
+"""Paper 000: design model, LMI design and its independent certificate."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from latobs.synthesis import bicycle_roll_model as brm
+from latobs.synthesis import certificate, designs, hinf, pi_hinf_000
+from latobs.synthesis.params import VehicleParameterError, load_vehicle, parse_vehicle
+
+
+def test_t_n_from_pseudo_inverse():
+    T, N = pi_hinf_000.t_n_matrices(brm.C)
+    assert np.allclose(T, np.diag([1, 0.5, 0.5, 0.5]))
+    assert np.allclose(N, np.vstack([np.zeros((1, 3)), 0.5 * np.eye(3)]))
+    assert np.allclose(T + N @ brm.C, np.eye(4))
+
+
+def test_design_model_entries_follow_the_derivation():
+    """Entries where ERRATA corrects the printed eq. (1), evaluated by hand."""
+    v = load_vehicle("sedan")
+    vx = 17.5
+    M = brm.model(v, vx)
+    m, Ix, Iz, hr, br, lf, lr, Cf, Cr = (getattr(v, k) for k in ("m", "Ix", "Iz", "hr", "br", "lf", "lr", "Cf", "Cr"))
+    assert M.A[0, 3] == pytest.approx(-hr * br / (Ix * vx))
+    assert M.A[1, 1] == pytest.approx(-(lf**2 * Cf + lr**2 * Cr) / (Iz * vx))
+    assert M.B[3, 0] == pytest.approx(hr * Cf / Ix)
+    assert M.F[:, 0] == pytest.approx([-9.81 / vx, 0, 0, 0])
+
+
+def test_detectability_assumption_a2(design_speed):
+    """A2: rank [[pI - A, -F], [0, p], [C, 0]] = n + 1 for Re p >= 0 (checked at p = 0 and on a grid)."""
+    v = load_vehicle("sedan")
+    for vx in (10.0, 17.5, 25.0):
+        M = brm.model(v, vx)
+        for p in (0.0, 0.5j, 1.0, 3.0 + 2.0j):
+            top = np.hstack([p * np.eye(4) - M.A, -M.F])
+            mid = np.hstack([np.zeros((1, 4)), [[p]]])
+            bot = np.hstack([M.C, np.zeros((3, 1))])
+            assert np.linalg.matrix_rank(np.vstack([top, mid, bot])) == 5
+
+
+@pytest.mark.parametrize("which", ["design_speed", "design_tire"])
+def test_lmi_solution_checked_independently(which, request):
+    """The LMIs of the returned (P, gains) hold when re-evaluated with numpy, and gamma bounds the
+    H-infinity norm computed by Hamiltonian bisection (no P) at every vertex."""
+    d = request.getfixturevalue(which)
+    assert d["certified"]
+    P = np.asarray(d["P"])
+    T, C = np.asarray(d["structure"]["T"]), np.asarray(d["structure"]["C"])
+    gamma, a, R = d["gamma"], d["region"]["alpha"], d["region"]["radius"]
+    norms = []
+    for mode in d["modes"]:
+        for vx in mode["design_speeds"]:
+            Acl, Fa, La = pi_hinf_000.closed_loop(mode["model"], mode["gains"]["K_P"], mode["gains"]["K_I"], T, C, vx)
+            lmi20 = np.block([[Acl.T @ P + P @ Acl, P @ Fa, La.T],
+                              [Fa.T @ P, -gamma**2 * np.eye(1), np.zeros((1, 1))],
+                              [La, np.zeros((1, 1)), -np.eye(1)]])
+            assert np.max(np.linalg.eigvalsh(lmi20)) < 0
+            assert np.max(np.linalg.eigvalsh(Acl.T @ P + P @ Acl + 2 * a * P)) < 0
+            disk = np.block([[-R * P, P @ Acl], [Acl.T @ P, -R * P]])
+            assert np.max(np.linalg.eigvalsh(disk)) < 0
+            ev = np.linalg.eigvals(Acl)
+            assert ev.real.max() < -a and np.abs(ev).max() < R
+            norms.append(hinf.hinf_norm(Acl, Fa, La).norm)
+    assert max(norms) <= gamma * (1 + 1e-6)
+    # the common-P bound is not vacuous: it is within a factor 2 of the worst vertex norm
+    assert max(norms) >= 0.5 * gamma
+
+
+def test_figures_near_errata(design_speed):
+    """ERRATA 000 reached gamma ~ 0.015, largest gain ~ 130, slowest bank pole ~ -0.58 with
+    a = 0.5, R = 100 on a representative sedan: same order here."""
+    s = certificate.summary(design_speed)
+    assert 0.005 < s["gamma"] < 0.05
+    gains = max(m["largest_gain"] for m in s["per_mode"])
+    assert 50 < gains < 500
+    slowest = max(m["slowest_bank_pole"] for m in s["per_mode"])
+    assert -1.0 < slowest < -0.5
+
+
+def test_certificate_rejects_tampered_designs(design_speed):
+    bad = copy.deepcopy(design_speed)
+    bad["modes"][1]["gains"]["K_I"] = (-np.asarray(bad["modes"][1]["gains"]["K_I"])).tolist()
+    ok, checks = certificate.certify(bad)
+    assert not ok
+    assert any("mode 2" in c.name and not c.passed for c in checks)
+
+    optimistic = copy.deepcopy(design_speed)
+    optimistic["gamma"] *= 0.5
+    ok, checks = certificate.certify(optimistic)
+    assert not ok
+    assert any(c.name.startswith("H-inf") and not c.passed for c in checks)
+
+    drifted = copy.deepcopy(design_speed)
+    drifted["vehicle"]["parameters"]["Cf"]["value"] *= 1.01
+    ok, checks = certificate.certify(drifted)
+    assert not ok
+    assert any("re-derived" in c.name and not c.passed for c in checks)
+
+
+def test_infeasible_region_gives_a_clear_error():
+    v = load_vehicle("sedan")
+    opts = pi_hinf_000.DesignOptions(name="Impossible", switching="speed", alpha=40.0, radius=45.0)
+    with pytest.raises(pi_hinf_000.DesignError, match="Impossible.*infeasible"):
+        pi_hinf_000.design(v, opts)
+
+
+def test_bad_options_and_vehicles_name_the_culprit():
+    with pytest.raises(ValueError, match="radius"):
+        pi_hinf_000.DesignOptions(name="X", switching="speed", alpha=5, radius=1).validate()
+    with pytest.raises(VehicleParameterError, match="Ix.*hr|hr.*Ix"):
+        designs.run("SideslipBankObserver", vehicle="mbds_250lm")
+    good = load_vehicle("sedan").as_dict()
+    good["parameters"]["Kr"]["value"] = -5.0
+    with pytest.raises(VehicleParameterError, match="'Kr' must be > 0"):
+        parse_vehicle(good, "test")
+    good["parameters"]["Kr"]["value"] = float("nan")
+    with pytest.raises(VehicleParameterError, match="'Kr' is not finite"):
+        parse_vehicle(good, "test")
+
+
+def test_every_shipped_vehicle_loads_and_round_trips():
+    from latobs.synthesis.params import vehicle_names
+    assert {"sedan", "delibasi", "mbds_250lm", "sharp_motorcycle"} <= set(vehicle_names())
+    for name in vehicle_names():
+        v = load_vehicle(name)
+        again = parse_vehicle(v.as_dict(), name)
+        assert {k: p.value for k, p in again.parameters.items()} == {k: p.value for k, p in v.parameters.items()}
+        assert all(p.unit for p in v.parameters.values())
