@@ -26,6 +26,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import traceback
 from xml.etree.ElementTree import Element, SubElement
 
@@ -43,6 +44,12 @@ BASE_UNITS = {
 }
 DEFAULT_STEP = 0.005  # s, communication step suggested in the model description
 
+# pythonfmu 0.7.0's native findClass() ends with Py_DECREF(PyModule_GetDict(module)): it releases,
+# on every instantiation, a reference to the entry module's __dict__ that it never owned, so the
+# dict is freed after a few instances and the next instantiation crashes the host (upstream issue
+# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see LatobsSlave.__init__).
+_ENTRY_DICT_REFS: list = []
+
 
 class LatobsSlave(_PythonFmuSlave):
     spec: ModelSpec = None        # set by the entry script
@@ -50,6 +57,9 @@ class LatobsSlave(_PythonFmuSlave):
     data_sha256: str = ""         # hash of that file at build time
 
     def __init__(self, **kwargs):
+        module = sys.modules.get(type(self).__module__)
+        if module is not None:
+            _ENTRY_DICT_REFS.append(vars(module))   # see _ENTRY_DICT_REFS
         super().__init__(**kwargs)
         spec = self.spec
         self.description = spec.description

@@ -35,57 +35,22 @@ def _cmd_list(args) -> int:
     return 0
 
 
-def design_one(name: str, vehicle: str | None, out: Path) -> Path:
-    """Design, certify and write ``out/NAME[_V].design.json``; prints the headline figures."""
-    from .synthesis import certificate, design_file, designs
-
-    data = designs.run(name, vehicle)
-    path = design_file.write(data, out)
-    s = certificate.summary(data)
-    print(f"{data['name']}: certified, gamma = {s['gamma']:.4g}, cond(P) = {s['cond_P']:.3g}, "
-          f"Clarabel {data['solver']['status']} in {data['solver']['seconds']:.2f} s -> {path}")
-    for m in s["per_mode"]:
-        print(f"  mode {m['mode']} @ {m['speed_kmh']:5.1f} km/h: H-inf bank->beta error {m['hinf']:.4g}, "
-              f"slowest bank pole {m['slowest_bank_pole']:.3f} 1/s, largest gain {m['largest_gain']:.4g}")
-    return path
-
-
 def _cmd_design(args) -> int:
+    from .pipeline import design_one
+
     design_one(args.name, args.vehicle, Path(args.out))
     return 0
 
 
-def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "python") -> list[Path]:
-    """Design + package the named FMUs (default: every observer and plant)."""
-    from . import packaging
-    from .synthesis import designs
-
-    if backend != "python":
-        raise CliError(f"backend {backend!r} is not available yet: only the pythonfmu backend ('python') "
-                       "is implemented")
-    names = names or [*designs.DESIGNS, *packaging.PLANTS]
-    unknown = [n for n in names if n not in designs.DESIGNS and n not in packaging.PLANTS]
-    if unknown:
-        raise CliError(f"unknown FMU(s) {', '.join(unknown)}; known: "
-                       f"{', '.join([*designs.DESIGNS, *packaging.PLANTS])}")
-    built = []
-    for name in names:
-        if name in designs.DESIGNS:
-            path = packaging.package_design(design_one(name, vehicle, out), out)
-        else:
-            path = packaging.package_plant(name, vehicle, out)
-        print(f"built {path}")
-        built.append(path)
-    return built
-
-
 def _cmd_build(args) -> int:
+    from .pipeline import build
+
     build(args.names, args.vehicle, Path(args.out), args.backend)
     return 0
 
 
 def _cmd_validate(args) -> int:
-    from .validate import run_validation
+    from .pipeline import run_validation
 
     run_validation(args.scenario, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
                    plant_parameters=dict(_kv(p) for p in args.plant_param), noise=args.noise, seed=args.seed,
@@ -145,13 +110,14 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     from .packaging import PackagingError
+    from .pipeline import PipelineError
     from .synthesis.designs import CertificateError
     from .synthesis.params import VehicleParameterError
     from .synthesis.pi_hinf_000 import DesignError
 
     try:
         return args.func(args)
-    except (CliError, CertificateError, DesignError, PackagingError, VehicleParameterError, KeyError) as exc:
+    except (CliError, PipelineError, CertificateError, DesignError, PackagingError, VehicleParameterError, KeyError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"latobs {args.command}: error: {msg}", file=sys.stderr)
         return 2

@@ -82,6 +82,11 @@ ENTRY = '''\
 from {pkg}.framework import LatobsSlave as Fmi2Slave
 from {pkg}.models.{model} import SPEC
 
+# pythonfmu 0.7.0 releases a reference to this module's globals per instantiation that it does
+# not own (see _ENTRY_DICT_REFS in the framework, which gives one back per instance); a reserve
+# for the first instantiation, before any instance exists.
+_GLOBALS_RESERVE = [globals()] * 8
+
 
 class {cls}(Fmi2Slave):
     spec = SPEC

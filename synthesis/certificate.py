@@ -69,8 +69,8 @@ def _certify_000(d: dict) -> list[Check]:
     vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
     model_err = 0.0
     for mode in d["modes"]:
-        scale = float(mode["stiffness_scale"])
-        ref = brm.lpv_coefficients(vehicle, scale * vehicle.Cf, scale * vehicle.Cr)
+        kf, kr = (float(k) for k in mode["stiffness_scale"])
+        ref = brm.lpv_coefficients(vehicle, kf * vehicle.Cf, kr * vehicle.Cr)
         for key, mats in ref.items():
             for k, M in enumerate(mats):
                 stored = np.asarray(mode["model"][key][k])

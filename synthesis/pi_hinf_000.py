@@ -18,6 +18,7 @@ Departures from the printed paper (ERRATA.md, section 000):
       alpha-stability  A_cl^T P + P A_cl + 2 a P < 0                    (Re lambda < -a)
       disk             [[-R P, P A_cl], [A_cl^T P, -R P]] < 0            (|lambda| < R)
     with P A_cl = P A_a + Gamma C_a: linear in (P, Gamma).
+  * Tire modes: C2 is fitted to the vehicle's tire curve by default (see ``mode_models``).
   * Tire-mode design (paper section IV-B, eq. 27): the paper designs M = 2 observers at one
     unstated speed. Here each tire mode has one gain pair, constrained by all LMIs at every speed
     of the grid (36/63/90 km/h) with the same common P, and the runtime evaluates the mode's
@@ -37,6 +38,7 @@ import numpy as np
 import scipy.linalg
 
 from . import bicycle_roll_model as brm
+from . import tire
 from .params import Vehicle
 
 KMH = 1.0 / 3.6  # m/s per km/h
@@ -58,7 +60,8 @@ class DesignOptions:
     radius: float = 100.0               # rad/s: all closed-loop poles with |lambda| < radius
     alpha_star_deg: float = 0.5         # tire modes: switching slip angle alpha*
     hysteresis_deg: float = 0.05        # tire modes: half-width of the hysteresis band (not in the paper)
-    c2_scale: float = 0.5               # tire modes: C2 = c2_scale * C1 (vehicles.md)
+    c2_scale: float | None = None       # tire modes: C2 = c2_scale * C1; None: fitted to the tire curve
+    c2_fit_deg: float = 4.0             # tire modes: C2 is the tire curve's secant slope on [alpha*, this]
     margin: float = 1e-6                # strictness of every LMI in scaled units
     gain_limit: float = 1e4             # certificate: largest admissible gain entry
     cond_limit: float = 1e7             # certificate: largest admissible cond(P)
@@ -72,8 +75,10 @@ class DesignOptions:
             raise ValueError(f"design {self.name}: speeds_kmh must be strictly increasing, got {self.speeds_kmh}")
         if not (self.alpha >= 0 and self.radius > self.alpha):
             raise ValueError(f"design {self.name}: need 0 <= alpha < radius, got alpha={self.alpha}, radius={self.radius}")
-        if not (0 < self.c2_scale <= 1):
+        if self.c2_scale is not None and not (0 < self.c2_scale <= 1):
             raise ValueError(f"design {self.name}: c2_scale must be in (0, 1], got {self.c2_scale}")
+        if not (self.alpha_star_deg < self.c2_fit_deg < 90):
+            raise ValueError(f"design {self.name}: need alpha_star_deg < c2_fit_deg < 90")
         if not (0 < self.hysteresis_deg < self.alpha_star_deg):
             raise ValueError(f"design {self.name}: need 0 < hysteresis_deg < alpha_star_deg")
 
@@ -88,7 +93,7 @@ class ModeModel:
     scheduling: dict
     Cf: float
     Cr: float
-    stiffness_scale: float = 1.0        # Cf, Cr = scale * the vehicle's
+    stiffness_scale: tuple[float, float] = (1.0, 1.0)   # (Cf, Cr) = scale * the vehicle's
 
 
 @dataclass
@@ -135,15 +140,26 @@ def mode_models(vehicle: Vehicle, opts: DesignOptions) -> list[ModeModel]:
         coeffs = brm.lpv_coefficients(vehicle)
         return [ModeModel(f"Vx = {opts.speeds_kmh[i]:g} km/h", coeffs, (v,),
                           {"variable": "vx", "unit": "m/s", "value": v, "range": [edges[i], edges[i + 1]]},
-                          Cf, Cr)
+                          Cf, Cr, (1.0, 1.0))
                 for i, v in enumerate(speeds)]
+    # Eq. (27): mode 1 below alpha*, mode 2 above. The paper reads C1, C2 off its measured tire
+    # curve (Fig. 1); vehicles.md suggests e.g. C2 = 0.5 C1. Departure: by default C2 is fitted to
+    # the vehicle's own tire curve (tire.mode_stiffness); 0.5 C1 on a tire that is still linear at
+    # a few degrees makes mode 2's model 50 % wrong exactly where the observer uses it.
+    if opts.c2_scale is None:
+        sf, sr = tire.mode_stiffness(vehicle, math.radians(opts.alpha_star_deg), math.radians(opts.c2_fit_deg))
+        how = f"secant of the tire curve on [{opts.alpha_star_deg:g}, {opts.c2_fit_deg:g}] deg"
+    else:
+        sf = sr = opts.c2_scale
+        how = "c2_scale option"
     out = []
-    for label, scale in (("C1 (linear tires)", 1.0), (f"C2 = {opts.c2_scale:g} C1", opts.c2_scale)):
-        out.append(ModeModel(label, brm.lpv_coefficients(vehicle, scale * Cf, scale * Cr), speeds,
+    for label, (kf, kr) in (("C1 (linear tires)", (1.0, 1.0)),
+                            (f"C2 = ({sf:.3f} Cf, {sr:.3f} Cr), {how}", (sf, sr))):
+        out.append(ModeModel(label, brm.lpv_coefficients(vehicle, kf * Cf, kr * Cr), speeds,
                              {"variable": "max(|alpha_f|, |alpha_r|)", "unit": "rad",
-                              "range": [0.0, math.radians(opts.alpha_star_deg)] if scale == 1.0
+                              "range": [0.0, math.radians(opts.alpha_star_deg)] if kf == 1.0 and kr == 1.0
                               else [math.radians(opts.alpha_star_deg), None]},
-                             scale * Cf, scale * Cr, scale))
+                             kf * Cf, kr * Cr, (kf, kr)))
     return out
 
 

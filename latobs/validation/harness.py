@@ -1,0 +1,531 @@
+"""Co-simulation of a plant FMU and observer FMUs with fmpy, wired by variable name.
+
+Only the BUILT FMUs are used, through fmpy's FMI 2.0 co-simulation API (``FMU2Slave``); the FMUs'
+Python internals are never imported.
+
+Signal bus
+    At each communication point t_k = k*dt (s) the bus holds the scenario's signals (the plant
+    inputs, e.g. delta rad, vx m/s, bank_angle rad) and every output (causality="output") of the
+    plant FMU, keyed by variable name. A plant output with the same name as a scenario signal
+    replaces it on the bus (the plant is the truth).
+Wiring
+    Plant inputs come from the scenario signals; each observer input is pulled from the bus by
+    name. A missing signal is a :class:`WiringError` naming the FMU and the variable, raised
+    before any FMU is instantiated.
+Measurement model
+    Observers see the bus through an optional :class:`NoiseSpec` (additive white Gaussian noise
+    with a standard deviation and a constant bias per signal, in the signal's SI unit). The noise
+    is drawn once per run from ``numpy.random.default_rng(seed)`` and applied only to what the
+    observers receive: the recorded truth (``SimResult.bus``) stays clean; what they received is
+    in ``SimResult.measured``. Every observer sees the same noisy measurement (one sensor each).
+Timing (fixed step, zero-order hold)
+    Initialisation: plant parameters and inputs u(t_0) are set, the plant is initialised and its
+    outputs read; then each observer gets bus(t_0) and is initialised. Step k: plant inputs
+    u(t_k) and observer inputs bus(t_k) are set, every FMU does doStep(t_k, dt), then the plant
+    outputs and observer outputs at t_{k+1} are read. So an observer output at t_{k+1} depends on
+    the bus at t_k (one step of transport delay, as for a sampled-data observer).
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+    fmi2Integer,
+    fmi2Real,
+    fmi2ValueReference,
+    fmi2Boolean,
+)
+
+from .scenarios import Scenario, get_scenario
+
+PLANT_LABEL = "plant"
+_STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
+MAX_LOG_MESSAGES = 10_000  # per FMU; further messages are counted, not stored
+
+
+class WiringError(ValueError):
+    """An FMU input has no signal to connect, or a parameter/noise name is unknown."""
+
+
+class CoSimulationError(RuntimeError):
+    """An FMU failed during the co-simulation (the message names it, the time and its last logs)."""
+
+
+# --------------------------------------------------------------------------------------------
+# measurement model
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NoiseSpec:
+    """Measurement model of what observers receive.
+
+    signals  {bus signal name: (std, bias)} in the signal's SI unit (e.g. rad, rad/s, m/s^2);
+             measured = truth + bias + std * N(0, 1), white, independent per signal and sample
+    seed     seed of numpy.random.default_rng; None = use the ``seed`` argument of :func:`run`
+
+    Draws are made per signal in sorted name order, a full-length array each, so a given
+    (seed, signal set, grid) always gives the same noise.
+    """
+
+    signals: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    seed: int | None = None
+
+    def __post_init__(self):
+        for name, sb in self.signals.items():
+            try:
+                std, bias = (float(x) for x in sb)
+            except (TypeError, ValueError):
+                raise ValueError(f"noise for {name!r} must be (std, bias), got {sb!r}") from None
+            if not (np.isfinite(std) and std >= 0 and np.isfinite(bias)):
+                raise ValueError(f"noise for {name!r}: std must be finite and >= 0 and bias finite, got {sb!r}")
+
+    def rng(self, default_seed: int = 0) -> np.random.Generator:
+        return np.random.default_rng(self.seed if self.seed is not None else default_seed)
+
+    def draw(self, n: int, default_seed: int = 0) -> dict[str, np.ndarray]:
+        """Additive error arrays (bias + std*N(0,1)), length n, per signal name."""
+        g = self.rng(default_seed)
+        out = {}
+        for name in sorted(self.signals):
+            std, bias = (float(x) for x in self.signals[name])
+            out[name] = bias + std * g.standard_normal(n)
+        return out
+
+    def as_dict(self) -> dict:
+        return {"signals": {k: {"std": float(v[0]), "bias": float(v[1])} for k, v in self.signals.items()},
+                "seed": self.seed}
+
+
+# --------------------------------------------------------------------------------------------
+# result
+# --------------------------------------------------------------------------------------------
+@dataclass
+class SimResult:
+    """Time series of one co-simulation.
+
+    time       communication points t_k, s, shape (n+1,)
+    bus        truth: {signal: array}, the scenario signals and every plant output (SI units)
+    measured   {signal: array} what the observers received for each bus signal wired to one
+    observers  {label: {output name: array}} every Real/Integer/Boolean output of each observer
+               (Integer outputs such as ``mode`` as int arrays)
+    logs       {label: [message, ...]} FMU log messages ("[STATUS] category: text"), plant
+               under "plant"
+    scenario   scenario name; dt communication step, s; settle_time, s (from the scenario)
+    units      {variable name: unit} where the modelDescriptions declare one
+    inputs     {label: [input names]} the wiring actually used
+    info       scenario info (derived amplitudes), noise spec, FMU paths, vehicle name
+    """
+
+    time: np.ndarray
+    bus: dict[str, np.ndarray]
+    observers: dict[str, dict[str, np.ndarray]]
+    logs: dict[str, list[str]]
+    scenario: str
+    dt: float
+    settle_time: float = 0.0
+    measured: dict[str, np.ndarray] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    inputs: dict[str, list[str]] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return float(self.time[-1] - self.time[0])
+
+
+# --------------------------------------------------------------------------------------------
+# one FMU
+# --------------------------------------------------------------------------------------------
+def _unit_of(v) -> str | None:
+    u = getattr(v, "unit", None)
+    if not u and getattr(v, "declaredType", None) is not None:
+        u = getattr(v.declaredType, "unit", None)
+    return u or None
+
+
+class FmuInstance:
+    """An extracted FMU: model description, slave, prebuilt value-reference arrays, logger."""
+
+    def __init__(self, label: str, path: Path, unzipdir: str):
+        self.label = label
+        self.path = path
+        self.unzipdir = unzipdir
+        try:
+            self.md = read_model_description(str(path))
+        except Exception as exc:
+            raise WiringError(f"FMU {label!r} ({path}): cannot read its modelDescription.xml: {exc}") from exc
+        if self.md.coSimulation is None:
+            raise WiringError(f"FMU {label!r} ({path.name}) has no co-simulation interface")
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.inputs = [v for v in self.md.modelVariables if v.causality == "input"]
+        self.outputs = [v for v in self.md.modelVariables
+                        if v.causality == "output" and v.type in ("Real", "Integer", "Boolean", "Enumeration")]
+        for v in self.inputs:
+            if v.type not in ("Real", "Integer", "Boolean", "Enumeration"):
+                raise WiringError(f"FMU {label!r} ({path.name}): input {v.name!r} has type {v.type}, "
+                                  "which the harness cannot drive (Real, Integer, Boolean only)")
+        self.logs: list[str] = []
+        self.dropped_logs = 0
+        self.slave: FMU2Slave | None = None
+        self.instantiated = False
+        self.initialized = False
+
+    @property
+    def model_name(self) -> str:
+        return self.md.modelName
+
+    def describe(self) -> str:
+        return f"FMU {self.label!r} ({self.path.name}, model {self.model_name})"
+
+    # logger --------------------------------------------------------------------------------
+    def _log(self, component, instance_name, status, category, message):
+        try:
+            if len(self.logs) >= MAX_LOG_MESSAGES:
+                self.dropped_logs += 1
+                return
+            st = _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+            cat = category.decode("utf-8", "replace") if category else ""
+            msg = message.decode("utf-8", "replace") if message else ""
+            self.logs.append(f"[{st}] {cat}: {msg}" if cat else f"[{st}] {msg}")
+        except Exception:  # never let an exception cross the C boundary
+            pass
+
+    def instantiate(self):
+        self.callbacks = fmi2CallbackFunctions()
+        self._logger_ref = fmi2CallbackLoggerTYPE(self._log)  # keep alive while the FMU lives
+        self.callbacks.logger = self._logger_ref
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:  # formats the printf-style variadic messages before they reach _log
+            from fmpy.logging import addLoggerProxy
+
+            addLoggerProxy(ctypes.byref(self.callbacks))
+        except Exception:  # pragma: no cover - the proxy library is optional
+            pass
+        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.label)
+        self.slave.instantiate(callbacks=self.callbacks, loggingOn=True)
+        self.instantiated = True
+
+    # prebuilt get/set ------------------------------------------------------------------------
+    def prepare_io(self, input_names: list[str]):
+        """Group inputs and outputs by type with ctypes arrays built once."""
+        self.in_groups = _groups([self.vars[n] for n in input_names])
+        self.out_groups = _groups(self.outputs)
+
+    def set_inputs(self, values: Mapping[str, float]):
+        s = self.slave
+        for typ, (names, vr, buf) in self.in_groups.items():
+            for i, n in enumerate(names):
+                buf[i] = values[n] if typ == "Real" else int(round(values[n]))
+            if typ == "Real":
+                s.fmi2SetReal(s.component, vr, len(names), buf)
+            elif typ == "Boolean":
+                s.fmi2SetBoolean(s.component, vr, len(names), buf)
+            else:
+                s.fmi2SetInteger(s.component, vr, len(names), buf)
+
+    def get_outputs(self) -> dict[str, float]:
+        s = self.slave
+        out = {}
+        for typ, (names, vr, buf) in self.out_groups.items():
+            if typ == "Real":
+                s.fmi2GetReal(s.component, vr, len(names), buf)
+            elif typ == "Boolean":
+                s.fmi2GetBoolean(s.component, vr, len(names), buf)
+            else:
+                s.fmi2GetInteger(s.component, vr, len(names), buf)
+            out.update(zip(names, buf))
+        return out
+
+    def check_parameters(self, params: Mapping[str, Any]):
+        """Raise WiringError naming any name in ``params`` that is not a parameter of this FMU."""
+        known = sorted(x.name for x in self.md.modelVariables if x.causality == "parameter")
+        for name in params:
+            if name not in known:
+                raise WiringError(f"{self.describe()} has no parameter {name!r}; its parameters: "
+                                  f"{', '.join(known) or '(none)'}")
+
+    def set_parameters(self, params: Mapping[str, Any]):
+        self.check_parameters(params)
+        for name, value in params.items():
+            v = self.vars[name]
+            if v.type == "Real":
+                self.slave.setReal([v.valueReference], [float(value)])
+            elif v.type in ("Integer", "Enumeration"):
+                self.slave.setInteger([v.valueReference], [int(value)])
+            elif v.type == "Boolean":
+                self.slave.setBoolean([v.valueReference], [bool(value)])
+            elif v.type == "String":
+                self.slave.setString([v.valueReference], [str(value)])
+
+    def close(self):
+        if self.slave is None:
+            return
+        if self.instantiated:
+            if self.initialized:
+                try:
+                    self.slave.terminate()
+                except Exception:
+                    pass
+            try:
+                self.slave.freeInstance()
+            except Exception:
+                pass
+        else:
+            try:
+                self.slave.freeLibrary()
+            except Exception:
+                pass
+        self.slave = None
+
+    def log_tail(self, n: int = 5) -> str:
+        return "; ".join(self.logs[-n:]) if self.logs else "(no log messages)"
+
+
+def _groups(variables) -> dict[str, tuple[list[str], Any, Any]]:
+    by: dict[str, list] = {}
+    for v in variables:
+        typ = "Integer" if v.type == "Enumeration" else v.type
+        by.setdefault(typ, []).append(v)
+    ctype = {"Real": fmi2Real, "Integer": fmi2Integer, "Boolean": fmi2Boolean}
+    out = {}
+    for typ, vs in by.items():
+        n = len(vs)
+        vr = (fmi2ValueReference * n)(*[v.valueReference for v in vs])
+        out[typ] = ([v.name for v in vs], vr, (ctype[typ] * n)())
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# the co-simulation
+# --------------------------------------------------------------------------------------------
+class CoSimulation:
+    """A plant FMU plus observer FMUs on a scenario. Use :meth:`run` (or the function :func:`run`).
+
+    scenario           a Scenario or a registered scenario name
+    plant_fmu          path of the plant FMU (its inputs must all be scenario signals)
+    observer_fmus      {label: path}; each observer's inputs are pulled from the bus by name
+    dt                 communication step, s (default 5 ms)
+    noise              NoiseSpec (or {signal: (std, bias)}) applied to what observers receive
+    seed               default seed of the noise generator
+    plant_parameters   {parameter name: value} set on the plant before initialisation (e.g. mu)
+    observer_parameters {label: {parameter name: value}} likewise for observers
+    vehicle            vehicle name or Vehicle, used by the scenario for its amplitudes
+    progress           show a tqdm progress bar
+    """
+
+    def __init__(self, scenario: Scenario | str, plant_fmu: str | os.PathLike,
+                 observer_fmus: Mapping[str, str | os.PathLike] | None = None, dt: float = 0.005,
+                 noise: NoiseSpec | Mapping | None = None, seed: int = 0,
+                 plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
+                 progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None):
+        self.scenario = get_scenario(scenario)
+        self.plant_path = Path(plant_fmu)
+        self.observer_paths = {str(k): Path(v) for k, v in (observer_fmus or {}).items()}
+        if PLANT_LABEL in self.observer_paths:
+            raise WiringError(f"observer label {PLANT_LABEL!r} is reserved for the plant")
+        for label, p in [(PLANT_LABEL, self.plant_path), *self.observer_paths.items()]:
+            if not p.is_file():
+                raise FileNotFoundError(f"FMU {label!r}: no such file {p}")
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0 s, got {dt}")
+        self.dt = float(dt)
+        if noise is not None and not isinstance(noise, NoiseSpec):
+            noise = NoiseSpec(dict(noise))
+        self.noise = noise
+        self.seed = seed
+        self.plant_parameters = dict(plant_parameters or {})
+        self.observer_parameters = {k: dict(v) for k, v in (observer_parameters or {}).items()}
+        unknown = sorted(set(self.observer_parameters) - set(self.observer_paths))
+        if unknown:
+            raise WiringError(f"observer_parameters for unknown observer label(s) {', '.join(unknown)}")
+        self.vehicle = vehicle
+        self.progress = progress
+
+    def run(self) -> SimResult:
+        tmp = tempfile.mkdtemp(prefix="latobs_cosim_")
+        fmus: list[FmuInstance] = []
+        try:
+            # extract each distinct FMU file once
+            unzipped: dict[Path, str] = {}
+            for p in [self.plant_path, *self.observer_paths.values()]:
+                key = p.resolve()
+                if key not in unzipped:
+                    unzipped[key] = extract(str(p), unzipdir=os.path.join(tmp, f"fmu{len(unzipped)}"))
+            plant = FmuInstance(PLANT_LABEL, self.plant_path, unzipped[self.plant_path.resolve()])
+            fmus.append(plant)
+            observers = {lab: FmuInstance(lab, p, unzipped[p.resolve()]) for lab, p in self.observer_paths.items()}
+            fmus.extend(observers.values())
+            return self._simulate(plant, observers)
+        finally:
+            for f in reversed(fmus):
+                f.close()
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    # ----------------------------------------------------------------------------------------
+    def _simulate(self, plant: FmuInstance, observers: dict[str, FmuInstance]) -> SimResult:
+        sc, dt = self.scenario, self.dt
+        t = sc.time_grid(dt)
+        n = len(t)
+        scen = {k: np.asarray(v, dtype=float) for k, v in sc.signals(t, self.vehicle).items()}
+        for k, v in scen.items():
+            if v.shape != t.shape:
+                raise ValueError(f"scenario {sc.name!r}: signal {k!r} has shape {v.shape}, expected {t.shape}")
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"scenario {sc.name!r}: signal {k!r} is not finite everywhere")
+
+        # ---- wiring, checked before anything is instantiated
+        plant_in = [v.name for v in plant.inputs]
+        missing = [x for x in plant_in if x not in scen]
+        if missing:
+            raise WiringError(
+                f"plant {plant.describe()}: input(s) {', '.join(repr(m) for m in missing)} not provided by "
+                f"scenario {sc.name!r} (it provides {', '.join(sorted(scen))})")
+        plant_out = [v.name for v in plant.outputs]
+        bus_names = list(dict.fromkeys([*scen, *plant_out]))
+        obs_in: dict[str, list[str]] = {}
+        for lab, f in observers.items():
+            names = [v.name for v in f.inputs]
+            for x in names:
+                if x not in bus_names:
+                    raise WiringError(
+                        f"observer {f.describe()}: input {x!r} has no signal on the bus "
+                        f"(bus signals: {', '.join(bus_names)})")
+            obs_in[lab] = names
+        plant.check_parameters(self.plant_parameters)
+        for lab, f in observers.items():
+            f.check_parameters(self.observer_parameters.get(lab, {}))
+        noise_arr: dict[str, np.ndarray] = {}
+        if self.noise is not None:
+            bad = sorted(set(self.noise.signals) - set(bus_names))
+            if bad:
+                raise WiringError(f"noise given for signal(s) {', '.join(repr(b) for b in bad)} not on the bus "
+                                  f"(bus signals: {', '.join(bus_names)})")
+            noise_arr = self.noise.draw(n, self.seed)
+        measured_names = list(dict.fromkeys(x for names in obs_in.values() for x in names))
+
+        units: dict[str, str] = {}
+        for f in [plant, *observers.values()]:
+            for v in f.md.modelVariables:
+                u = _unit_of(v)
+                if u and v.causality in ("input", "output"):
+                    units.setdefault(v.name, u)
+
+        # ---- storage
+        bus = {k: np.empty(n) for k in bus_names}
+        for k, v in scen.items():
+            bus[k][:] = v
+        measured = {k: np.empty(n) for k in measured_names}
+        obs_rec: dict[str, dict[str, np.ndarray]] = {}
+        for lab, f in observers.items():
+            obs_rec[lab] = {v.name: np.zeros(n, dtype=float if v.type == "Real" else np.int64) for v in f.outputs}
+
+        def fill_bus(k: int, plant_values: Mapping[str, float]):
+            for name, val in plant_values.items():
+                bus[name][k] = val
+            for name in measured_names:
+                val = bus[name][k]
+                if name in noise_arr:
+                    val = val + noise_arr[name][k]
+                measured[name][k] = val
+
+        def meas(k: int, names: list[str]) -> dict[str, float]:
+            return {x: measured[x][k] for x in names}
+
+        def call(f: FmuInstance, what: str, k: int, fn, *args):
+            try:
+                return fn(*args)
+            except Exception as exc:
+                raise CoSimulationError(
+                    f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {exc}. Last log messages: "
+                    f"{f.log_tail()}") from exc
+
+        # ---- initialisation: plant first (its outputs at t0 feed the observers)
+        stop = float(t[-1])
+        call(plant, "instantiate", 0, plant.instantiate)
+        plant.prepare_io(plant_in)
+        call(plant, "setupExperiment", 0, plant.slave.setupExperiment, None, float(t[0]), stop)
+        call(plant, "setting parameters", 0, plant.set_parameters, self.plant_parameters)
+        call(plant, "enterInitializationMode", 0, plant.slave.enterInitializationMode)
+        plant.initialized = True
+        u0 = {x: scen[x][0] for x in plant_in}
+        call(plant, "setting inputs", 0, plant.set_inputs, u0)
+        call(plant, "exitInitializationMode", 0, plant.slave.exitInitializationMode)
+        fill_bus(0, call(plant, "getting outputs", 0, plant.get_outputs))
+        for lab, f in observers.items():
+            call(f, "instantiate", 0, f.instantiate)
+            f.prepare_io(obs_in[lab])
+            call(f, "setupExperiment", 0, f.slave.setupExperiment, None, float(t[0]), stop)
+            call(f, "setting parameters", 0, f.set_parameters, self.observer_parameters.get(lab, {}))
+            call(f, "enterInitializationMode", 0, f.slave.enterInitializationMode)
+            f.initialized = True
+            call(f, "setting inputs", 0, f.set_inputs, meas(0, obs_in[lab]))
+            call(f, "exitInitializationMode", 0, f.slave.exitInitializationMode)
+            for name, val in call(f, "getting outputs", 0, f.get_outputs).items():
+                obs_rec[lab][name][0] = val
+
+        # ---- fixed-step loop
+        steps = range(n - 1)
+        if self.progress:
+            from tqdm import tqdm
+
+            steps = tqdm(steps, desc=f"{sc.name}", unit="step", leave=False)
+        for k in steps:
+            tk = float(t[k])
+            call(plant, "setting inputs", k, plant.set_inputs, {x: scen[x][k] for x in plant_in})
+            for lab, f in observers.items():
+                call(f, "setting inputs", k, f.set_inputs, meas(k, obs_in[lab]))
+            call(plant, "doStep", k, plant.slave.doStep, tk, dt)
+            for f in observers.values():
+                call(f, "doStep", k, f.slave.doStep, tk, dt)
+            fill_bus(k + 1, call(plant, "getting outputs", k + 1, plant.get_outputs))
+            for lab, f in observers.items():
+                for name, val in call(f, "getting outputs", k + 1, f.get_outputs).items():
+                    obs_rec[lab][name][k + 1] = val
+
+        logs = {}
+        for f in [plant, *observers.values()]:
+            logs[f.label] = list(f.logs)
+            if f.dropped_logs:
+                logs[f.label].append(f"[INFO] harness: {f.dropped_logs} further log messages dropped")
+        veh = self.vehicle if isinstance(self.vehicle, str) else getattr(self.vehicle, "name", str(self.vehicle))
+        info = {
+            "scenario": sc.info(self.vehicle),
+            "vehicle": veh,
+            "plant_fmu": str(self.plant_path),
+            "plant_model": plant.model_name,
+            "observer_fmus": {lab: str(p) for lab, p in self.observer_paths.items()},
+            "observer_models": {lab: f.model_name for lab, f in observers.items()},
+            "plant_parameters": {k: (v if isinstance(v, (int, float, str, bool)) else str(v))
+                                 for k, v in self.plant_parameters.items()},
+            "noise": self.noise.as_dict() if self.noise is not None else None,
+            "seed": self.seed,
+        }
+        return SimResult(time=t, bus=bus, observers=obs_rec, logs=logs, scenario=sc.name, dt=dt,
+                         settle_time=float(sc.settle_time), measured=measured, units=units,
+                         inputs={PLANT_LABEL: plant_in, **obs_in}, info=info)
+
+
+def run(scenario: Scenario | str, plant_fmu: str | os.PathLike,
+        observer_fmus: Mapping[str, str | os.PathLike] | None = None, dt: float = 0.005,
+        noise: NoiseSpec | Mapping | None = None, seed: int = 0,
+        plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
+        progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None) -> SimResult:
+    """Co-simulate ``plant_fmu`` and ``observer_fmus`` on ``scenario``; see :class:`CoSimulation`."""
+    return CoSimulation(scenario, plant_fmu, observer_fmus, dt=dt, noise=noise, seed=seed,
+                        plant_parameters=plant_parameters, vehicle=vehicle, progress=progress,
+                        observer_parameters=observer_parameters).run()

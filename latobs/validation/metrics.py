@@ -1,0 +1,196 @@
+"""Scores of a co-simulation: estimation errors, interval enclosure, bank-angle L2 gain, modes.
+
+Every number is in the SI unit of its signal (rad, rad/s, m/s, N ...; the unit is repeated in
+the entry when a modelDescription declares it). Structure returned by :func:`compute`::
+
+    {
+      "scenario": str, "dt_s": float, "duration_s": float, "settle_time_s": float, "n_samples": int,
+      "info": {...}                                    # SimResult.info (scenario amplitudes, noise...)
+      "observers": {
+        label: {
+          "estimates": {"X_hat": {"truth": "X", "unit": str|None, "rms": e, "max_abs": e,
+                                   "rms_after_settle": e, "max_abs_after_settle": e,
+                                   "nonfinite_samples": int}},
+          "intervals": {"X": {"truth": "X", "lower": "X_lower", "upper": "X_upper",
+                              "enclosure_violations": int, "enclosure_violations_after_settle": int,
+                              "max_violation": e, "mean_width": w, "mean_width_after_settle": w,
+                              "nonfinite_samples": int}},
+          "beta_error_to_bank_l2_ratio": r | None,              # paper 000 eq. (26)
+          "beta_error_to_bank_l2_ratio_after_settle": r | None,
+          "mode_occupancy": {"1": fraction, ...}, "mode_switches": int,   # if a `mode` output exists
+          "unscored_outputs": [names without a truth on the bus],
+          "log_messages": int
+        }
+      }
+    }
+
+Errors are estimate minus truth (X_hat - X). "after settle" uses samples with t >= settle_time.
+Non-finite statistics are written as null so that the file is strict JSON.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .harness import SimResult
+
+ENCLOSURE_TOL = 1e-9  # absolute tolerance of the enclosure test, in the signal's unit
+
+
+def _f(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _rms(e: np.ndarray) -> float | None:
+    return _f(np.sqrt(np.mean(e**2))) if e.size else None
+
+
+def _maxabs(e: np.ndarray) -> float | None:
+    return _f(np.max(np.abs(e))) if e.size else None
+
+
+def l2_norm(x: np.ndarray, dt: float) -> float:
+    """Discrete L2 norm sqrt(sum x_k^2 * dt) (unit of x times sqrt(s))."""
+    return float(np.sqrt(np.sum(np.asarray(x, dtype=float) ** 2) * dt))
+
+
+def mode_occupancy(time: np.ndarray, mode: np.ndarray) -> dict[str, float]:
+    """Fraction of the run's time spent in each mode, zero-order hold (sample k holds over
+    [t_k, t_{k+1})); keys are the mode numbers as strings."""
+    time = np.asarray(time, dtype=float)
+    mode = np.asarray(mode)
+    if time.size < 2:
+        return {str(int(m)): 1.0 for m in np.unique(mode)}
+    w = np.diff(time)
+    total = float(time[-1] - time[0])
+    occ = {}
+    for m in np.unique(mode[:-1]):
+        occ[str(int(m))] = float(np.sum(w[mode[:-1] == m]) / total)
+    return dict(sorted(occ.items(), key=lambda kv: int(kv[0])))
+
+
+def compute(result: SimResult, settle_time: float | None = None) -> dict[str, Any]:
+    """Metrics of ``result`` (see the module docstring); settle_time (s) defaults to the scenario's."""
+    t = np.asarray(result.time, dtype=float)
+    ts = result.settle_time if settle_time is None else float(settle_time)
+    after = t >= ts - 1e-12
+    dt = float(result.dt)
+    bus = result.bus
+    out: dict[str, Any] = {
+        "scenario": result.scenario,
+        "dt_s": dt,
+        "duration_s": float(t[-1] - t[0]),
+        "settle_time_s": ts,
+        "n_samples": int(t.size),
+        "info": result.info,
+        "observers": {},
+    }
+    for label, outs in result.observers.items():
+        o: dict[str, Any] = {"estimates": {}, "intervals": {}}
+        scored: set[str] = set()
+        for name, y in outs.items():
+            if name.endswith("_hat") and name[:-4] in bus:
+                truth = name[:-4]
+                e = np.asarray(y, dtype=float) - bus[truth]
+                finite = np.isfinite(e)
+                o["estimates"][name] = {
+                    "truth": truth,
+                    "unit": result.units.get(name) or result.units.get(truth),
+                    "rms": _rms(e),
+                    "max_abs": _maxabs(e),
+                    "rms_after_settle": _rms(e[after]),
+                    "max_abs_after_settle": _maxabs(e[after]),
+                    "nonfinite_samples": int(np.sum(~finite)),
+                }
+                scored.add(name)
+        for name in outs:
+            if name.endswith("_lower"):
+                base = name[:-6]
+                up = base + "_upper"
+                if up in outs and base in bus:
+                    lo = np.asarray(outs[name], dtype=float)
+                    hi = np.asarray(outs[up], dtype=float)
+                    x = bus[base]
+                    below = lo - x  # > 0 when violated
+                    above = x - hi
+                    viol = (x < lo - ENCLOSURE_TOL) | (x > hi + ENCLOSURE_TOL) | ~np.isfinite(lo) | ~np.isfinite(hi)
+                    width = hi - lo
+                    o["intervals"][base] = {
+                        "truth": base,
+                        "lower": name,
+                        "upper": up,
+                        "unit": result.units.get(name) or result.units.get(base),
+                        "enclosure_violations": int(np.sum(viol)),
+                        "enclosure_violations_after_settle": int(np.sum(viol[after])),
+                        "max_violation": _f(max(0.0, float(np.nanmax(np.maximum(below, above))))) if x.size else None,
+                        "mean_width": _f(np.mean(width)),
+                        "mean_width_after_settle": _f(np.mean(width[after])) if np.any(after) else None,
+                        "nonfinite_samples": int(np.sum(~np.isfinite(width))),
+                    }
+                    scored.update((name, up))
+        if "beta_hat" in outs and "beta" in bus and "bank_angle" in bus:
+            e = np.asarray(outs["beta_hat"], dtype=float) - bus["beta"]
+            phi = bus["bank_angle"]
+            for key, sel in (("beta_error_to_bank_l2_ratio", slice(None)),
+                             ("beta_error_to_bank_l2_ratio_after_settle", after)):
+                den = l2_norm(phi[sel], dt)
+                o[key] = _f(l2_norm(e[sel], dt) / den) if den > 0 else None
+        if "mode" in outs:
+            m = np.asarray(outs["mode"])
+            o["mode_occupancy"] = mode_occupancy(t, m)
+            o["mode_switches"] = int(np.sum(m[1:] != m[:-1]))
+            scored.add("mode")
+        o["unscored_outputs"] = sorted(set(outs) - scored)
+        o["log_messages"] = len(result.logs.get(label, []))
+        out["observers"][label] = o
+    return out
+
+
+def write_json_atomic(data: Any, path: str | os.PathLike) -> Path:
+    """Write strict JSON (no NaN) to ``path`` via a temporary file and os.replace."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(_sanitize(data), indent=2, allow_nan=False)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def _sanitize(x):
+    """JSON-ready copy: numpy scalars/arrays to Python, non-finite floats to None, paths to str."""
+    if isinstance(x, dict):
+        return {str(k): _sanitize(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_sanitize(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _sanitize(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, os.PathLike):
+        return os.fspath(x)
+    if x is None or isinstance(x, (str, int, float, bool)):
+        return x
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+def write(metrics: dict, out_dir: str | os.PathLike, filename: str = "metrics.json") -> Path:
+    """Write ``metrics`` to ``out_dir/metrics.json`` atomically; returns the path."""
+    return write_json_atomic(metrics, Path(out_dir) / filename)

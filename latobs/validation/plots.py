@@ -1,0 +1,172 @@
+"""PNG figures of a co-simulation (matplotlib, Agg canvas; pyplot's global state is not used).
+
+Angles are drawn in degrees and angular rates in deg/s (axis labels say so); other signals in
+their SI unit. Files written by :func:`plot_all` into ``out_dir``:
+
+    estimates.png   truth vs every observer's estimate (and interval band) per estimated signal
+    modes.png       active mode of each observer over time (observers with a `mode` output)
+    bank_angle.png  road bank angle: truth vs each observer's bank_angle_hat
+    inputs.png      the scenario's plant inputs (delta, vx, bank_angle)
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .harness import PLANT_LABEL, SimResult
+
+RAD2DEG = 180.0 / math.pi
+
+#: preferred order of the estimated signals; others follow alphabetically
+PREFERRED = ("beta", "yaw_rate", "roll_angle", "roll_rate", "bank_angle")
+
+_ANGLES = {"beta", "roll_angle", "bank_angle", "delta", "alpha_f", "alpha_r", "steer_angle"}
+_RATES = {"yaw_rate", "roll_rate", "steer_rate"}
+_SI = {"vx": "m/s", "vy": "m/s", "ay": "m/s^2", "Fyf": "N", "Fyr": "N", "Ff": "N", "Fr": "N",
+       "rider_torque": "N*m"}
+_LABELS = {"beta": "sideslip beta", "yaw_rate": "yaw rate", "roll_angle": "roll angle",
+           "roll_rate": "roll rate", "bank_angle": "bank angle", "delta": "road-wheel angle delta",
+           "vx": "speed vx", "vy": "lateral speed vy", "ay": "lateral acceleration ay"}
+
+
+def display_scale(name: str, units: dict[str, str] | None = None) -> tuple[float, str]:
+    """(factor, unit label) to draw signal ``name``: rad -> deg, rad/s -> deg/s, else SI."""
+    u = (units or {}).get(name) or (units or {}).get(name + "_hat")
+    if u in ("rad",) or (u is None and name in _ANGLES):
+        return RAD2DEG, "deg"
+    if u in ("rad/s",) or (u is None and name in _RATES):
+        return RAD2DEG, "deg/s"
+    return 1.0, u or _SI.get(name, "SI")
+
+
+def _ylabel(name: str, units) -> str:
+    _, u = display_scale(name, units)
+    return f"{_LABELS.get(name, name)} [{u}]"
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    FigureCanvasAgg(fig)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, format="png", dpi=110)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def estimated_signals(result: SimResult) -> list[str]:
+    """Truth signals (on the bus) that some observer estimates (X_hat) or bounds (X_lower/upper)."""
+    found = set()
+    for outs in result.observers.values():
+        for n in outs:
+            if n.endswith("_hat") and n[:-4] in result.bus:
+                found.add(n[:-4])
+            if n.endswith("_lower") and n[:-6] + "_upper" in outs and n[:-6] in result.bus:
+                found.add(n[:-6])
+    return [s for s in PREFERRED if s in found] + sorted(found - set(PREFERRED))
+
+
+def plot_estimates(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
+    sigs = estimated_signals(result)
+    if not sigs:
+        return None
+    t = result.time
+    fig = Figure(figsize=(10, 2.3 * len(sigs) + 0.8))
+    axes = fig.subplots(len(sigs), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, s in zip(axes, sigs):
+        k, _ = display_scale(s, result.units)
+        ax.plot(t, k * result.bus[s], color="black", lw=1.6, label=f"{s} (truth)")
+        for label, outs in result.observers.items():
+            if s + "_hat" in outs:
+                ax.plot(t, k * np.asarray(outs[s + "_hat"], float), lw=1.0, label=f"{label}: {s}_hat")
+            if s + "_lower" in outs and s + "_upper" in outs:
+                ax.fill_between(t, k * np.asarray(outs[s + "_lower"], float), k * np.asarray(outs[s + "_upper"], float),
+                                alpha=0.25, label=f"{label}: [{s}_lower, {s}_upper]")
+        ax.set_ylabel(_ylabel(s, result.units))
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{result.scenario}: estimates vs truth")
+    fig.tight_layout()
+    return _save(fig, Path(out_dir) / "estimates.png")
+
+
+def plot_modes(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
+    labs = [lab for lab, outs in result.observers.items() if "mode" in outs]
+    if not labs:
+        return None
+    fig = Figure(figsize=(10, 1.6 * len(labs) + 1.0))
+    axes = fig.subplots(len(labs), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, lab in zip(axes, labs):
+        m = np.asarray(result.observers[lab]["mode"])
+        ax.step(result.time, m, where="post", lw=1.2)
+        ax.set_ylabel(f"{lab}\nmode [-]", fontsize=8)
+        lo, hi = int(m.min()), int(m.max())
+        ax.set_yticks(range(lo, hi + 1))
+        ax.set_ylim(lo - 0.5, hi + 0.5)
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{result.scenario}: active mode (1-based)")
+    fig.tight_layout()
+    return _save(fig, Path(out_dir) / "modes.png")
+
+
+def plot_bank(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
+    if "bank_angle" not in result.bus:
+        return None
+    k, u = display_scale("bank_angle", result.units)
+    fig = Figure(figsize=(10, 3.5))
+    ax = fig.subplots()
+    ax.plot(result.time, k * result.bus["bank_angle"], color="black", lw=1.6, label="bank_angle (truth)")
+    for lab, outs in result.observers.items():
+        if "bank_angle_hat" in outs:
+            ax.plot(result.time, k * np.asarray(outs["bank_angle_hat"], float), lw=1.0, label=f"{lab}: bank_angle_hat")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"bank angle [{u}]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.suptitle(f"{result.scenario}: road bank angle")
+    fig.tight_layout()
+    return _save(fig, Path(out_dir) / "bank_angle.png")
+
+
+def plot_inputs(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
+    names = [n for n in result.inputs.get(PLANT_LABEL, []) if n in result.bus]
+    if not names:
+        names = [n for n in ("delta", "vx", "bank_angle") if n in result.bus]
+    if not names:
+        return None
+    fig = Figure(figsize=(10, 2.2 * len(names) + 0.8))
+    axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, n in zip(axes, names):
+        k, _ = display_scale(n, result.units)
+        ax.plot(result.time, k * result.bus[n], lw=1.2)
+        ax.set_ylabel(_ylabel(n, result.units))
+        ax.grid(True, alpha=0.3)
+        if n == "vx":
+            sec = ax.secondary_yaxis("right", functions=(lambda v: v * 3.6, lambda v: v / 3.6))
+            sec.set_ylabel("[km/h]")
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{result.scenario}: plant inputs")
+    fig.tight_layout()
+    return _save(fig, Path(out_dir) / "inputs.png")
+
+
+def plot_all(result: SimResult, out_dir: str | os.PathLike) -> list[Path]:
+    """Write every applicable figure into ``out_dir``; returns the paths written."""
+    paths = [plot_estimates(result, out_dir), plot_modes(result, out_dir), plot_bank(result, out_dir),
+             plot_inputs(result, out_dir)]
+    return [p for p in paths if p is not None]

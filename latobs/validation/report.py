@@ -1,0 +1,195 @@
+"""Markdown report: ``index.md`` with the metrics tables and figures of each validation run.
+
+A section is one of
+
+* a :class:`ReportSection` (title, metrics dict as from :func:`latobs.validation.metrics.compute`,
+  image paths, extra markdown),
+* a mapping with the same keys,
+* a plain string: markdown copied as is (e.g. a design certificate written by the caller).
+
+Image links are made relative to the report directory. Metric values are in the SI unit of the
+signal (rad, rad/s, m/s, N); the unit column repeats it when the FMU declares it.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+IMAGE_ORDER = ("estimates.png", "bank_angle.png", "modes.png", "inputs.png")
+
+
+@dataclass
+class ReportSection:
+    title: str
+    metrics: Mapping[str, Any] | None = None
+    images: list[str | os.PathLike] = field(default_factory=list)
+    markdown: str = ""
+
+
+def _fmt(x) -> str:
+    if x is None:
+        return "—"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, int):
+        return str(x)
+    if isinstance(x, float):
+        return f"{x:.4g}"
+    return str(x)
+
+
+def _table(header: list[str], rows: list[list[Any]]) -> str:
+    if not rows:
+        return ""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(_fmt(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def metrics_markdown(metrics: Mapping[str, Any]) -> str:
+    """Tables of one scenario's metrics (estimates, intervals, per-observer summary)."""
+    obs = metrics.get("observers", {})
+    parts = []
+    head = []
+    for key, lab in (("scenario", "scenario"), ("duration_s", "duration [s]"), ("dt_s", "step [s]"),
+                     ("settle_time_s", "settle time [s]")):
+        if key in metrics:
+            head.append(f"{lab}: {_fmt(metrics[key])}")
+    if head:
+        parts.append("; ".join(head) + "\n")
+    est_rows, int_rows, sum_rows = [], [], []
+    for lab, o in obs.items():
+        for name, e in o.get("estimates", {}).items():
+            est_rows.append([lab, name, e.get("truth"), e.get("unit"), e.get("rms"), e.get("max_abs"),
+                             e.get("rms_after_settle"), e.get("max_abs_after_settle")])
+        for name, e in o.get("intervals", {}).items():
+            int_rows.append([lab, name, e.get("unit"), e.get("enclosure_violations"),
+                             e.get("enclosure_violations_after_settle"), e.get("mean_width"),
+                             e.get("max_violation")])
+        occ = o.get("mode_occupancy")
+        occ_s = ", ".join(f"{m}: {v:.0%}" for m, v in occ.items()) if occ else None
+        sum_rows.append([lab, o.get("beta_error_to_bank_l2_ratio"), o.get("beta_error_to_bank_l2_ratio_after_settle"),
+                         occ_s, o.get("mode_switches"), o.get("log_messages")])
+    if est_rows:
+        parts.append("Estimation errors (estimate − truth, SI units):\n\n" + _table(
+            ["observer", "estimate", "truth", "unit", "RMS", "max abs", "RMS after settle", "max abs after settle"],
+            est_rows))
+    if int_rows:
+        parts.append("Interval outputs:\n\n" + _table(
+            ["observer", "signal", "unit", "enclosure violations", "violations after settle", "mean width",
+             "max violation"], int_rows))
+    if sum_rows:
+        parts.append("Per observer (‖β − β̂‖₂ / ‖φr‖₂ is paper 000 eq. (26)):\n\n" + _table(
+            ["observer", "‖β−β̂‖₂/‖φr‖₂", "same after settle", "mode occupancy", "mode switches", "log messages"],
+            sum_rows))
+    return "\n".join(parts)
+
+
+def _as_section(s) -> ReportSection | str:
+    if isinstance(s, (ReportSection, str)):
+        return s
+    if isinstance(s, Mapping):
+        return ReportSection(title=str(s.get("title", "")), metrics=s.get("metrics"),
+                             images=list(s.get("images", [])), markdown=str(s.get("markdown", "")))
+    raise TypeError(f"report section must be a ReportSection, a mapping or a markdown string, got {type(s).__name__}")
+
+
+def _rel(path, report_dir: Path) -> str:
+    p = Path(path)
+    if not p.is_absolute():
+        p = report_dir / p
+    return Path(os.path.relpath(p, report_dir)).as_posix()
+
+
+def section_from_dir(scenario_dir: str | os.PathLike, title: str | None = None, markdown: str = "") -> ReportSection:
+    """A section from a ``validate`` output directory: its metrics.json and its PNGs."""
+    d = Path(scenario_dir)
+    metrics = None
+    mf = d / "metrics.json"
+    if mf.is_file():
+        metrics = json.loads(mf.read_text(encoding="utf-8"))
+    pngs = sorted(d.glob("*.png"), key=lambda p: (IMAGE_ORDER.index(p.name) if p.name in IMAGE_ORDER else 99, p.name))
+    return ReportSection(title=title or (metrics or {}).get("scenario", d.name), metrics=metrics,
+                         images=pngs, markdown=markdown)
+
+
+def render(report_dir: str | os.PathLike, sections: Iterable, title: str = "latobs validation report",
+           intro: str = "") -> str:
+    report_dir = Path(report_dir)
+    out = [f"# {title}\n"]
+    if intro:
+        out.append(intro.rstrip() + "\n")
+    secs = [_as_section(s) for s in sections]
+    # overview: one row per (scenario, observer)
+    rows = []
+    for s in secs:
+        if isinstance(s, ReportSection) and s.metrics:
+            for lab, o in s.metrics.get("observers", {}).items():
+                est = o.get("estimates", {})
+                beta = est.get("beta_hat", {})
+                viol = sum(v.get("enclosure_violations") or 0 for v in o.get("intervals", {}).values()) \
+                    if o.get("intervals") else None
+                rows.append([s.title, lab, beta.get("rms_after_settle"), o.get("beta_error_to_bank_l2_ratio"), viol,
+                             len(est)])
+    if rows:
+        out.append("## Overview\n\n" + _table(
+            ["scenario", "observer", "β̂ RMS after settle [rad]", "‖β−β̂‖₂/‖φr‖₂", "enclosure violations",
+             "scored estimates"], rows))
+    for s in secs:
+        if isinstance(s, str):
+            out.append(s.rstrip() + "\n")
+            continue
+        out.append(f"## {s.title}\n")
+        if s.markdown:
+            out.append(s.markdown.rstrip() + "\n")
+        if s.metrics:
+            out.append(metrics_markdown(s.metrics))
+        for img in s.images:
+            rel = _rel(img, report_dir)
+            out.append(f"![{Path(img).stem}]({rel})\n")
+    return "\n".join(out)
+
+
+def write_index(report_dir: str | os.PathLike, sections: Iterable, title: str = "latobs validation report",
+                intro: str = "") -> Path:
+    """Write ``report_dir/index.md`` atomically (temp file + os.replace); returns its path."""
+    report_dir = Path(report_dir)
+    report_dir.mkdir(parents=True, exist_ok=True)
+    text = render(report_dir, sections, title=title, intro=intro)
+    path = report_dir / "index.md"
+    fd, tmp = tempfile.mkstemp(prefix=".index.md.", suffix=".tmp", dir=report_dir)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def text_table(metrics: Mapping[str, Any]) -> str:
+    """Plain-text table of one scenario's metrics for a terminal (SI units)."""
+    rows = [("observer", "output", "RMS", "max abs", "RMS settled", "max settled")]
+    for lab, o in metrics.get("observers", {}).items():
+        for name, e in o.get("estimates", {}).items():
+            rows.append((lab, name, _fmt(e.get("rms")), _fmt(e.get("max_abs")), _fmt(e.get("rms_after_settle")),
+                         _fmt(e.get("max_abs_after_settle"))))
+        for name, e in o.get("intervals", {}).items():
+            rows.append((lab, f"[{name}] violations/width", _fmt(e.get("enclosure_violations")),
+                         _fmt(e.get("mean_width")), _fmt(e.get("enclosure_violations_after_settle")),
+                         _fmt(e.get("mean_width_after_settle"))))
+        if o.get("beta_error_to_bank_l2_ratio") is not None:
+            rows.append((lab, "|beta err|/|bank| L2", _fmt(o["beta_error_to_bank_l2_ratio"]), "",
+                         _fmt(o.get("beta_error_to_bank_l2_ratio_after_settle")), ""))
+    widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return f"scenario {metrics.get('scenario', '?')} (SI units: rad, rad/s, m/s, N)\n" + "\n".join(lines)

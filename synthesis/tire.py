@@ -1,0 +1,45 @@
+"""The vehicle's lateral tire curve at static load, for choosing switched stiffness modes.
+
+Simplified Magic Formula (vehicles.md): Fy = mu Fz sin(C atan(B a - E (B a - atan(B a)))) per
+wheel, with B set so that mu Fz B C equals the wheel's linear cornering stiffness at static load
+(the same curve as the nonlinear CarPlant; an axle is two such wheels).
+
+Paper 000 (section IV-B, Fig. 1) takes its two tire modes C1, C2 as the slopes of the measured
+lateral force characteristic on either side of alpha*. ``mode_stiffness`` does the same on this
+curve: C1 is the linear stiffness, C2 the least-squares slope through the origin over
+[alpha*, alpha_fit] (a secant stiffness, since eq. (2) has no offset term).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .params import G, Vehicle
+
+MF_PARAMS = ("m", "lf", "lr", "Cf", "Cr", "mf_C", "mf_E", "mu")
+
+
+def axle_force(vehicle: Vehicle, axle: str, alpha: np.ndarray) -> np.ndarray:
+    """Lateral force (N) of the front (``"f"``) or rear (``"r"``) axle at slip angles ``alpha`` (rad)."""
+    p = vehicle.require(MF_PARAMS, "the Magic Formula tire curve")
+    L = p["lf"] + p["lr"]
+    Fz = p["m"] * G * (p["lr"] if axle == "f" else p["lf"]) / L / 2.0     # N per wheel, static
+    c_wheel = (p["Cf"] if axle == "f" else p["Cr"]) / 2.0
+    C, E, mu = p["mf_C"], p["mf_E"], p["mu"]
+    B = c_wheel / (C * mu * Fz)
+    x = B * np.asarray(alpha, dtype=float)
+    return 2.0 * mu * Fz * np.sin(C * np.arctan(x - E * (x - np.arctan(x))))
+
+
+def mode_stiffness(vehicle: Vehicle, alpha_star: float, alpha_fit: float, n: int = 200) -> tuple[float, float]:
+    """(C2f/Cf, C2r/Cr): secant-slope ratios of the tire curve over [alpha_star, alpha_fit] (rad)."""
+    if not 0 < alpha_star < alpha_fit < math.pi / 2:
+        raise ValueError(f"need 0 < alpha* < alpha_fit < 90 deg, got alpha* = {math.degrees(alpha_star):g} deg, "
+                         f"alpha_fit = {math.degrees(alpha_fit):g} deg")
+    a = np.linspace(alpha_star, alpha_fit, n)
+    out = []
+    for axle, c in (("f", vehicle.Cf), ("r", vehicle.Cr)):
+        F = axle_force(vehicle, axle, a)
+        out.append(float(np.dot(a, F) / np.dot(a, a)) / c)
+    return out[0], out[1]
