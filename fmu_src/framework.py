@@ -141,6 +141,12 @@ class LatobsSlave(_PythonFmuSlave):
             return
         try:
             self._rt = self.spec.runtime(self._data, dict(self._p))
+            if hasattr(self._rt, "initialize"):
+                if all(math.isfinite(v) for v in self._u.values()):
+                    self._rt.initialize(dict(self._u))
+                else:
+                    self.log("non-finite inputs at initialisation: the runtime starts from the first step",
+                             Fmi2Status.warning)
             self._y.update(self._rt.y)
             self._drain()
             self._phase = "stepping"

@@ -16,7 +16,8 @@ Documented clamps (never an exception for finite inputs):
     per entry (the model has 1/Vx terms; at standstill sideslip is undefined);
   * vx outside the design grid: speed modes use the nearest mode; tire modes evaluate the model
     at the nearest grid edge; one warning per excursion;
-  * the first step initialises x^ with beta^ = 0 and the measured [r, phi, phidot].
+  * ``initialize`` (at exitInitializationMode, or else the first step) sets x^ = [0, y] (beta^ = 0,
+    measured r, phi, phidot) and the mode of the initial speed.
 Outputs are those at the end of the step, x^ = z + N y with the held measurement.
 """
 from __future__ import annotations
@@ -141,16 +142,24 @@ class SwitchedPIObserver:
         Ny = _matvec(self.N, y_meas)
         return [a + b for a, b in zip(z, Ny)]
 
+    def initialize(self, u: dict) -> None:
+        """Start from the first measurement: x^(0) = [0, y(0)], i.e. z(0) = x^(0) - N y(0), and the
+        mode of the initial speed (tire modes: mode 1)."""
+        y_meas = [u["yaw_rate"], u["roll_angle"], u["roll_rate"]]
+        x0 = [0.0] + y_meas
+        Ny = _matvec(self.N, y_meas)
+        self.s[: self.n] = [a - b for a, b in zip(x0, Ny)]
+        self._started = True
+        if self.switching["kind"] == "speed_bands" and abs(u["vx"]) >= self.vx_hold:
+            self.mode = self._select_mode(u["vx"], u["delta"], x0)
+        self._publish(y_meas)
+
     def step(self, h: float, u: dict) -> None:
         vx = u["vx"]
         y_meas = [u["yaw_rate"], u["roll_angle"], u["roll_rate"]]
         delta = u["delta"]
         if not self._started:
-            # x^(0) = [0, y(0)]: z(0) = x^(0) - N y(0)
-            x0 = [0.0] + y_meas
-            Ny = _matvec(self.N, y_meas)
-            self.s[: self.n] = [a - b for a, b in zip(x0, Ny)]
-            self._started = True
+            self.initialize(u)
         if abs(vx) < self.vx_hold:
             if not self._holding:
                 self.events.append(("warning", f"|vx| = {abs(vx):.3g} m/s < vx_hold = {self.vx_hold:g} m/s: "

@@ -6,6 +6,8 @@ maths; the runtime classes know nothing of FMI. A runtime class follows this pro
     rt = Runtime(data, params)   # data: the FMU's JSON data file (design or plant file),
                                  # params: {parameter name: value} after initialisation
     rt.y                         # dict {output name: value}, valid after construction
+    rt.initialize(u)             # optional: the inputs set in initialisation mode (finite), so that
+                                 # the outputs at the start time are consistent with them
     rt.step(h, u)                # advance h seconds, inputs u (dict name -> float) held
     rt.events                    # list of (level, message) produced by the last call,
                                  # level in {"warning", "error"}; drained by the framework
