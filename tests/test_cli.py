@@ -1,0 +1,37 @@
+"""The command line: exit codes and messages (CONTRACT.md)."""
+from __future__ import annotations
+
+import json
+
+from latobs.cli import main
+
+
+def test_list_names_everything(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("SideslipBankObserver", "SideslipBankObserverTire", "CarPlant", "sedan", "mbds_250lm",
+                 "bank-braking", "double-lane-change", "sine-with-dwell", "fishhook"):
+        assert name in out
+
+
+def test_design_writes_a_certified_file(tmp_path, capsys):
+    assert main(["design", "SideslipBankObserver", "--out", str(tmp_path)]) == 0
+    data = json.loads((tmp_path / "SideslipBankObserver.design.json").read_text())
+    for key in ("name", "paper", "vehicle", "modes", "gamma", "certified", "checks", "solver"):
+        assert key in data
+    assert data["certified"] and all(c["passed"] for c in data["checks"])
+    assert set(data["checks"][0]) >= {"name", "value", "limit", "passed"}
+    assert {"name", "status", "seconds"} <= set(data["solver"])
+    assert "gamma" in capsys.readouterr().out
+
+
+def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys):
+    assert main(["design", "SideslipBankObserver", "--vehicle", "mbds_250lm", "--out", str(tmp_path)]) == 2
+    assert "lacks parameter(s) Ix, hr, Kr, br" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())                 # nothing half-written
+    assert main(["design", "NoSuchObserver"]) == 2
+    assert "unknown design" in capsys.readouterr().err
+    assert main(["build", "CarPlant", "--backend", "c", "--out", str(tmp_path)]) == 2
+    assert "not available yet" in capsys.readouterr().err
+    assert main(["validate", "no-such-scenario", "--out", str(tmp_path)]) == 2
+    assert "no-such-scenario" in capsys.readouterr().err
