@@ -17,7 +17,6 @@ atomically.
 from __future__ import annotations
 
 import hashlib
-import os
 import shutil
 import sys
 import tempfile
@@ -25,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import __version__
+from .atomic import atomic_path
 from .synthesis import certificate, design_file
 from .synthesis.params import load_vehicle
 
@@ -118,18 +118,14 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
         (stage / data_name).write_text(data_text, encoding="utf-8")
         script = stage / f"{module}.py"
         script.write_text(entry, encoding="utf-8")
-        tmp_fmu = Path(tempfile.mkstemp(prefix=f".{class_name}.", suffix=".fmu", dir=out_dir)[1])
+        final = out_dir / f"{class_name}.fmu"
         try:
-            tmp_fmu.unlink()
-            FmuBuilder.build_FMU(script, dest=tmp_fmu, project_files=[stage / pkg, stage / data_name])
-            problems = validate_fmu(str(tmp_fmu))
-            if problems:
-                raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
-            final = out_dir / f"{class_name}.fmu"
-            os.replace(tmp_fmu, final)
+            with atomic_path(final, suffix=".fmu") as tmp_fmu:
+                FmuBuilder.build_FMU(script, dest=tmp_fmu, project_files=[stage / pkg, stage / data_name])
+                problems = validate_fmu(str(tmp_fmu))
+                if problems:
+                    raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
         finally:
-            if tmp_fmu.exists():
-                tmp_fmu.unlink()
             # the build imported the staged modules: forget them (their folder is gone)
             for name in set(sys.modules) - modules_before:
                 if name == module or name == pkg or name.startswith(pkg + "."):

@@ -29,10 +29,11 @@ Non-finite statistics are written as null so that the file is strict JSON.
 """
 from __future__ import annotations
 
+from ..atomic import atomic_write_text
+
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -158,18 +159,7 @@ def write_json_atomic(data: Any, path: str | os.PathLike) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(_sanitize(data), indent=2, allow_nan=False)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return atomic_write_text(path, text + "\n")
 
 
 def _sanitize(x):

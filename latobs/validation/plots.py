@@ -10,9 +10,10 @@ their SI unit. Files written by :func:`plot_all` into ``out_dir``:
 """
 from __future__ import annotations
 
+from ..atomic import atomic_path
+
 import math
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -52,18 +53,8 @@ def _ylabel(name: str, units) -> str:
 
 def _save(fig: Figure, path: Path) -> Path:
     FigureCanvasAgg(fig)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, format="png", dpi=110)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
     return path
 
 

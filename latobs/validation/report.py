@@ -12,9 +12,10 @@ signal (rad, rad/s, m/s, N); the unit column repeats it when the FMU declares it
 """
 from __future__ import annotations
 
+from ..atomic import atomic_write_text
+
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -160,19 +161,7 @@ def write_index(report_dir: str | os.PathLike, sections: Iterable, title: str = 
     report_dir = Path(report_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
     text = render(report_dir, sections, title=title, intro=intro)
-    path = report_dir / "index.md"
-    fd, tmp = tempfile.mkstemp(prefix=".index.md.", suffix=".tmp", dir=report_dir)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return atomic_write_text(report_dir / "index.md", text)
 
 
 def text_table(metrics: Mapping[str, Any]) -> str:
