@@ -21,6 +21,7 @@ import shutil
 import sys
 import tempfile
 from dataclasses import dataclass
+from importlib import import_module
 from pathlib import Path
 
 from . import __version__
@@ -103,6 +104,12 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
     if not class_name.isidentifier():
         raise PackagingError(f"FMU name {class_name!r} is not a valid identifier")
     out_dir = Path(out_dir)
+    # the runtime must accept its data now, not when a user initialises the FMU
+    spec = import_module(f"{_fmu_src.__name__}.models.{kind.model_module}").SPEC
+    try:
+        spec.runtime(data, {})
+    except (ValueError, KeyError, TypeError) as exc:
+        raise PackagingError(f"{class_name}: the {kind.name} runtime rejects its data: {exc}") from exc
     out_dir.mkdir(parents=True, exist_ok=True)
     pkg = runtime_package_name()
     data_name = f"{class_name}.{kind.data_kind}.json"
@@ -142,10 +149,10 @@ def package_design(design_path: Path, out_dir: Path) -> Path:
         failed = [c.name for c in checks if not c.passed]
         raise PackagingError(f"{design_path}: design is not certified ({', '.join(failed) or 'flag false'}); "
                              "refusing to package it")
-    base = data["name"].split("_")[0] if data["name"] not in OBSERVERS else data["name"]
-    kind = OBSERVERS.get(base)
+    kind = OBSERVERS.get(data.get("design", ""))
     if kind is None:
-        raise PackagingError(f"{design_path}: no FMU model for design {data['name']!r}")
+        raise PackagingError(f"{design_path}: no FMU model for design {data.get('design')!r} "
+                             f"(known: {', '.join(OBSERVERS)})")
     return build_fmu(kind, data["name"], data, out_dir)
 
 

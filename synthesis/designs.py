@@ -64,6 +64,7 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     veh = load_vehicle(vehicle or entry.default_vehicle)
     opts = replace(entry.options(artefact_name(name, veh.name)), **overrides)
     data = entry.solve(veh, opts)
+    data["design"] = name          # the catalogue entry (the FMU model), whatever the artefact name
     ok, checks = certificate.certify(data)
     data["certified"] = ok
     data["checks"] = certificate.as_dicts(checks)

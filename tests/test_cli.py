@@ -14,6 +14,13 @@ def test_list_names_everything(capsys):
         assert name in out
 
 
+def test_every_design_has_an_fmu_model():
+    from latobs.packaging import OBSERVERS
+    from latobs.synthesis.designs import DESIGNS
+
+    assert set(OBSERVERS) == set(DESIGNS)
+
+
 def test_design_writes_a_certified_file(tmp_path, capsys):
     assert main(["design", "SideslipBankObserver", "--out", str(tmp_path)]) == 0
     data = json.loads((tmp_path / "SideslipBankObserver.design.json").read_text())
@@ -29,6 +36,9 @@ def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys):
     assert main(["design", "SideslipBankObserver", "--vehicle", "mbds_250lm", "--out", str(tmp_path)]) == 2
     assert "lacks parameter(s) Ix, hr, Kr, br" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())                 # nothing half-written
+    assert main(["build", "CarPlant", "--vehicle", "mbds_250lm", "--out", str(tmp_path)]) == 2
+    assert "CarPlant_mbds_250lm: the CarPlant runtime rejects its data" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.fmu"))
     assert main(["design", "NoSuchObserver"]) == 2
     assert "unknown design" in capsys.readouterr().err
     assert main(["build", "CarPlant", "--backend", "c", "--out", str(tmp_path)]) == 2
