@@ -213,7 +213,10 @@ class CarPlantModel:
     @classmethod
     def parameter_defaults(cls, data) -> dict:
         """The FMU parameter defaults for the vehicle in ``data`` (mu and sigma from the vehicle)."""
-        v = cls._vehicle_values(data)
+        return cls._defaults(cls._vehicle_values(data))
+
+    @staticmethod
+    def _defaults(v: dict) -> dict:
         return {"mu": v["mu"], "scale_f": 1.0, "scale_r": 1.0, "sigma": v["sigma"]}
 
     def __init__(self, data: dict, params: dict | None = None):
@@ -223,7 +226,7 @@ class CarPlantModel:
         if unknown:
             raise ValueError(f"CarPlant: unknown parameter(s) {', '.join(unknown)}; "
                              f"known: {', '.join(self.PARAMETERS)}")
-        defaults = {"mu": v["mu"], "scale_f": 1.0, "scale_r": 1.0, "sigma": v["sigma"]}
+        defaults = self._defaults(v)
         p = {}
         for k, d in defaults.items():
             val = params.get(k)

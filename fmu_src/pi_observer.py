@@ -110,7 +110,7 @@ class SwitchedPIObserver:
         G.append([KII[0][c] for c in range(ny)] + [0.0])
         return M, G
 
-    def _select_mode(self, vx: float, delta: float, xhat) -> int:
+    def _select_mode(self, vx: float, delta: float, y_meas) -> int:
         sw = self.switching
         if sw["kind"] == "speed_bands":
             edges = sw["edges"]
@@ -119,10 +119,13 @@ class SwitchedPIObserver:
                     return i
             return 0 if vx < edges[0] else len(self.modes) - 1
         # tire modes, eq. (27) with the slip angles of eq. (2) from the estimates
+        xhat = self.xhat(y_meas)
         beta, r = xhat[0], xhat[1]
         a_f = delta - beta - sw["lf"] * r / vx
         a_r = -beta + sw["lr"] * r / vx
         premise = max(abs(a_f), abs(a_r))
+        # departure from eq. (27): a hysteresis band of +-hysteresis around alpha* (the paper
+        # switches exactly at alpha*, which chatters when the estimated slip hovers there)
         if self.mode == 0 and premise > sw["alpha_star"] + sw["hysteresis"]:
             return 1
         if self.mode == 1 and premise < sw["alpha_star"] - sw["hysteresis"]:
@@ -151,7 +154,7 @@ class SwitchedPIObserver:
         self.s[: self.n] = [a - b for a, b in zip(x0, Ny)]
         self._started = True
         if self.switching["kind"] == "speed_bands" and abs(u["vx"]) >= self.vx_hold:
-            self.mode = self._select_mode(u["vx"], u["delta"], x0)
+            self.mode = self._select_mode(u["vx"], u["delta"], y_meas)
         self._publish(y_meas)
 
     def step(self, h: float, u: dict) -> None:
@@ -176,7 +179,7 @@ class SwitchedPIObserver:
             self.events.append(("warning", f"vx = {vx:.4g} m/s outside the design grid [{lo:.4g}, {hi:.4g}] m/s: "
                                            "clamped to the nearest grid mode/speed"))
         self._outside = outside
-        self.mode = self._select_mode(vx, delta, self.xhat(y_meas))
+        self.mode = self._select_mode(vx, delta, y_meas)
         if self.mode in self._fixed:
             M, G = self._fixed[self.mode]
         else:

@@ -42,7 +42,6 @@ def _reference_observer(design, ts, X):
     Pi = T A - K C (7), K_p = K + Pi N (8). Modes by eq. (25)."""
     T, N, C = (np.asarray(design["structure"][k]) for k in ("T", "N", "C"))
     edges = design["switching"]["edges"]
-    z = np.zeros(4)
     w = 0.0
     out_beta, out_w, modes = [], [], []
     y0 = C @ X[0]
@@ -129,11 +128,12 @@ def test_tire_mode_switching_has_hysteresis(design_tire):
     obs = SwitchedPIObserver(design_tire, {})
     a_star = design_tire["switching"]["alpha_star"]
     hyst = design_tire["switching"]["hysteresis"]
-    assert obs._select_mode(20.0, a_star + 0.5 * hyst, [0, 0, 0, 0]) == 0
-    assert obs._select_mode(20.0, a_star + 1.5 * hyst, [0, 0, 0, 0]) == 1
+    y0 = [0.0, 0.0, 0.0]      # no yaw rate and beta^ = 0: the premise is |delta|
+    assert obs._select_mode(20.0, a_star + 0.5 * hyst, y0) == 0
+    assert obs._select_mode(20.0, a_star + 1.5 * hyst, y0) == 1
     obs.mode = 1
-    assert obs._select_mode(20.0, a_star - 0.5 * hyst, [0, 0, 0, 0]) == 1
-    assert obs._select_mode(20.0, a_star - 1.5 * hyst, [0, 0, 0, 0]) == 0
+    assert obs._select_mode(20.0, a_star - 0.5 * hyst, y0) == 1
+    assert obs._select_mode(20.0, a_star - 1.5 * hyst, y0) == 0
 
 
 @pytest.mark.parametrize("vx", [0.0, 0.5, -3.0, 2.0, 40.0, 300.0])
