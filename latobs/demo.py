@@ -29,7 +29,7 @@ def _design_section(path: Path) -> str:
     s = certificate.summary(d)
     o = d["options"]
     lines = [f"**{d['name']}** (paper {d['paper']}, vehicle `{d['vehicle']['name']}`): "
-             f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c["passed"] for c in checks)}/{len(checks)} checks "
+             f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c['passed'] for c in checks)}/{len(checks)} checks "
              f"passed; gamma = {s['gamma']:.4g}; cond(P) = {s['cond_P']:.3g}; pole region Re < -{o['alpha']:g}, "
              f"|lambda| < {o['radius']:g}; Clarabel {d['solver']['status']} in {d['solver']['seconds']:.2f} s.",
              "",

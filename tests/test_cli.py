@@ -45,3 +45,13 @@ def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys):
     assert "not available yet" in capsys.readouterr().err
     assert main(["validate", "no-such-scenario", "--out", str(tmp_path)]) == 2
     assert "no-such-scenario" in capsys.readouterr().err
+
+
+def test_demo_certificate_section_renders(tmp_path, design_speed):
+    from latobs.demo import _design_section
+    from latobs.synthesis import design_file
+
+    text = _design_section(design_file.write(design_speed, tmp_path))
+    n = len(design_speed["checks"])
+    assert f"certified, {n}/{n} checks passed" in text
+    assert text.count("| Vx = ") == 3            # one row per speed mode
