@@ -1,24 +1,38 @@
 """The one FMI 2.0 co-simulation glue of every latobs FMU (pythonfmu backend). No maths here.
 
+pythonfmu's native library (``binaries/<platform>/<id>.so``, taken unchanged from pythonfmu) embeds
+Python, imports the module named in ``resources/slavemodule.txt`` and calls, on an instance of the
+class that the regex ``class NAME(Fmi2Slave):`` finds in it, a small set of methods: the
+constructor (``instance_name``, ``resources``, ``logger``, ``visible``), ``_get_log_queue``,
+``setup_experiment``, ``enter/exit_initialization_mode``, ``do_step``, ``terminate``,
+``get/set_real|integer|boolean|string`` and ``_get/_set_fmu_state``. :class:`Fmi2Slave` speaks
+that protocol itself (:class:`Fmi2Slave`) instead of subclassing pythonfmu's Python class: an FMU then carries
+no ``pythonfmu`` package, so no two FMUs share a module in one process (see ``latobs.packaging``),
+every call is as lean as a Python call can be (the per-step cost through fmpy matters), and the
+model description is ours to write (:func:`model_description`).
+
 A generated entry script binds a ``ModelSpec`` (``spec.py``) and a data file to this class:
 
-    from latobs_rt_<hash>.framework import LatobsSlave as Fmi2Slave
+    from latobs_rt_<hash>.framework import Fmi2Slave
     class SideslipBankObserver(Fmi2Slave):
         spec = SPEC; data_file = "SideslipBankObserver.design.json"; data_sha256 = "..."
 
-(pythonfmu's native loader finds the class with the regex ``class NAME(Fmi2Slave):``, hence the
-alias). The host never sees a Python exception: every failure is logged and reported as a
+The host never sees a Python exception (pythonfmu 0.7.0 turns one into fmi2Fatal, and after a
+few of them its log buffer handling crashes the host). Every failure is logged and reported as a
 status, as documented here:
   * a non-finite input or step size, or doStep before exitInitializationMode: the step is
     refused, the state is kept, an error is logged and doStep returns fmi2Discard (pythonfmu
-    maps a refused step to fmi2Discard; any uncaught Python exception would be fmi2Fatal);
-  * the data file differs from the one the FMU was built with (sha256), or the runtime rejects
-    its data or parameters at exitInitializationMode: logged as an error, every later doStep
-    is refused;
+    maps a refused step to fmi2Discard; it has no way to return fmi2Error);
+  * an unknown value reference, or one of another type, in a get/set call: an error is logged,
+    a set is ignored, a get returns 0 for it. (With the native guard of ``latobs.native_guard``,
+    which the linux64 binary has when a C compiler was present at build time, such a call never
+    reaches Python: the guard returns a real fmi2Error.) Setting a variable that is not an input
+    or a parameter is likewise logged and ignored;
+  * the data file differs from the one the FMU was built with (sha256), a parameter is outside
+    its declared [min, max], or the runtime rejects its data or parameters at
+    exitInitializationMode: logged as an error, every later doStep is refused;
   * parameters set after initialisation are ignored with a warning;
   * warnings of the runtime (clamps, e.g. speed outside the design grid) are logged.
-The model description gets what pythonfmu omits and ``fmpy validate`` requires (ModelStructure/
-InitialUnknowns) plus units.
 """
 from __future__ import annotations
 
@@ -28,90 +42,116 @@ import math
 import os
 import sys
 import traceback
-from xml.etree.ElementTree import Element, SubElement
-
-from pythonfmu import Fmi2Slave as _PythonFmuSlave
-from pythonfmu import DefaultExperiment, Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
-from pythonfmu.enums import Fmi2Status
+from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .spec import ModelSpec
 
-# FMI 2.0 base-unit exponents of the units used by the model files
+# FMI 2.0 status codes (fmi2Status)
+OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
+_CATEGORY = {WARNING: "logStatusWarning", ERROR: "logStatusError", FATAL: "logStatusFatal"}
+
+# FMI 2.0 base-unit exponents of the units used by the model files; "1" is dimensionless
 BASE_UNITS = {
-    "rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "m": {"m": "1"}, "m/s": {"m": "1", "s": "-1"},
-    "m/s2": {"m": "1", "s": "-2"}, "N": {"kg": "1", "m": "1", "s": "-2"}, "N.m": {"kg": "1", "m": "2", "s": "-2"},
-    "s": {"s": "1"},
+    "1": {}, "rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "m": {"m": "1"},
+    "m/s": {"m": "1", "s": "-1"}, "m/s2": {"m": "1", "s": "-2"}, "N": {"kg": "1", "m": "1", "s": "-2"},
+    "N.m": {"kg": "1", "m": "2", "s": "-2"}, "s": {"s": "1"},
 }
+# display units offered to tools: (name, factor) with display value = factor * SI value
+DISPLAY_UNITS = {"rad": ("deg", 180.0 / math.pi), "rad/s": ("deg/s", 180.0 / math.pi), "m/s": ("km/h", 3.6)}
 DEFAULT_STEP = 0.005  # s, communication step suggested in the model description
 
 # pythonfmu 0.7.0's native findClass() ends with Py_DECREF(PyModule_GetDict(module)): it releases,
 # on every instantiation, a reference to the entry module's __dict__ that it never owned, so the
 # dict is freed after a few instances and the next instantiation crashes the host (upstream issue
-# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see LatobsSlave.__init__).
+# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see Fmi2Slave.__init__).
 _ENTRY_DICT_REFS: list = []
 
 
-class LatobsSlave(_PythonFmuSlave):
+class _LogMsg:
+    """What pythonfmu's native side reads from the log queue: status, category, msg."""
+
+    __slots__ = ("status", "category", "msg")
+
+    def __init__(self, status: int, category: str, msg: str):
+        self.status, self.category, self.msg = status, category, msg
+
+
+def start_values(spec: ModelSpec, data: dict) -> dict:
+    """Parameter start values: the spec's, overridden by the runtime's data-dependent defaults."""
+    p = {v.name: float(v.start) for v in spec.parameters}
+    defaults = getattr(spec.runtime, "parameter_defaults", None)
+    if defaults is not None and data:
+        p.update({k: float(x) for k, x in defaults(data).items() if k in p})
+    return p
+
+
+def variable_table(spec: ModelSpec) -> list[tuple[int, str, str, object]]:
+    """(value reference, FMI type, causality, Var) in value-reference order: parameters, inputs,
+    Real outputs, Integer outputs. The model description and the native guard use this table."""
+    rows = [(v, "Real", "parameter") for v in spec.parameters]
+    rows += [(v, "Real", "input") for v in spec.inputs]
+    rows += [(v, "Real", "output") for v in spec.outputs]
+    rows += [(v, "Integer", "output") for v in spec.integer_outputs]
+    return [(vr, typ, caus, v) for vr, (v, typ, caus) in enumerate(rows)]
+
+
+class Fmi2Slave:
+    """The slave of every latobs FMU. pythonfmu 0.7.0's native ``findClass`` picks, in the entry
+    module, the class whose MRO holds a class named ``Fmi2Slave``: hence this class's name."""
+
     spec: ModelSpec = None        # set by the entry script
     data_file: str = ""           # resource file holding the design or plant data
     data_sha256: str = ""         # hash of that file at build time
 
-    def __init__(self, **kwargs):
+    def __init__(self, instance_name="", resources=None, logger=None, visible=False, **_):
         module = sys.modules.get(type(self).__module__)
         if module is not None:
             _ENTRY_DICT_REFS.append(vars(module))   # see _ENTRY_DICT_REFS
-        super().__init__(**kwargs)
+        self.instance_name = instance_name
+        self.resources = resources
+        self.log_queue: list = []
+        # pythonfmu put this FMU's resources folder at the front of sys.path to import the entry
+        # module; everything is imported by now: keep the host's sys.path as it was
+        if resources:
+            sys.path[:] = [p for p in sys.path if p != resources]
         spec = self.spec
-        self.description = spec.description
-        self.author = "latobs"
-        self.default_experiment = DefaultExperiment(start_time=0.0, step_size=DEFAULT_STEP)
         self._phase = "instantiated"
         self._fault = ""
         self._rt = None
+        self._data = self._load_data()
         self._u = {v.name: float(v.start) for v in spec.inputs}
-        self._p = {v.name: float(v.start) for v in spec.parameters}
+        self._p = start_values(spec, self._data if not self._fault else {})
         self._y = {v.name: float(v.start) for v in spec.outputs}
         self._y.update({v.name: int(v.start) for v in spec.integer_outputs})
-        self._data = self._load_data()
-        defaults = getattr(spec.runtime, "parameter_defaults", None)   # data-dependent start values
-        if defaults is not None and self._data:
-            self._p.update({k: float(x) for k, x in defaults(self._data).items() if k in self._p})
-        for v in spec.parameters:
-            self.register_variable(Real(v.name, start=self._p[v.name], description=f"{v.description} [{v.unit}]",
-                                        causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
-                                        initial=Fmi2Initial.exact,
-                                        getter=self._getter(self._p, v.name), setter=self._param_setter(v.name)))
-        for v in spec.inputs:
-            self.register_variable(Real(v.name, start=v.start, description=f"{v.description} [{v.unit}]",
-                                        causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
-                                        getter=self._getter(self._u, v.name), setter=self._input_setter(v.name)))
-        for v in spec.outputs:
-            self.register_variable(Real(v.name, description=f"{v.description} [{v.unit}]",
-                                        causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
-                                        getter=self._getter(self._y, v.name)))
-        for v in spec.integer_outputs:
-            self.register_variable(Integer(v.name, description=v.description,
-                                           causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
-                                           getter=self._getter(self._y, v.name)))
+        self._bounds = {v.name: (v.min, v.max) for v in spec.parameters}
+        # value reference -> (store, name) per type; settable Real references -> store
+        self._get = {"Real": {}, "Integer": {}}
+        self._set_in, self._set_par = {}, {}
+        for vr, typ, caus, v in variable_table(spec):
+            store = {"parameter": self._p, "input": self._u, "output": self._y}[caus]
+            self._get[typ][vr] = (store, v.name)
+            if caus == "input":
+                self._set_in[vr] = v.name
+            elif caus == "parameter":
+                self._set_par[vr] = v.name
+        self._inputs = tuple(v.name for v in spec.inputs)
 
-    # -- variables ---------------------------------------------------------------------------
-    @staticmethod
-    def _getter(store, name):
-        return lambda: store[name]
+    # -- logging -------------------------------------------------------------------------------
+    def _get_log_queue(self):
+        return self.log_queue
 
-    def _input_setter(self, name):
-        def setter(value):
-            self._u[name] = float(value)   # checked (finite) at doStep
-        return setter
+    def log(self, msg: str, status: int = OK) -> None:
+        self.log_queue.append(_LogMsg(int(status), _CATEGORY.get(status, "logAll"), str(msg)))
 
-    def _param_setter(self, name):
-        def setter(value):
-            if self._phase not in ("instantiated", "initialization"):
-                self.log(f"parameter {name!r} set after initialisation: ignored", Fmi2Status.warning)
-                return
-            self._p[name] = float(value)
-        return setter
+    def _drain(self):
+        rt = self._rt
+        if rt is None or not rt.events:
+            return
+        for level, msg in rt.events:
+            self.log(msg, ERROR if level == "error" else WARNING)
+        rt.events.clear()
 
+    # -- data ----------------------------------------------------------------------------------
     def _load_data(self):
         """The FMU's data file, checked against the hash the entry script was built with."""
         if not self.data_file:
@@ -128,87 +168,260 @@ class LatobsSlave(_PythonFmuSlave):
             self._fault = (f"data file {self.data_file!r} (sha256 {digest[:12]}) is not the one this FMU "
                            f"was built with ({self.data_sha256[:12]}): refusing to run other gains")
             return {}
-        return json.loads(raw.decode("utf-8"))
+        try:
+            return json.loads(raw.decode("utf-8"))
+        except ValueError as exc:
+            self._fault = f"data file {self.data_file!r} is not valid JSON: {exc}"
+            return {}
+
+    # -- variables (never raise: see the module docstring) -------------------------------------
+    def _bad_ref(self, what: str, vr, typ: str) -> None:
+        kind = next((t for t, table in self._get.items() if vr in table), None)
+        why = f"is a {kind} variable" if kind else "is not a variable of this FMU"
+        self.log(f"{what}: value reference {vr!r} {why}; {typ} value references are "
+                 f"{sorted(self._get.get(typ, {})) or 'none'}", ERROR)
+
+    def _getter(self, typ: str, vrs, conv):
+        table = self._get[typ]
+        try:
+            return [conv(s[n]) for s, n in map(table.__getitem__, vrs)]
+        except Exception:  # an unknown reference: answer what is known, 0 for the rest
+            out = []
+            for vr in vrs:
+                entry = table.get(vr)
+                if entry is None:
+                    self._bad_ref(f"fmi2Get{typ}", vr, typ)
+                    out.append(conv(0))
+                else:
+                    out.append(conv(entry[0][entry[1]]))
+            return out
+
+    def get_real(self, vrs):
+        return self._getter("Real", vrs, float)
+
+    def get_integer(self, vrs):
+        return self._getter("Integer", vrs, int)
+
+    def get_boolean(self, vrs):
+        for vr in vrs:
+            self._bad_ref("fmi2GetBoolean", vr, "Boolean")
+        return [False for _ in vrs]
+
+    def get_string(self, vrs):
+        for vr in vrs:
+            self._bad_ref("fmi2GetString", vr, "String")
+        return ["" for _ in vrs]
+
+    def set_real(self, vrs, values):
+        u, names = self._u, self._set_in
+        try:
+            for vr, x in zip(vrs, values):
+                u[names[vr]] = x          # checked (finite) at doStep
+        except Exception:
+            for vr, x in zip(vrs, values):
+                if vr in names:
+                    u[names[vr]] = float(x)
+                elif vr in self._set_par:
+                    self._set_parameter(self._set_par[vr], x)
+                elif vr in self._get["Real"]:
+                    self.log(f"fmi2SetReal: value reference {vr} ({self._get['Real'][vr][1]}) is an output; "
+                             "ignored", ERROR)
+                else:
+                    self._bad_ref("fmi2SetReal", vr, "Real")
+
+    def _set_parameter(self, name, value):
+        if self._phase not in ("instantiated", "initialization"):
+            self.log(f"parameter {name!r} set after initialisation: ignored", WARNING)
+            return
+        self._p[name] = float(value)
+
+    def _refuse_set(self, typ, vrs):
+        for vr in vrs:
+            if vr in self._get.get(typ, {}):
+                self.log(f"fmi2Set{typ}: value reference {vr} ({self._get[typ][vr][1]}) is an output; ignored",
+                         ERROR)
+            else:
+                self._bad_ref(f"fmi2Set{typ}", vr, typ)
+
+    def set_integer(self, vrs, values):
+        self._refuse_set("Integer", vrs)
+
+    def set_boolean(self, vrs, values):
+        self._refuse_set("Boolean", vrs)
+
+    def set_string(self, vrs, values):
+        self._refuse_set("String", vrs)
+
+    def _get_fmu_state(self):    # canGetAndSetFMUstate="false": never called by a conforming host
+        self.log("fmi2GetFMUstate is not supported by this FMU", ERROR)
+        return {}
+
+    def _set_fmu_state(self, state):
+        self.log("fmi2SetFMUstate is not supported by this FMU", ERROR)
 
     # -- FMI calls -----------------------------------------------------------------------------
+    def setup_experiment(self, start_time=0.0, stop_time=None, tolerance=None):
+        pass
+
     def enter_initialization_mode(self):
         self._phase = "initialization"
 
     def exit_initialization_mode(self):
-        if self._fault:
-            self.log(self._fault, Fmi2Status.error)
-            self._phase = "error"
-            return
         try:
+            if not self._fault:
+                for name, (lo, hi) in self._bounds.items():
+                    x = self._p[name]
+                    if not math.isfinite(x) or (lo is not None and x < lo) or (hi is not None and x > hi):
+                        self._fault = (f"parameter {name!r} = {x!r} is outside its declared range "
+                                       f"[{lo}, {hi}]")
+                        break
+            if self._fault:
+                self.log(self._fault, ERROR)
+                self._phase = "error"
+                return
             self._rt = self.spec.runtime(self._data, dict(self._p))
             if hasattr(self._rt, "initialize"):
-                if all(math.isfinite(v) for v in self._u.values()):
+                if all(map(math.isfinite, self._u.values())):
                     self._rt.initialize(dict(self._u))
                 else:
                     self.log("non-finite inputs at initialisation: the runtime starts from the first step",
-                             Fmi2Status.warning)
+                             WARNING)
             self._y.update(self._rt.y)
             self._drain()
             self._phase = "stepping"
         except Exception as exc:  # the runtime rejected its data or parameters
             self._fault = f"initialisation failed: {exc}"
-            self.log(self._fault, Fmi2Status.error)
+            self.log(self._fault, ERROR)
             self._phase = "error"
 
     def do_step(self, current_time, step_size):
-        if self._phase != "stepping":
-            why = self._fault or f"doStep called in phase {self._phase!r} (call exitInitializationMode first)"
-            self.log(f"step refused at t = {current_time}: {why}", Fmi2Status.error)
-            return False
-        if not (isinstance(step_size, float) and math.isfinite(step_size) and step_size > 0):
-            self.log(f"step refused: communication step {step_size!r} must be finite and > 0 s", Fmi2Status.error)
-            return False
-        bad = [f"{k} = {v!r}" for k, v in self._u.items() if not math.isfinite(v)]
-        if bad:
-            self.log(f"step refused at t = {current_time}: non-finite input(s) {', '.join(bad)}; state held",
-                     Fmi2Status.error)
-            return False
         try:
-            self._rt.step(step_size, self._u)
+            if self._phase != "stepping":
+                why = self._fault or f"doStep called in phase {self._phase!r} (call exitInitializationMode first)"
+                self.log(f"step refused at t = {current_time}: {why}", ERROR)
+                return False
+            if not (step_size > 0 and math.isfinite(step_size)):
+                self.log(f"step refused: communication step {step_size!r} must be finite and > 0 s", ERROR)
+                return False
+            u = self._u
+            if not all(map(math.isfinite, u.values())):
+                bad = [f"{k} = {v!r}" for k, v in u.items() if not math.isfinite(v)]
+                self.log(f"step refused at t = {current_time}: non-finite input(s) {', '.join(bad)}; state held",
+                         ERROR)
+                return False
+            rt = self._rt
+            rt.step(step_size, u)
+            if rt.events:
+                self._drain()
+            self._y.update(rt.y)
+            return True
         except Exception as exc:  # never let the host see an exception
-            self.log(f"step failed at t = {current_time}: {exc!r}\n{traceback.format_exc(limit=3)}",
-                     Fmi2Status.error)
-            self._drain()
+            self.log(f"step failed at t = {current_time}: {exc!r}\n{traceback.format_exc(limit=3)}", ERROR)
+            try:
+                self._drain()
+            except Exception:
+                pass
             return False
-        self._drain()
-        self._y.update(self._rt.y)
-        return True
 
     def terminate(self):
         self._phase = "terminated"
 
-    def _drain(self):
-        rt = self._rt
-        if rt is None:
-            return
-        for level, msg in rt.events:
-            self.log(msg, Fmi2Status.error if level == "error" else Fmi2Status.warning)
-        rt.events.clear()
 
-    # -- model description -------------------------------------------------------------------
-    def to_xml(self, model_options=dict()) -> Element:
-        root = super().to_xml(model_options)
-        units = {v.name: v.unit for v in (*self.spec.inputs, *self.spec.outputs, *self.spec.parameters)}
-        used = sorted({u for u in units.values() if u in BASE_UNITS})
-        if used:
-            ud = Element("UnitDefinitions")
-            for u in used:
-                SubElement(SubElement(ud, "Unit", name=u), "BaseUnit", BASE_UNITS[u])
-            cs_index = list(root).index(root.find("CoSimulation"))
-            root.insert(cs_index + 1, ud)
-        for sv in root.find("ModelVariables"):
-            real = sv.find("Real")
-            if real is not None and units.get(sv.get("name")) in BASE_UNITS:
-                real.set("unit", units[sv.get("name")])
-        structure = root.find("ModelStructure")
-        outputs = structure.find("Outputs")
-        if outputs is not None:
-            initial = SubElement(structure, "InitialUnknowns")
-            for unknown in outputs:
-                SubElement(initial, "Unknown", index=unknown.get("index"))
-        return root
+# ------------------------------------------------------------------------------------------------
+# model description (build time; deterministic: no dates, the guid is given)
+# ------------------------------------------------------------------------------------------------
+def _num(x: float) -> str:
+    x = float(x)
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
+
+
+def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: str, *, version: str,
+                      generation_tool: str, copyright: str, license: str = "MIT",
+                      author: str = "latobs") -> bytes:
+    """modelDescription.xml of an FMU of ``spec`` with ``data``: UTF-8 bytes, deterministic.
+
+    Beyond what pythonfmu writes: units with base units and display units (deg, deg/s, km/h),
+    ``unit="1"`` on dimensionless variables, min/max where physics bounds a value, the output
+    ``dependencies`` (empty: outputs change only in doStep, so no direct feedthrough and no false
+    algebraic loop for a tool that closes one), InitialUnknowns (outputs after initialisation may
+    depend on every known, as the observers start from their initial inputs) and a
+    DefaultExperiment with a stop time.
+    """
+    description = spec.description + (f" -- {spec.describe(data)}" if spec.describe else "")
+    root = Element("fmiModelDescription", {
+        "fmiVersion": "2.0", "modelName": model_identifier, "guid": guid, "description": description,
+        "author": author, "version": version, "copyright": copyright, "license": license,
+        "generationTool": generation_tool, "variableNamingConvention": "flat",
+        "numberOfEventIndicators": "0"})
+    SubElement(root, "CoSimulation", {
+        "modelIdentifier": model_identifier, "needsExecutionTool": "true",
+        "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
+        "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
+        "canGetAndSetFMUstate": "false", "canSerializeFMUstate": "false"})
+    table = variable_table(spec)
+    used = sorted({v.unit for _, typ, _, v in table if typ == "Real" and v.unit in BASE_UNITS})
+    if used:
+        ud = SubElement(root, "UnitDefinitions")
+        for u in used:
+            unit = SubElement(ud, "Unit", name=u)
+            SubElement(unit, "BaseUnit", BASE_UNITS[u])
+            if u in DISPLAY_UNITS:
+                name, factor = DISPLAY_UNITS[u]
+                SubElement(unit, "DisplayUnit", name=name, factor=repr(factor))
+    cats = SubElement(root, "LogCategories")
+    for name, desc in (("logStatusWarning", "warnings: clamps, speed outside the design grid, ignored calls"),
+                       ("logStatusError", "errors: refused steps, bad value references, bad parameters"),
+                       ("logAll", "all other messages")):
+        SubElement(cats, "Category", name=name, description=desc)
+    SubElement(root, "DefaultExperiment", startTime="0", stopTime=_num(spec.stop_time), stepSize=repr(DEFAULT_STEP))
+    starts = start_values(spec, data)
+    bounds = spec.bounds(data) if spec.bounds else {}
+    mv = SubElement(root, "ModelVariables")
+    for vr, typ, caus, v in table:
+        attrs = {"name": v.name, "valueReference": str(vr),
+                 "description": f"{v.description} [{v.unit}]" if v.unit != "1" else v.description,
+                 "causality": caus}
+        if caus == "parameter":
+            attrs.update(variability="fixed", initial="exact")
+        elif caus == "input":
+            attrs["variability"] = "continuous"
+        else:
+            attrs.update(variability="continuous" if typ == "Real" else "discrete", initial="calculated")
+        sv = SubElement(mv, "ScalarVariable", attrs)
+        tattrs = {}
+        lo, hi = bounds.get(v.name, (v.min, v.max))
+        if typ == "Real":
+            if v.unit in BASE_UNITS:
+                tattrs["unit"] = v.unit
+                if v.unit in DISPLAY_UNITS:
+                    tattrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
+        if lo is not None:
+            tattrs["min"] = _num(lo) if typ == "Real" else str(int(lo))
+        if hi is not None:
+            tattrs["max"] = _num(hi) if typ == "Real" else str(int(hi))
+        if caus == "parameter":
+            tattrs["start"] = repr(starts[v.name])
+        elif caus == "input":
+            tattrs["start"] = _num(v.start)
+        SubElement(sv, typ, tattrs)
+    ms = SubElement(root, "ModelStructure")
+    outputs = [vr for vr, _, caus, _ in table if caus == "output"]
+    if outputs:
+        out_el = SubElement(ms, "Outputs")
+        for vr in outputs:
+            SubElement(out_el, "Unknown", index=str(vr + 1), dependencies="")
+        init_el = SubElement(ms, "InitialUnknowns")
+        for vr in outputs:
+            SubElement(init_el, "Unknown", index=str(vr + 1))
+    _indent(root)
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="unicode") + "\n").encode("utf-8")
+
+
+def _indent(el: Element, level: int = 0) -> None:
+    pad = "\n" + "  " * (level + 1)
+    if len(el):
+        el.text = pad
+        for child in el:
+            _indent(child, level + 1)
+            child.tail = pad
+        el[-1].tail = "\n" + "  " * level

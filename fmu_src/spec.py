@@ -11,27 +11,43 @@ maths; the runtime classes know nothing of FMI. A runtime class follows this pro
     rt.step(h, u)                # advance h seconds, inputs u (dict name -> float) held
     rt.events                    # list of (level, message) produced by the last call,
                                  # level in {"warning", "error"}; drained by the framework
+    Runtime.parameter_defaults(data)   # optional: data-dependent parameter start values
 
 ``step`` receives only finite inputs (the framework rejects the others) and must not raise for
 any finite value: out-of-range inputs are clamped as documented by the runtime, with a warning.
+Outputs change only in ``initialize`` and ``step``: the model description declares that no
+output depends directly on an input (no direct feedthrough), and the tests check it.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Optional
 
 
 @dataclass(frozen=True)
 class Var:
+    """One variable. ``unit`` is an FMI unit name ("1" for dimensionless); ``min``/``max`` are the
+    physical bounds declared in the model description (a parameter outside them is refused at
+    initialisation, an input outside them is the runtime's business)."""
+
     name: str
     unit: str
     description: str
     start: float = 0.0
+    min: Optional[float] = None
+    max: Optional[float] = None
 
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """Interface of one FMU: Real inputs/outputs/parameters, Integer outputs."""
+    """Interface of one FMU: Real inputs/outputs/parameters, Integer outputs.
+
+    description   what the model is; ``describe(data)``, if given, says which variant the data
+                  file makes of it (e.g. speed or tire switching), appended to the description
+    bounds        optional ``bounds(data) -> {variable name: (min, max)}`` for bounds that depend
+                  on the data file (e.g. the number of modes)
+    stop_time     s, the DefaultExperiment's stop time (a sensible first run)
+    """
 
     description: str
     runtime: Callable  # the runtime class, see the module docstring
@@ -39,3 +55,6 @@ class ModelSpec:
     outputs: tuple[Var, ...]
     integer_outputs: tuple[Var, ...] = ()
     parameters: tuple[Var, ...] = field(default_factory=tuple)
+    describe: Optional[Callable[[dict], str]] = None
+    bounds: Optional[Callable[[dict], dict]] = None
+    stop_time: float = 10.0

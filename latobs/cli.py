@@ -53,8 +53,14 @@ def _cmd_validate(args) -> int:
 
     run_validation(args.scenario, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
                    plant_parameters=dict(_kv(p) for p in args.plant_param), noise=args.noise, seed=args.seed,
-                   tag=args.tag)
+                   tag=args.tag, plots=not args.no_plots)
     return 0
+
+
+def _cmd_bench(args) -> int:
+    from .bench import main as bench_main
+
+    return bench_main(args.bench_args)
 
 
 def _cmd_demo(args) -> int:
@@ -99,24 +105,43 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--noise", action="store_true", help="add the default sensor noise and bias")
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--tag", default="", help="suffix of the output folder (SCENARIO_TAG)")
+    v.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
     v.set_defaults(func=_cmd_validate)
+    bn = sub.add_parser("bench", help="µs per step of the built FMUs and the coupled run, beside references",
+                        add_help=False)
+    bn.add_argument("bench_args", nargs=argparse.REMAINDER, help="see `latobs bench --help`")
+    bn.set_defaults(func=_cmd_bench)
     m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
     m.add_argument("--out", default=str(DEFAULT_OUT))
     m.set_defaults(func=_cmd_demo)
     return p
 
 
+# The user-facing errors of each stage, as (module, class). A command imports only what it uses
+# (``latobs validate`` never loads the solver stack), so the classes are looked up among the
+# modules that are loaded: an exception can only be of a class whose module is.
+USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
+               ("latobs.packaging", "PackagingError"), ("latobs.synthesis.designs", "CertificateError"),
+               ("latobs.synthesis.pi_hinf_000", "DesignError"),
+               ("latobs.synthesis.params", "VehicleParameterError"))
+
+
+def _user_error_types() -> tuple[type, ...]:
+    types = [KeyError]
+    for module, name in USER_ERRORS:
+        m = sys.modules.get(module)
+        if m is not None:
+            types.append(getattr(m, name))
+    return tuple(types)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
-    from .packaging import PackagingError
-    from .pipeline import PipelineError
-    from .synthesis.designs import CertificateError
-    from .synthesis.params import VehicleParameterError
-    from .synthesis.pi_hinf_000 import DesignError
-
     try:
         return args.func(args)
-    except (CliError, PipelineError, CertificateError, DesignError, PackagingError, VehicleParameterError, KeyError) as exc:
+    except Exception as exc:
+        if not isinstance(exc, _user_error_types()):
+            raise
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"latobs {args.command}: error: {msg}", file=sys.stderr)
         return 2

@@ -1,25 +1,34 @@
-"""Package FMUs with pythonfmu: the runtime (``fmu_src``) plus one data file per FMU.
+"""Package FMUs (pythonfmu backend): the runtime (``fmu_src``), one data file, pythonfmu's binaries.
 
-pythonfmu imports an FMU's script as a top-level module named after the script file, and
-Python caches modules by name: two FMUs whose scripts (or helper packages) share a name would,
-in one process, silently run the code and module-level data of the first one loaded. Here no
-two different FMUs can share a module:
-  * the runtime is copied into the FMU as package ``latobs_rt_<sha of its sources>`` (identical
-    name only for identical code);
-  * the entry script is ``<Class>_<sha of script + data>.py`` and holds no data, only the data
-    file's sha256;
-  * the gains live in the FMU's own resources folder, read per instance, and the instance
-    refuses to run if that file's hash is not the one its entry script was built with.
-A design file is re-certified (``latobs.synthesis.certificate``) before packaging; an
-uncertified design is never packaged. The FMU is validated with fmpy and then moved into place
-atomically.
+An FMU is assembled here file by file, not by pythonfmu's ``FmuBuilder``, so that it is
+
+* **isolated**: pythonfmu's native library imports an FMU's entry module by name and Python
+  caches modules by name for the life of the process, while importers (fmpy, libcosim) delete an
+  FMU's extraction folder when they unload it. Every module an FMU brings therefore has a name
+  unique to its content: the runtime package is ``latobs_rt_<h>`` and the entry module
+  ``<Class>_<h>``, with ``h`` the hash of everything the FMU runs (runtime sources, model, class
+  name, data file, latobs version). Two different FMUs never share a module, so any sequence of
+  them can be loaded, unloaded and reloaded in one process; the same FMU loaded again reuses
+  identical code. The FMU carries no ``pythonfmu`` Python package (``framework.py`` speaks the
+  native protocol itself);
+* **identified by its content**: the ``guid`` is derived from the hash of every file of the FMU
+  and of its model description, so the same sources and design give the same guid and other
+  gains another. On linux64 a native guard (``latobs.native_guard``, built when a C compiler is
+  present) refuses an instantiation with another guid and unknown value references with
+  fmi2Error; pythonfmu's own library, which ignores the guid, is shipped beside it;
+* **reproducible**: the zip has sorted entries, fixed timestamps and permissions, and the model
+  description has no generation date: two builds from the same inputs are byte-identical.
+
+A design file is re-certified (``latobs.synthesis.certificate``) before packaging; an uncertified
+design is never packaged. The FMU is checked with ``fmpy validate`` and then moved into place
+atomically. The gains live in the FMU's own resources folder, read per instance, and an instance
+refuses to run if that file's hash is not the one its entry script was built with.
 """
 from __future__ import annotations
 
 import hashlib
-import shutil
-import sys
-import tempfile
+import warnings
+import zipfile
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
@@ -30,8 +39,11 @@ from .synthesis import certificate, design_file
 from .synthesis.params import load_vehicle
 
 from . import fmu_src as _fmu_src  # the runtime's sources are copied, not run, here
+from .fmu_src import framework as _framework  # model description only (standard library)
 
 FMU_SRC = Path(_fmu_src.__file__).resolve().parent
+COPYRIGHT = "Copyright (c) 2026 the latobs authors"
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed timestamp of every zip entry (reproducible builds)
 
 
 class PackagingError(RuntimeError):
@@ -60,28 +72,56 @@ def runtime_sources() -> list[Path]:
     return files
 
 
-def runtime_package_name() -> str:
-    h = hashlib.sha256()
-    for p in runtime_sources():
-        h.update(p.relative_to(FMU_SRC).as_posix().encode())
-        h.update(b"\0")
-        h.update(p.read_bytes())
-    return f"latobs_rt_{h.hexdigest()[:16]}"
-
-
 def plant_data(vehicle: str) -> dict:
     """The data file of a plant FMU: the validated vehicle parameter set."""
     return {"schema": "latobs.plant/1", "vehicle": load_vehicle(vehicle).as_dict()}
 
 
+def pythonfmu_binaries() -> dict[str, bytes]:
+    """pythonfmu's native libraries by platform folder: {"linux64/.so": bytes, "win64/.dll": ...}."""
+    import pythonfmu  # packaging only: the FMUs carry its binaries, not its Python code
+
+    root = Path(pythonfmu.__file__).resolve().parent / "resources" / "binaries"
+    out = {}
+    for f in sorted(root.rglob("*")):
+        if f.is_file() and f.suffix in (".so", ".dll", ".dylib"):
+            out[f"{f.parent.name}/{f.suffix}"] = f.read_bytes()
+    if not any(k.startswith("linux64/") for k in out):
+        raise PackagingError(f"pythonfmu's linux64 binary not found under {root}")
+    return out
+
+
 ENTRY = '''\
 # Generated by latobs {version}; do not edit.
-# pythonfmu's native loader imports this module by its file name and finds the slave class with
-# the regex `class NAME(Fmi2Slave):`, hence the alias. Module and package names carry content
-# hashes so that FMUs with other code or data never share a module in one process; the data
-# file's hash is checked by every instance.
-from {pkg}.framework import LatobsSlave as Fmi2Slave
-from {pkg}.models.{model} import SPEC
+# pythonfmu 0.7.0's native loader imports this module by its file name (resources/slavemodule.txt),
+# re-executes it at every instantiation and takes the class whose MRO holds a class named
+# Fmi2Slave. This module and the runtime package carry the hash of the FMU's content in their
+# names: FMUs with other code or data never share a module in one process (see latobs.packaging).
+import os as _os
+import sys as _sys
+
+_PKG = "{pkg}"
+
+
+def _rebind_stale_package():
+    """If this very FMU was loaded before from a folder the importer has deleted since, point the
+    cached package (identical content: same hash) at this folder, so that any submodule not yet
+    imported is found here."""
+    # this instance's resources folder: pythonfmu has just put it first on sys.path (__file__ may
+    # name the folder of an earlier load, since pythonfmu re-executes this file in the cached module)
+    here = next((p for p in _sys.path if _os.path.isfile(_os.path.join(p, "{module}.py"))),
+                _os.path.dirname(_os.path.abspath(__file__)))
+    root = _os.path.join(here, _PKG)
+    for name, module in list(_sys.modules.items()):
+        if name == _PKG or name.startswith(_PKG + "."):
+            path = getattr(module, "__path__", None)
+            if path is not None and not all(_os.path.isdir(p) for p in path):
+                module.__path__ = [_os.path.join(root, *name.split(".")[1:])]
+
+
+_rebind_stale_package()
+from {pkg}.framework import Fmi2Slave  # noqa: E402
+from {pkg}.models.{model} import SPEC  # noqa: E402
 
 # pythonfmu 0.7.0 releases a reference to this module's globals per instantiation that it does
 # not own (see _ENTRY_DICT_REFS in the framework, which gives one back per instance); a reserve
@@ -96,9 +136,25 @@ class {cls}(Fmi2Slave):
 '''
 
 
+def _guid(digest: str) -> str:
+    """A UUID-shaped guid from a content hash (version nibble 5: name-based, SHA)."""
+    h = digest[:32]
+    return f"{{{h[:8]}-{h[8:12]}-5{h[13:16]}-{h[16:20]}-{h[20:32]}}}"
+
+
+def _write_zip(path: Path, files: dict[str, bytes]) -> None:
+    """A reproducible zip: entries sorted, fixed date and permissions, fixed compression."""
+    with zipfile.ZipFile(path, "w") as z:
+        for name in sorted(files):
+            info = zipfile.ZipInfo(name, date_time=ZIP_DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
+            info.create_system = 3  # unix, whatever the build machine
+            z.writestr(info, files[name], compresslevel=6)
+
+
 def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path:
     """Build ``out_dir/<class_name>.fmu`` from the runtime and ``data``; returns its path."""
-    from pythonfmu import FmuBuilder  # packaging only
     from fmpy.validation import validate_fmu
 
     if not class_name.isidentifier():
@@ -110,34 +166,72 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
         spec.runtime(data, {})
     except (ValueError, KeyError, TypeError) as exc:
         raise PackagingError(f"{class_name}: the {kind.name} runtime rejects its data: {exc}") from exc
-    out_dir.mkdir(parents=True, exist_ok=True)
-    pkg = runtime_package_name()
     data_name = f"{class_name}.{kind.data_kind}.json"
-    data_text = design_file.dumps(data)
-    data_sha = hashlib.sha256(data_text.encode("utf-8")).hexdigest()
-    entry = ENTRY.format(version=__version__, pkg=pkg, model=kind.model_module, cls=class_name,
+    data_bytes = design_file.dumps(data).encode("utf-8")
+    data_sha = hashlib.sha256(data_bytes).hexdigest()
+
+    # content hash of everything the FMU runs -> unique module names
+    h = hashlib.sha256()
+    for part in (__version__, kind.model_module, class_name, data_sha):
+        h.update(part.encode() + b"\0")
+    sources = {p.relative_to(FMU_SRC).as_posix(): p.read_bytes() for p in runtime_sources()}
+    for rel, raw in sources.items():
+        h.update(rel.encode() + b"\0" + hashlib.sha256(raw).digest())
+    tag = h.hexdigest()[:16]
+    pkg, module = f"latobs_rt_{tag}", f"{class_name}_{tag}"
+    entry = ENTRY.format(version=__version__, pkg=pkg, module=module, model=kind.model_module, cls=class_name,
                          data_file=data_name, data_sha=data_sha)
-    module = f"{class_name}_{hashlib.sha256((entry + data_sha).encode()).hexdigest()[:16]}"
-    modules_before, path_before = set(sys.modules), list(sys.path)
-    with tempfile.TemporaryDirectory(prefix="latobs_stage_") as stage:
-        stage = Path(stage)
-        shutil.copytree(FMU_SRC, stage / pkg, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        (stage / data_name).write_text(data_text, encoding="utf-8")
-        script = stage / f"{module}.py"
-        script.write_text(entry, encoding="utf-8")
-        final = out_dir / f"{class_name}.fmu"
-        try:
-            with atomic_path(final, suffix=".fmu") as tmp_fmu:
-                FmuBuilder.build_FMU(script, dest=tmp_fmu, project_files=[stage / pkg, stage / data_name])
-                problems = validate_fmu(str(tmp_fmu))
-                if problems:
-                    raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
-        finally:
-            # the build imported the staged modules: forget them (their folder is gone)
-            for name in set(sys.modules) - modules_before:
-                if name == module or name == pkg or name.startswith(pkg + "."):
-                    del sys.modules[name]
-            sys.path[:] = path_before
+
+    files: dict[str, bytes] = {f"resources/{pkg}/{rel}": raw for rel, raw in sources.items()}
+    files[f"resources/{module}.py"] = entry.encode("utf-8")
+    files[f"resources/{data_name}"] = data_bytes
+    files["resources/slavemodule.txt"] = module.encode("utf-8")
+    binaries = pythonfmu_binaries()
+    for key, raw in binaries.items():
+        platform, suffix = key.split("/")
+        files[f"binaries/{platform}/{class_name}{suffix}"] = raw
+
+    from . import native_guard
+
+    cc = native_guard.find_compiler()
+    guarded = cc is not None
+    if guarded:  # pythonfmu's library moves aside; the guard takes its name
+        files[f"binaries/linux64/{class_name}_pythonfmu.so"] = files.pop(f"binaries/linux64/{class_name}.so")
+    else:
+        warnings.warn(f"{class_name}: no C compiler found; the FMU has no native guard, so its guid and "
+                      "value references are not checked natively (see latobs.native_guard)", stacklevel=2)
+
+    import pythonfmu
+
+    tool = f"latobs {__version__} (pythonfmu {pythonfmu.__version__} binaries)"
+    md = lambda guid: _framework.model_description(  # noqa: E731
+        spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT)
+    g = hashlib.sha256(md(""))
+    if guarded:  # the guard's binary holds the guid; its source stands for it in the hash
+        g.update(native_guard.GUARD_SOURCE.read_bytes())
+    for name in sorted(files):
+        g.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
+    guid = _guid(g.hexdigest())
+    files["modelDescription.xml"] = md(guid)
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    final = out_dir / f"{class_name}.fmu"
+    with atomic_path(final, suffix=".fmu") as tmp_fmu:
+        if guarded:
+            from .fmu_src.framework import variable_table
+
+            guard = tmp_fmu.with_suffix(".guard.so")
+            try:
+                native_guard.build_guard(class_name, guid, f"{class_name}_pythonfmu.so",
+                                         [(vr, typ, caus in ("input", "parameter"))
+                                          for vr, typ, caus, _ in variable_table(spec)], guard)
+                files[f"binaries/linux64/{class_name}.so"] = guard.read_bytes()
+            finally:
+                guard.unlink(missing_ok=True)
+        _write_zip(tmp_fmu, files)
+        problems = validate_fmu(str(tmp_fmu))
+        if problems:
+            raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
     return final
 
 

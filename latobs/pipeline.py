@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .synthesis import designs
+from .synthesis import designs  # the catalogue only: it imports the solver stack when designing
 
 # Sensor noise and bias of ``latobs validate --noise``: (std, bias) per measured signal, SI units.
 # Typical automotive-grade inertial and steering sensors.
@@ -71,8 +71,9 @@ def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
 
 def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_dir: Path,
                    plant_parameters: dict | None = None, noise: bool = False, seed: int = 0,
-                   tag: str = "", quiet: bool = False) -> dict:
-    """Co-simulate plant + observers on a scenario; writes out/SCENARIO[_TAG]/metrics.json and PNGs."""
+                   tag: str = "", quiet: bool = False, plots: bool = True) -> dict:
+    """Co-simulate plant + observers on a scenario; writes out/SCENARIO[_TAG]/metrics.json and PNGs
+    (no PNGs with ``plots=False``)."""
     from .validation import get_scenario, validate
     from .validation.harness import NoiseSpec
     from .validation.report import text_table
@@ -83,7 +84,8 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     out_dir = out / (f"{scenario}_{tag}" if tag else scenario)
     _, metrics, paths = validate(sc, fmus[sc.plant], {n: fmus[n] for n in observers}, out_dir,
                                  plant_parameters=plant_parameters or {},
-                                 noise=NoiseSpec(signals=DEFAULT_NOISE) if noise else None, seed=seed)
+                                 noise=NoiseSpec(signals=DEFAULT_NOISE) if noise else None, seed=seed,
+                                 plots=plots)
     if not quiet:
         print(f"{scenario}{' [' + tag + ']' if tag else ''}: plant parameters {plant_parameters or 'nominal'}, "
               f"noise {'on' if noise else 'off'}")

@@ -8,8 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from . import certificate, pi_hinf_000
 from .params import Vehicle, load_vehicle
+
+# The design and certificate modules (cvxpy, scipy) are imported where they are used, so that
+# reading the catalogue (``latobs list``, ``latobs validate``) does not load the solver stack.
 
 
 class CertificateError(RuntimeError):
@@ -27,18 +29,28 @@ class DesignEntry:
 
 
 def _solve_000(vehicle: Vehicle, opts) -> dict:
+    from . import pi_hinf_000
+
     return pi_hinf_000.to_design_dict(pi_hinf_000.design(vehicle, opts))
+
+
+def _options_000(switching: str):
+    def options(name: str):
+        from . import pi_hinf_000
+
+        return pi_hinf_000.DesignOptions(name=name, switching=switching)
+    return options
 
 
 DESIGNS: dict[str, DesignEntry] = {
     "SideslipBankObserver": DesignEntry(
         "SideslipBankObserver", "000", "sedan",
         "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25)",
-        lambda name: pi_hinf_000.DesignOptions(name=name, switching="speed"), _solve_000),
+        _options_000("speed"), _solve_000),
     "SideslipBankObserverTire": DesignEntry(
         "SideslipBankObserverTire", "000", "sedan",
-        "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / 0.5 C1 at alpha* = 0.5 deg (eq. 27)",
-        lambda name: pi_hinf_000.DesignOptions(name=name, switching="tire"), _solve_000),
+        "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) at alpha* = 0.5 deg (eq. 27)",
+        _options_000("tire"), _solve_000),
 }
 
 
@@ -60,6 +72,8 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     Raises ``pi_hinf_000.DesignError`` when the LMIs are infeasible and ``CertificateError``
     (carrying the failed checks) when the certificate fails.
     """
+    from . import certificate
+
     entry = get(name)
     veh = load_vehicle(vehicle or entry.default_vehicle)
     opts = replace(entry.options(artefact_name(name, veh.name)), **overrides)

@@ -28,9 +28,12 @@ SPEC = ModelSpec(
         Var("alpha_r", "rad", "rear slip angle (mean of the two wheels)"),
     ),
     parameters=(
-        Var("mu", "1", "peak friction coefficient (dry 1.0, wet 0.8, snow 0.3, ice 0.1)", start=1.0),
-        Var("scale_f", "1", "front cornering stiffness scale factor", start=1.0),
-        Var("scale_r", "1", "rear cornering stiffness scale factor", start=1.0),
-        Var("sigma", "m", "tire relaxation length (<= 0: no relaxation)", start=0.5),
+        Var("mu", "1", "peak friction coefficient (dry 1.0, wet 0.8, snow 0.3, ice 0.1)", start=1.0,
+            min=0.01, max=2.0),
+        Var("scale_f", "1", "front cornering stiffness scale factor", start=1.0, min=0.1, max=10.0),
+        Var("scale_r", "1", "rear cornering stiffness scale factor", start=1.0, min=0.1, max=10.0),
+        Var("sigma", "m", "tire relaxation length (0: no relaxation, algebraic tires)", start=0.5,
+            min=0.0, max=5.0),
     ),
+    stop_time=10.0,
 )

@@ -21,18 +21,22 @@ __all__ = ["SCENARIOS", "Scenario", "get_scenario", "scenario_names", "validate"
 
 def validate(scenario: Scenario | str, plant_fmu: str | os.PathLike,
              observer_fmus: Mapping[str, str | os.PathLike], out_dir: str | os.PathLike,
-             **run_kwargs: Any) -> tuple[Any, dict, list[Path]]:
-    """Run the co-simulation, write ``out_dir/metrics.json`` and the PNG plots.
+             plots: bool = True, **run_kwargs: Any) -> tuple[Any, dict, list[Path]]:
+    """Run the co-simulation, write ``out_dir/metrics.json`` and the PNG plots (unless ``plots``
+    is false: matplotlib is then not even imported).
 
     ``run_kwargs`` go to :func:`latobs.validation.harness.run` (dt, noise, seed,
     plant_parameters, vehicle, progress, observer_parameters). Returns (SimResult, metrics dict,
     [paths written: metrics.json first, then the PNGs]).
     """
-    from . import harness, metrics, plots
+    from . import harness, metrics
 
     result = harness.run(scenario, plant_fmu, observer_fmus, **run_kwargs)
     m = metrics.compute(result)
     out = Path(out_dir)
     paths = [metrics.write(m, out)]
-    paths += plots.plot_all(result, out)
+    if plots:
+        from . import plots as plotting
+
+        paths += plotting.plot_all(result, out)
     return result, m, paths

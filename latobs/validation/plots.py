@@ -51,6 +51,32 @@ def _ylabel(name: str, units) -> str:
     return f"{_LABELS.get(name, name)} [{u}]"
 
 
+MAX_BUCKETS = 800  # a line is drawn from at most 2 samples (its min and max) per bucket
+
+
+def thin(t: np.ndarray, *ys: np.ndarray) -> np.ndarray:
+    """Indices of the samples to draw: per bucket of consecutive samples, the minimum and maximum of
+    each series in ``ys`` (so peaks and steps survive), plus the first and last sample. A 30 s run
+    at 5 ms (6001 samples) draws at most ~1600 points per line instead of 6001: the figure looks
+    the same at the resolution it is saved in and renders several times faster."""
+    n = len(t)
+    if n <= 2 * MAX_BUCKETS:
+        return np.arange(n)
+    b = -(-n // MAX_BUCKETS)
+    nb = n // b
+    idx = [np.array([0, n - 1]), np.arange(nb * b, n)]
+    base = np.arange(nb) * b
+    for y in ys:
+        blocks = np.asarray(y, float)[: nb * b].reshape(nb, b)
+        idx += [base + np.argmin(blocks, axis=1), base + np.argmax(blocks, axis=1)]
+    return np.unique(np.concatenate(idx))
+
+
+def _plot(ax, t, y, **kw):
+    i = thin(t, y)
+    return ax.plot(t[i], np.asarray(y)[i], **kw)
+
+
 def _save(fig: Figure, path: Path) -> Path:
     FigureCanvasAgg(fig)
     with atomic_path(path, suffix=".png") as tmp:
@@ -79,13 +105,14 @@ def plot_estimates(result: SimResult, out_dir: str | os.PathLike) -> Path | None
     axes = fig.subplots(len(sigs), 1, sharex=True, squeeze=False)[:, 0]
     for ax, s in zip(axes, sigs):
         k, _ = display_scale(s, result.units)
-        ax.plot(t, k * result.bus[s], color="black", lw=1.6, label=f"{s} (truth)")
+        _plot(ax, t, k * result.bus[s], color="black", lw=1.6, label=f"{s} (truth)")
         for label, outs in result.observers.items():
             if s + "_hat" in outs:
-                ax.plot(t, k * np.asarray(outs[s + "_hat"], float), lw=1.0, label=f"{label}: {s}_hat")
+                _plot(ax, t, k * np.asarray(outs[s + "_hat"], float), lw=1.0, label=f"{label}: {s}_hat")
             if s + "_lower" in outs and s + "_upper" in outs:
-                ax.fill_between(t, k * np.asarray(outs[s + "_lower"], float), k * np.asarray(outs[s + "_upper"], float),
-                                alpha=0.25, label=f"{label}: [{s}_lower, {s}_upper]")
+                lo, hi = k * np.asarray(outs[s + "_lower"], float), k * np.asarray(outs[s + "_upper"], float)
+                i = thin(t, lo, hi)
+                ax.fill_between(t[i], lo[i], hi[i], alpha=0.25, label=f"{label}: [{s}_lower, {s}_upper]")
         ax.set_ylabel(_ylabel(s, result.units))
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
@@ -121,10 +148,10 @@ def plot_bank(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
     k, u = display_scale("bank_angle", result.units)
     fig = Figure(figsize=(10, 3.5))
     ax = fig.subplots()
-    ax.plot(result.time, k * result.bus["bank_angle"], color="black", lw=1.6, label="bank_angle (truth)")
+    _plot(ax, result.time, k * result.bus["bank_angle"], color="black", lw=1.6, label="bank_angle (truth)")
     for lab, outs in result.observers.items():
         if "bank_angle_hat" in outs:
-            ax.plot(result.time, k * np.asarray(outs["bank_angle_hat"], float), lw=1.0, label=f"{lab}: bank_angle_hat")
+            _plot(ax, result.time, k * np.asarray(outs["bank_angle_hat"], float), lw=1.0, label=f"{lab}: bank_angle_hat")
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"bank angle [{u}]")
     ax.grid(True, alpha=0.3)
@@ -144,7 +171,7 @@ def plot_inputs(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
     axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)[:, 0]
     for ax, n in zip(axes, names):
         k, _ = display_scale(n, result.units)
-        ax.plot(result.time, k * result.bus[n], lw=1.2)
+        _plot(ax, result.time, k * result.bus[n], lw=1.2)
         ax.set_ylabel(_ylabel(n, result.units))
         ax.grid(True, alpha=0.3)
         if n == "vx":

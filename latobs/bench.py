@@ -1,0 +1,188 @@
+"""``latobs bench``: how fast the built FMUs step, measured side by side in one run.
+
+Not a test: nothing here asserts a time. Every figure is printed beside a reference measured in
+the same process, so that ratios (not absolute microseconds, which depend on the machine) are
+what gets compared:
+
+* **per FMU**, µs per communication step through fmpy's ``FMU2Slave`` (the same prebuilt ctypes
+  set/doStep/get calls as the validation harness): set the inputs, ``doStep``, get the outputs;
+* **the same arithmetic in numpy**, per step, in the same run: for an observer, the affine map
+  of one step (``Phi @ s + Gam @ w``, 5 states, 4 inputs) and, for comparison, the classical RK4
+  substeps it replaces; for the plant, one call of the FMU's own runtime class stepping outside
+  any FMU (the FMI overhead is the difference);
+* **the coupled run**: ``bank-braking`` (30 s at 5 ms: CarPlant + both paper-000 observers)
+  through the validation harness, wall time and real-time factor.
+
+The FMUs are taken from ``--fmu-dir`` (built there if missing), so that FMUs built by another
+latobs version can be measured with the same script.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+OBSERVERS = ("SideslipBankObserver", "SideslipBankObserverTire")
+PLANT = "CarPlant"
+SCENARIO = "bank-braking"
+DT = 0.005
+
+
+def _bus_trajectory(fmu_dir: Path) -> dict[str, np.ndarray]:
+    """Plant inputs and outputs of the bank-braking scenario (one co-simulation, plant alone)."""
+    from .validation.harness import run
+
+    res = run(SCENARIO, fmu_dir / f"{PLANT}.fmu", {}, dt=DT)
+    return res.bus
+
+
+def _fmu_step_time(path: Path, inputs: dict[str, np.ndarray], n: int, repeats: int) -> float:
+    """Best-of-``repeats`` µs per (set inputs + doStep + get outputs) over ``n`` steps."""
+    from fmpy import extract
+
+    from .validation.harness import FmuInstance
+
+    best = math.inf
+    for _ in range(repeats):
+        fmu = FmuInstance(path.stem, path, extract(str(path)))
+        fmu.instantiate()
+        names = [v.name for v in fmu.inputs]
+        fmu.prepare_io(names)
+        fmu.slave.setupExperiment(startTime=0.0)
+        fmu.slave.enterInitializationMode()
+        rows = [{k: float(inputs[k][i]) for k in names} for i in range(n)]
+        fmu.set_inputs(rows[0])
+        fmu.slave.exitInitializationMode()
+        fmu.initialized = True
+        do_step = fmu.slave.doStep
+        set_inputs, get_outputs = fmu.set_inputs, fmu.get_outputs
+        t0 = time.perf_counter()
+        for i in range(n):
+            set_inputs(rows[i])
+            do_step(i * DT, DT)
+            get_outputs()
+        best = min(best, (time.perf_counter() - t0) / n * 1e6)
+        fmu.close()
+    return best
+
+
+def _numpy_reference(n: int, nsub: int = 5) -> dict[str, float]:
+    """µs per step of the observer arithmetic in numpy: the one-step affine map, and RK4 substeps."""
+    rng = np.random.default_rng(0)
+    M = rng.standard_normal((5, 5)) * 0.1
+    G = rng.standard_normal((5, 4))
+    Phi = np.eye(5) + M * 0.005
+    Gam = G * 0.005
+    w = rng.standard_normal((n, 4))
+    s = np.zeros(5)
+    t0 = time.perf_counter()
+    for i in range(n):
+        s = Phi @ s + Gam @ w[i]
+    affine = (time.perf_counter() - t0) / n * 1e6
+    hs = 0.005 / nsub
+    s = np.zeros(5)
+    t0 = time.perf_counter()
+    for i in range(n):
+        b = G @ w[i]
+        for _ in range(nsub):
+            k1 = M @ s + b
+            k2 = M @ (s + 0.5 * hs * k1) + b
+            k3 = M @ (s + 0.5 * hs * k2) + b
+            k4 = M @ (s + hs * k3) + b
+            s = s + hs / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    rk4 = (time.perf_counter() - t0) / n * 1e6
+    return {"numpy_affine_map_us": affine, "numpy_rk4_substeps_us": rk4}
+
+
+def _plant_runtime_time(bus: dict[str, np.ndarray], n: int) -> float:
+    """µs per CarPlantModel.step outside any FMU (the FMU's own maths, no FMI)."""
+    from .fmu_src.car_plant import CarPlantModel
+    from .packaging import plant_data
+
+    rt = CarPlantModel(plant_data("sedan"), {})
+    rows = [{"delta": float(bus["delta"][i]), "vx": float(bus["vx"][i]),
+             "bank_angle": float(bus["bank_angle"][i])} for i in range(n)]
+    t0 = time.perf_counter()
+    for u in rows:
+        rt.step(DT, u)
+    return (time.perf_counter() - t0) / n * 1e6
+
+
+def _coupled(fmu_dir: Path, repeats: int) -> dict[str, float]:
+    from .validation.harness import run
+    from .validation.scenarios import get_scenario
+
+    sc = get_scenario(SCENARIO)
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run(sc, fmu_dir / f"{PLANT}.fmu", {o: fmu_dir / f"{o}.fmu" for o in OBSERVERS}, dt=DT)
+        best = min(best, time.perf_counter() - t0)
+    steps = round(sc.duration / DT)
+    return {"seconds": best, "scenario_seconds": sc.duration, "real_time_factor": sc.duration / best,
+            "us_per_step": best / steps * 1e6}
+
+
+def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3) -> dict:
+    fmu_dir = Path(fmu_dir)
+    missing = [x for x in (PLANT, *OBSERVERS) if not (fmu_dir / f"{x}.fmu").is_file()]
+    if missing:
+        from .pipeline import build
+
+        build(missing, None, fmu_dir)
+    bus = _bus_trajectory(fmu_dir)
+    n = min(n, len(bus["vx"]))
+    out: dict = {"n_steps": n, "dt": DT, "fmus": {}}
+    out["fmus"][PLANT] = {"fmpy_us_per_step": _fmu_step_time(fmu_dir / f"{PLANT}.fmu", bus, n, repeats),
+                          "runtime_us_per_step": _plant_runtime_time(bus, n)}
+    for o in OBSERVERS:
+        out["fmus"][o] = {"fmpy_us_per_step": _fmu_step_time(fmu_dir / f"{o}.fmu", bus, n, repeats)}
+    out["numpy_reference"] = _numpy_reference(n)
+    out["coupled"] = _coupled(fmu_dir, max(1, repeats - 1))
+    return out
+
+
+def table(r: dict) -> str:
+    ref = r["numpy_reference"]
+    lines = [f"µs per step (set inputs + doStep + get outputs through fmpy FMU2Slave), {r['n_steps']} steps, "
+             f"dt = {r['dt'] * 1e3:g} ms",
+             "| FMU | µs/step (fmpy) | reference in the same run | ratio |",
+             "|---|---|---|---|"]
+    p = r["fmus"][PLANT]
+    lines.append(f"| {PLANT} | {p['fmpy_us_per_step']:.1f} | runtime step outside the FMU "
+                 f"{p['runtime_us_per_step']:.1f} | {p['fmpy_us_per_step'] / p['runtime_us_per_step']:.2f} |")
+    for o in OBSERVERS:
+        f = r["fmus"][o]["fmpy_us_per_step"]
+        lines.append(f"| {o} | {f:.1f} | numpy affine map {ref['numpy_affine_map_us']:.2f} "
+                     f"(numpy RK4 substeps {ref['numpy_rk4_substeps_us']:.1f}) | "
+                     f"{f / ref['numpy_affine_map_us']:.1f} |")
+    c = r["coupled"]
+    lines.append("")
+    lines.append(f"coupled {SCENARIO} (CarPlant + {' + '.join(OBSERVERS)}), {c['scenario_seconds']:g} s simulated: "
+                 f"{c['seconds']:.2f} s wall, {c['us_per_step']:.0f} µs per step, "
+                 f"{c['real_time_factor']:.1f}x real time")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="latobs bench", description=__doc__.split("\n\n")[0])
+    p.add_argument("--fmu-dir", default="build", help="FMUs to measure (built there if missing)")
+    p.add_argument("--steps", type=int, default=3000)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--json", dest="json_file", help="also write the figures to this JSON file")
+    a = p.parse_args(argv)
+    r = bench(Path(a.fmu_dir), a.steps, a.repeats)
+    print(table(r))
+    if a.json_file:
+        from .atomic import atomic_write_text
+
+        atomic_write_text(a.json_file, json.dumps(r, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
