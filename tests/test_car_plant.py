@@ -368,7 +368,7 @@ def test_extreme_inputs_never_raise_and_warn_once():
 
 
 def test_substeps_and_ax_from_vx_inputs():
-    """step(h) = n RK4 substeps of h/n with n = ceil(h/1 ms); ax is the vx finite difference."""
+    """step(h) = n Heun substeps of h/n with n = ceil(h/1 ms); ax is the vx finite difference."""
     u = {"delta": 0.02, "vx": 20.0, "bank_angle": 0.01}
     a, b = plant(), plant()
     a.step(0.0047, u)
@@ -424,7 +424,7 @@ def test_no_numpy_in_runtime_module():
 
 
 def test_speed_of_one_step():
-    """Informational: CPU time of one 5 ms step (5 RK4 substeps); not asserted."""
+    """Informational: CPU time of one 5 ms step (5 Heun substeps); not asserted."""
     p = plant()
     u = {"delta": 0.02, "vx": 20.0, "bank_angle": 0.0}
     t0 = time.process_time()
