@@ -87,7 +87,7 @@ def run_libcosim(path: Path) -> dict[str, list[float]]:
             man.slave_real_values(idx, list(inputs.values()), [u[n] for n in inputs])
             assert ex.step(), f"libcosim step {k} failed"
             record()
-        del ex, obs, man
+        ex = obs = man = None  # unload the FMU before its folder is deleted
     finally:
         shutil.rmtree(folder)
     return out

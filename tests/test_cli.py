@@ -55,3 +55,24 @@ def test_demo_certificate_section_renders(tmp_path, design_speed):
     n = len(design_speed["checks"])
     assert f"certified, {n}/{n} checks passed" in text
     assert text.count("| Vx = ") == 3            # one row per speed mode
+
+
+def test_validate_loads_no_design_stack_and_can_skip_plots(tmp_path, fmu_dir):
+    """`latobs validate` with built FMUs imports neither the solver (cvxpy, Clarabel) nor the
+    certificate (scipy) nor, with --no-plots, matplotlib; and writes no PNG then."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, json\n"
+        "from latobs.cli import main\n"
+        f"rc = main(['validate', 'double-lane-change', '--fmu-dir', {str(fmu_dir)!r}, '--out', {str(tmp_path)!r}, "
+        "'--no-plots'])\n"
+        "print(json.dumps([rc, sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('cvxpy', 'clarabel', 'scipy', 'matplotlib', 'pythonfmu') or m.endswith(('.certificate', '.pi_hinf_000', '.hinf')))]))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    rc, heavy = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert rc == 0 and heavy == []
+    out = tmp_path / "double-lane-change"
+    assert (out / "metrics.json").is_file() and not list(out.glob("*.png"))

@@ -18,7 +18,6 @@ from xml.etree import ElementTree
 
 import pytest
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
 
 from latobs import native_guard, packaging
 from latobs.synthesis import design_file, designs

@@ -15,7 +15,6 @@ import shutil
 import subprocess
 import sys
 import sysconfig
-import warnings
 import zipfile
 from pathlib import Path
 
@@ -30,46 +29,7 @@ needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (se
 MAX_GLIBC = (2, 17)
 
 
-# ---- making a guarded FMU (the lead may replace these by the packaging fixture) ---------------
-
-TINY_SLAVE = '''\
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
-
-
-class GuardTiny(Fmi2Slave):
-    author = "latobs tests"
-    description = "y = k * u"
-
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.k = 2.0
-        self.u = 0.0
-        self.y = 0.0
-        self.register_variable(Real("k", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
-        self.register_variable(Real("u", causality=Fmi2Causality.input))
-        self.register_variable(Real("y", causality=Fmi2Causality.output))
-
-    def do_step(self, current_time, step_size):
-        self.y = self.k * self.u
-        return True
-'''
-
-
-def make_pythonfmu_fmu(out: Path) -> Path:
-    """A real pythonfmu FMU: the latobs observer, or a tiny one if `latobs build` is broken."""
-    cmd = [sys.executable, "-m", "latobs", "build", "SideslipBankObserver", "--out", str(out)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    fmu = out / "SideslipBankObserver.fmu"
-    if proc.returncode == 0 and fmu.is_file():
-        return fmu
-    warnings.warn(f"`latobs build` failed (exit {proc.returncode}), guarding a tiny pythonfmu FMU "
-                  f"instead:\n{proc.stderr[-2000:]}")
-    from pythonfmu import FmuBuilder
-
-    script = out / "GuardTiny.py"
-    script.write_text(TINY_SLAVE)
-    return Path(FmuBuilder.build_FMU(script, dest=out))
-
+# ---- the guarded FMU under test ------------------------------------------------------------------
 
 def fmu_info(fmu: Path) -> dict:
     """modelIdentifier, guid, the guard's vr table, the Real input vrs and one Real output vr."""
@@ -87,41 +47,15 @@ def fmu_info(fmu: Path) -> dict:
     }
 
 
-def guard_fmu(src: Path, out: Path) -> Path:
-    """Copy of pythonfmu FMU `src` at `out` with a freshly built guard as binaries/linux64/<id>.so.
-
-    If `src` is already guarded (its real library is <id>_pythonfmu.so), its guard is replaced.
-    """
-    info = fmu_info(src)
-    lib = f"binaries/linux64/{info['id']}.so"
-    real = f"{info['id']}_pythonfmu.so"
-    guard = out.with_suffix(".guard.so")
-    build_guard(info["id"], info["guid"], real, info["variables"], guard)
-    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as zout:
-        names = zin.namelist()
-        real_entry = f"binaries/linux64/{real}" if f"binaries/linux64/{real}" in names else lib
-        for item in zin.infolist():
-            if item.filename == f"binaries/linux64/{real}":
-                continue
-            new = zipfile.ZipInfo(item.filename, item.date_time)
-            new.external_attr, new.compress_type = item.external_attr, zipfile.ZIP_DEFLATED
-            if item.filename == lib:
-                zout.writestr(new, guard.read_bytes())
-                new = zipfile.ZipInfo(f"binaries/linux64/{real}", item.date_time)
-                new.external_attr, new.compress_type = item.external_attr, zipfile.ZIP_DEFLATED
-                zout.writestr(new, zin.read(real_entry))
-            else:
-                zout.writestr(new, zin.read(item))
-    guard.unlink()
-    return out
-
-
 @pytest.fixture(scope="module")
-def guarded_fmu(tmp_path_factory) -> Path:
+def guarded_fmu(fmu_dir) -> Path:
+    """The observer FMU as `latobs build` makes it: guarded whenever a C compiler is present."""
     if find_compiler() is None:
         pytest.skip("no C compiler (set CC, or install cc/gcc)")
-    src = make_pythonfmu_fmu(tmp_path_factory.mktemp("pythonfmu"))
-    return guard_fmu(src, tmp_path_factory.mktemp("guarded") / src.name)
+    fmu = fmu_dir / "SideslipBankObserver.fmu"
+    with zipfile.ZipFile(fmu) as z:
+        assert "binaries/linux64/SideslipBankObserver_pythonfmu.so" in z.namelist()
+    return fmu
 
 
 def extract_to(fmu: Path, folder: Path) -> Path:
