@@ -43,13 +43,11 @@ def _fmu_step_time(path: Path, inputs: dict[str, np.ndarray], n: int, repeats: i
     """µs per (set inputs + doStep + get outputs) over ``n`` steps: (first instance in the process,
     best of ``repeats`` fresh instances). They differ when a runtime builds and caches per-process
     data on its first steps (the paper-000 observers' step maps)."""
-    from fmpy import extract
-
     from .validation.harness import FmuInstance
 
     times = []
     for _ in range(repeats):
-        fmu = FmuInstance(path.stem, path, extract(str(path)))
+        fmu = FmuInstance(path.stem, path)
         fmu.instantiate()
         names = [v.name for v in fmu.inputs]
         fmu.prepare_io(names)
@@ -157,7 +155,7 @@ def _coupled_in_fresh_process(fmu_dir: Path) -> float:
 
     code = (f"from pathlib import Path; from latobs.bench import _coupled; "
             f"print(_coupled(Path({str(fmu_dir)!r}), 1)['real_time_factor'])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, check=True).stdout
     return float(out.strip().splitlines()[-1])
 
 

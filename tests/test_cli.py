@@ -70,7 +70,7 @@ def test_validate_loads_no_design_stack_and_can_skip_plots(tmp_path, fmu_dir):
         "'--no-plots'])\n"
         "print(json.dumps([rc, sorted(m for m in sys.modules if m.split('.')[0] in "
         "('cvxpy', 'clarabel', 'scipy', 'matplotlib', 'pythonfmu') or m.endswith(('.certificate', '.pi_hinf_000', '.hinf')))]))\n")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     rc, heavy = json.loads(proc.stdout.strip().splitlines()[-1])
     assert rc == 0 and heavy == []

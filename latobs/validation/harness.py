@@ -157,12 +157,17 @@ def _unit_of(v) -> str | None:
 
 
 class FmuInstance:
-    """An extracted FMU: model description, slave, prebuilt value-reference arrays, logger."""
+    """An extracted FMU: model description, slave, prebuilt value-reference arrays, logger.
 
-    def __init__(self, label: str, path: Path, unzipdir: str):
+    ``unzipdir``: where the FMU is extracted; if None, it is extracted into a temporary folder
+    that :meth:`close` deletes after unloading the FMU.
+    """
+
+    def __init__(self, label: str, path: Path, unzipdir: str | None = None):
         self.label = label
-        self.path = path
-        self.unzipdir = unzipdir
+        self.path = Path(path)
+        self._owned_dir = unzipdir is None
+        self.unzipdir = extract(str(path)) if unzipdir is None else unzipdir
         try:
             self.md = read_model_description(str(path))
         except Exception as exc:
@@ -274,6 +279,8 @@ class FmuInstance:
 
     def close(self):
         if self.slave is None:
+            if self._owned_dir:
+                shutil.rmtree(self.unzipdir, ignore_errors=True)
             return
         if self.instantiated:
             if self.initialized:
@@ -291,6 +298,8 @@ class FmuInstance:
             except Exception:
                 pass
         self.slave = None
+        if self._owned_dir:
+            shutil.rmtree(self.unzipdir, ignore_errors=True)
 
     def log_tail(self, n: int = 5) -> str:
         return "; ".join(self.logs[-n:]) if self.logs else "(no log messages)"
