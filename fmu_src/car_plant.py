@@ -49,11 +49,33 @@ wheel at (-lr, +-t/2) carries (0, Fy_i); the moment of (Fx, Fy) at (x, y) is x F
      C = mf_C, E = mf_E; B is fixed per axle so that mu Fz_static B C = scale * C_axle / 2 with
      Fz_static the flat-road static wheel load: at nominal load the wheel's linear cornering
      stiffness is exactly C_axle/2 (times the scale parameter) for ANY mu.
+     Parameter linear_tires = 1: the Magic Formula is replaced by its linearisation at zero slip,
+        Fy_ss = mu Fz B C a          (same B, C: no saturation, no peak),
+     i.e. a cornering stiffness per unit load mu B C, so that at nominal load each axle's
+     stiffness is exactly scale * C_axle; the load transfer (E5) still acts through Fz, and
+     relaxation, roll and the slip-angle geometry (E4) are unchanged. This is the tire of the
+     linear design models (bicycle model with relaxation, paper 001); |S| is then unbounded.
 (E7) relaxation (sigma > 0):  Fy' = (max(vx, V_RELAX_MIN) / sigma) (Fy_ss - Fy);
      sigma <= 0: algebraic tires, Fy = Fy_ss (the tire states are not integrated).
 
 At straight driving with linear tires and no relaxation, E1-E4 linearise exactly to the design
 model of ``synthesis/bicycle_roll_model.py`` (beta = vy/vx); tests/test_car_plant.py checks it.
+With relaxation, linear_tires = 1 and hr -> 0 they linearise to the bicycle model with tire
+relaxation of paper 001 (states vy, r, (Fyf + Fyr)/m, (lf Fyf - lr Fyr)/Iz); tests/test_car_plant_001.py.
+
+Outputs at the centre of gravity
+--------------------------------
+``vy`` and ``beta`` are those of the roll-axis point P below the CG. The CG sits at
+rho = (0, -hr sin(phi), hr cos(phi)) from P (E2's lateral offset; phi > 0 leans right, the CG
+moves to -y). In the yawing road-plane frame (angular velocity r about z) its velocity is
+v_P + d(rho)/dt + r e_z x rho, and e_z x rho = (hr sin(phi), 0, 0) has no y component, so
+
+    vy_cg   = vy + d/dt(-hr sin(phi)) = vy - hr phidot cos(phi)          (m/s)
+    beta_cg = atan(vy_cg / max(vx, V_SLIP_MIN))                         (rad)
+
+(the x component r hr sin(phi) is neglected like the CG's other in-plane terms: vx is that of P).
+E2 reads m (d(vy_cg)/dt + vx r) = S - m g sin(phi_r): Newton's law for the CG's lateral velocity.
+These are the lateral velocity and sideslip of paper 001 and of the measured datasets.
 
 Modelling assumptions
 ---------------------
@@ -79,7 +101,7 @@ Modelling assumptions
   Clamping: the longitudinal transfer is limited so that neither axle goes below zero load, and
   each axle's lateral transfer to +-(its wheel load), so every Fz >= 0 and sum(Fz) stays
   m g cos(phi_r) (the spec's "clamp each Fz >= 0", done without creating load). Hence
-  |S| <= mu m g cos(phi_r) with algebraic tires.
+  |S| <= mu m g cos(phi_r) with algebraic Magic Formula tires.
 * Road bank enters as gravity only (E1, E2, E5); the bank is a body-frame input (the road's
   slope across the car's x axis), not a map of the road.
 
@@ -148,17 +170,21 @@ class CarPlantModel:
     * ``scale_r`` (1)    rear cornering stiffness scale factor; default 1.0.
     * ``sigma``   (m)    tire relaxation length; default the vehicle's ``sigma``; <= 0 disables
                          the relaxation (algebraic tires).
+    * ``linear_tires`` (1)  0 (default): Magic Formula tires; 1: their linearisation at zero slip,
+                         Fy_ss = mu Fz B C alpha, no saturation (E6). Other values are refused.
 
     ``PARAMETERS`` holds the defaults for the representative sedan; ``parameter_defaults(data)``
     gives the defaults for a given vehicle (use it for the FMU start values).
     """
 
-    PARAMETERS = {"mu": 1.0, "scale_f": 1.0, "scale_r": 1.0, "sigma": 0.5}
+    PARAMETERS = {"mu": 1.0, "scale_f": 1.0, "scale_r": 1.0, "sigma": 0.5, "linear_tires": 0.0}
     PARAMETER_INFO = {
         "mu": ("1", "peak tire-road friction coefficient (default: the vehicle's mu)"),
         "scale_f": ("1", "front cornering stiffness scale factor"),
         "scale_r": ("1", "rear cornering stiffness scale factor"),
         "sigma": ("m", "tire relaxation length (default: the vehicle's sigma); <= 0 disables relaxation"),
+        "linear_tires": ("1", "1: linear tires Fy = mu Fz B C alpha (the Magic Formula's slope at zero "
+                              "slip, no saturation); 0: Magic Formula (default)"),
     }
     STATE_NAMES = ("vy", "yaw_rate", "roll_angle", "roll_rate", "Fy_fl", "Fy_fr", "Fy_rl", "Fy_rr")
     STATE_UNITS = ("m/s", "rad/s", "rad", "rad/s", "N", "N", "N", "N")
@@ -174,7 +200,9 @@ class CarPlantModel:
                "Fyf": ("N", "front tire forces along body y (both wheels)"),
                "Fyr": ("N", "rear tire forces along body y (both wheels)"),
                "alpha_f": ("rad", "mean front slip angle"),
-               "alpha_r": ("rad", "mean rear slip angle")}
+               "alpha_r": ("rad", "mean rear slip angle"),
+               "vy_cg": ("m/s", "lateral velocity of the CG (road-plane body axes): vy - hr phidot cos(phi)"),
+               "beta_cg": ("rad", "sideslip angle at the CG: atan(vy_cg/vx)")}
 
     H_MAX = 1e-3          # s, largest internal (Heun) substep
     VX_MAX = 100.0        # m/s, larger vx inputs are clamped
@@ -229,7 +257,7 @@ class CarPlantModel:
 
     @staticmethod
     def _defaults(v: dict) -> dict:
-        return {"mu": v["mu"], "scale_f": 1.0, "scale_r": 1.0, "sigma": v["sigma"]}
+        return {"mu": v["mu"], "scale_f": 1.0, "scale_r": 1.0, "sigma": v["sigma"], "linear_tires": 0.0}
 
     def __init__(self, data: dict, params: dict | None = None):
         v = self._vehicle_values(data)
@@ -249,6 +277,9 @@ class CarPlantModel:
         for k in ("mu", "scale_f", "scale_r"):
             if not p[k] > 0:
                 raise ValueError(f"CarPlant: parameter {k!r} must be > 0, got {p[k]}")
+        if p["linear_tires"] not in (0.0, 1.0):
+            raise ValueError(f"CarPlant: parameter 'linear_tires' must be 0 (Magic Formula) or 1 (linear "
+                             f"tires), got {p['linear_tires']}")
         self.params = p
         self.vehicle = v
 
@@ -263,6 +294,7 @@ class CarPlantModel:
         self._sigma = p["sigma"]
         self._relax = p["sigma"] > 0.0
         self._C, self._E = v["mf_C"], v["mf_E"]
+        self._linear = p["linear_tires"] == 1.0
         # flat-road static wheel loads (N) and the per-axle Magic Formula B (E6)
         self._Wf = m * G * lr / (2.0 * L)
         self._Wr = m * G * lf / (2.0 * L)
@@ -288,7 +320,8 @@ class CarPlantModel:
         mu = self._mu
         self._consts = (lf, lr, self._t2, m, hr, Ix, Iz, self._Kr, self._br, mu * self._kyf, mu * self._kyr,
                         mu * self._ef, mu * self._er, self._C, self._E, mu, -self._Bf, -self._Br,
-                        self._Wf, self._Wr, self._kx, self._relax, self._sigma)
+                        self._Wf, self._Wr, self._kx, self._relax, self._sigma, self._linear,
+                        -self._Bf * self._C, -self._Br * self._C)
 
         self.x = [0.0] * 8
         self.events: list = []
@@ -314,7 +347,7 @@ class CarPlantModel:
         applied to the loads rather than to each wheel's Magic Formula value.
         """
         (lf, lr, t2, m, hr, Ix, Iz, Kr, br, mkyf, mkyr, mef, mer, C, E, mu, nBf, nBr, Wf, Wr, kx,
-         relax, sigma) = self._consts
+         relax, sigma, linear, nBCf, nBCr) = self._consts
         vmin = self.V_SLIP_MIN
         atan, sin, cos = _atan, _sin, _cos
         sd = sin(delta)
@@ -372,15 +405,20 @@ class CarPlantModel:
                 Ffy = (F1 + F2) * cd
                 return (Ffy + F3 + F4, Ffy, F3 + F4, -0.5 * (atan(q1) + atan(q2)),
                         -0.5 * (atan(q3) + atan(q4)), F1, F2, F3, F4)
-            # E6 with x = B alpha: Fy_ss / (mu Fz) = sin(C atan(x - E (x - atan x)))
-            x = nBf * atan(q1)
-            g1 = sin(C * atan(x - E * (x - atan(x))))
-            x = nBf * atan(q2)
-            g2 = sin(C * atan(x - E * (x - atan(x))))
-            x = nBr * atan(q3)
-            g3 = sin(C * atan(x - E * (x - atan(x))))
-            x = nBr * atan(q4)
-            g4 = sin(C * atan(x - E * (x - atan(x))))
+            if linear:   # E6, linear_tires = 1: Fy_ss / (mu Fz) = B C alpha (alpha = -atan q)
+                g1 = nBCf * atan(q1)
+                g2 = nBCf * atan(q2)
+                g3 = nBCr * atan(q3)
+                g4 = nBCr * atan(q4)
+            else:        # E6 with x = B alpha: Fy_ss / (mu Fz) = sin(C atan(x - E (x - atan x)))
+                x = nBf * atan(q1)
+                g1 = sin(C * atan(x - E * (x - atan(x))))
+                x = nBf * atan(q2)
+                g2 = sin(C * atan(x - E * (x - atan(x))))
+                x = nBr * atan(q3)
+                g3 = sin(C * atan(x - E * (x - atan(x))))
+                x = nBr * atan(q4)
+                g4 = sin(C * atan(x - E * (x - atan(x))))
             # E5: lateral load transfer, left wheels -dFz, right +dFz, clamped to the axle's load
             # (d = mu dFz: the forces are (mu Fz_axle -+ d) g)
             Mroll = Kr * phi + br * phid
@@ -596,6 +634,9 @@ class CarPlantModel:
         y["Fyr"] = Fyr
         y["alpha_f"] = af
         y["alpha_r"] = ar
+        vy_cg = x[0] - self._hr * x[3] * _cos(x[2])   # CG lateral velocity (module docstring)
+        y["vy_cg"] = vy_cg
+        y["beta_cg"] = _atan(vy_cg / vs)
         if ar > self.ALPHA_SPIN or ar < -self.ALPHA_SPIN:
             if "spin" not in self._flags:
                 self._flags.add("spin")

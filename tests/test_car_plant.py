@@ -388,10 +388,10 @@ def test_substeps_and_ax_from_vx_inputs():
 # ------------------------------------------------------------------------------------------
 def test_defaults_and_initial_outputs():
     p = plant()
-    assert p.params == {"mu": 1.0, "scale_f": 1.0, "scale_r": 1.0, "sigma": 0.5}
+    assert p.params == {"mu": 1.0, "scale_f": 1.0, "scale_r": 1.0, "sigma": 0.5, "linear_tires": 0.0}
     assert CarPlantModel.parameter_defaults(DATA) == p.params
     assert set(p.y) == {"beta", "vy", "yaw_rate", "ay", "roll_angle", "roll_rate", "Fyf", "Fyr",
-                        "alpha_f", "alpha_r"}
+                        "alpha_f", "alpha_r", "vy_cg", "beta_cg"}
     assert all(v == 0.0 for v in p.y.values())
     assert p.x == [0.0] * 8 and len(CarPlantModel.STATE_NAMES) == 8
 

@@ -7,7 +7,7 @@ from ..car_plant import CarPlantModel
 from ..spec import ModelSpec, Var
 
 SPEC = ModelSpec(
-    description="Nonlinear two-track lateral/yaw/roll car model with Magic Formula tires, "
+    description="Nonlinear two-track lateral/yaw/roll car model with Magic Formula (optionally linear) tires, "
                 "load transfer and tire relaxation (latobs truth model)",
     runtime=CarPlantModel,
     inputs=(
@@ -16,8 +16,8 @@ SPEC = ModelSpec(
         Var("bank_angle", "rad", "road bank angle (> 0: gravity pulls towards -y)"),
     ),
     outputs=(
-        Var("beta", "rad", "sideslip angle atan(vy/vx)"),
-        Var("vy", "m/s", "lateral velocity"),
+        Var("beta", "rad", "sideslip angle atan(vy/vx) at the roll axis below the CG"),
+        Var("vy", "m/s", "lateral velocity at the roll axis below the CG"),
         Var("yaw_rate", "rad/s", "yaw rate"),
         Var("ay", "m/s2", "lateral acceleration sensed at the CG (tire forces / m)"),
         Var("roll_angle", "rad", "roll angle, > 0 leaning right"),
@@ -26,6 +26,8 @@ SPEC = ModelSpec(
         Var("Fyr", "N", "rear axle lateral force (body y)"),
         Var("alpha_f", "rad", "front slip angle (mean of the two wheels)"),
         Var("alpha_r", "rad", "rear slip angle (mean of the two wheels)"),
+        Var("vy_cg", "m/s", "lateral velocity of the CG: vy - hr roll_rate cos(roll_angle)"),
+        Var("beta_cg", "rad", "sideslip angle at the CG atan(vy_cg/vx)"),
     ),
     parameters=(
         Var("mu", "1", "peak friction coefficient (dry 1.0, wet 0.8, snow 0.3, ice 0.1)", start=1.0,
@@ -34,6 +36,8 @@ SPEC = ModelSpec(
         Var("scale_r", "1", "rear cornering stiffness scale factor", start=1.0, min=0.1, max=10.0),
         Var("sigma", "m", "tire relaxation length (0: no relaxation, algebraic tires)", start=0.5,
             min=0.0, max=5.0),
+        Var("linear_tires", "1", "1: linear tires mu Fz B C alpha (Magic Formula slope at zero slip, "
+            "no saturation); 0: Magic Formula", start=0.0, min=0.0, max=1.0),
     ),
     stop_time=10.0,
 )
