@@ -62,6 +62,7 @@ PLANTS = {"CarPlant": FmuKind("CarPlant", "car_plant", "plant", "sedan")}
 OBSERVERS = {
     "SideslipBankObserver": FmuKind("SideslipBankObserver", "sideslip_bank_observer", "design", "sedan"),
     "SideslipBankObserverTire": FmuKind("SideslipBankObserverTire", "sideslip_bank_observer", "design", "sedan"),
+    "LateralIntervalObserver": FmuKind("LateralIntervalObserver", "lateral_interval_observer", "design", "sedan"),
 }
 
 

@@ -34,6 +34,18 @@ def _solve_000(vehicle: Vehicle, opts) -> dict:
     return pi_hinf_000.to_design_dict(pi_hinf_000.design(vehicle, opts))
 
 
+def _solve_001(vehicle: Vehicle, opts) -> dict:
+    from . import interval_001
+
+    return interval_001.to_design_dict(interval_001.design(vehicle, opts))
+
+
+def _options_001(name: str):
+    from . import interval_001
+
+    return interval_001.DesignOptions(name=name)
+
+
 def _options_000(switching: str):
     def options(name: str):
         from . import pi_hinf_000
@@ -51,6 +63,11 @@ DESIGNS: dict[str, DesignEntry] = {
         "SideslipBankObserverTire", "000", "sedan",
         "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) at alpha* = 0.5 deg (eq. 27)",
         _options_000("tire"), _solve_000),
+    "LateralIntervalObserver": DesignEntry(
+        "LateralIntervalObserver", "001", "sedan",
+        "switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and axle "
+        "forces for cornering stiffnesses in a +-20 % box, speed modes 11.5/14.5/18 m/s (Theorem 1)",
+        _options_001, _solve_001),
 }
 
 

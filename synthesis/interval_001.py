@@ -1,0 +1,235 @@
+"""Paper 001's design: Theorem 1 of Ifqir, Ichalal, Ait-Oufroukh, Mammar (ACC 2020).
+
+Switched interval observer (eq. 23) of the relaxation model (``relaxation_model.py``, eq. 9)
+under a box of cornering stiffnesses (eq. 10), one mode per speed band (eq. 44). Theorem 1:
+find a positive DIAGONAL Q common to all modes, W_i, X_i and the least gamma such that, for
+every mode i,
+
+    (35)  [[He(Q A_i - X_i C A_i - W_i C) + eps Q, Q], [Q, -gamma I]] < 0
+    (36)  Q A_i - X_i C A_i - W_i C + eta Q >= 0            (elementwise, every entry)
+    (34)  alpha I <= Q <= beta I
+
+then E_i = Q^-1 X_i, K_i = Q^-1 W_i, P_i = I - E_i C, N_i = P_i A_i - K_i C (eq. 33, Metzler by
+(36): N_i + eta I >= 0), J_i = K_i + N_i E_i (eq. 30a), H_i = P_i B_i (eq. 30b), and the interval
+width e = x_up - x_lo is ISS w.r.t. Omega with lim ||e|| <= sqrt(gamma/(alpha eps)) max ||Omega||
+(eq. 37). ERRATA 001: the elementwise (36), diagonal included, is what keeps the problem bounded,
+and with it the optimum tends to N_i ~ -eta I: eta is the bandwidth knob; eps the ISS rate.
+
+Numerics (not in the paper): (34) is normalised to alpha = 1 (Q >= I; the LMIs are homogeneous
+in (Q, W, X, 1/gamma), so only gamma/alpha matters, which is what eq. (37) uses); the LMIs are
+solved in the time scale tau = eta (A_i/tau, eps/tau, eta/tau, gamma_s = tau gamma), so that the
+solver sees entries of order 1..40; Clarabel. The certificate (``certificate._certify_001``)
+re-evaluates everything from the design file with numpy/scipy, including the width-dynamics
+small-gain check that Theorem 1 omits (ERRATA 001).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import relaxation_model as rm
+from .params import Vehicle
+
+PAPER_EDGES = (10.0, 13.0, 16.0, 20.0)      # m/s, eq. (44): V_x^0 .. V_x^3
+PAPER_SPEEDS = (11.5, 14.5, 18.0)           # m/s, eq. (44): the modes' model speeds
+
+
+class DesignError(RuntimeError):
+    """The LMIs are infeasible or the solver failed; the message names the design and the LMI."""
+
+
+@dataclass(frozen=True)
+class DesignOptions:
+    """Options of a paper-001 design (SI units: m/s, 1/s)."""
+
+    name: str
+    edges: tuple[float, ...] | None = None      # band edges (m/s); None: eq. (44), or the vehicle's speed range
+    speeds: tuple[float, ...] | None = None     # model speed per band (m/s); None: eq. (44) or band midpoints
+    box: tuple[float, float] = (0.2, 0.2)       # relative half-widths of the Cf and Cr box (eq. 10)
+    epsilon: float = 0.5                        # 1/s, ISS rate of eq. (35)
+    eta: float = 7.0                            # 1/s, Metzler shift of eq. (36)
+    margin: float = 1e-7                        # strictness of (35) in scaled units
+    y_error_bound: tuple[float, float] = (0.0, 0.0)     # rad/s, m/s^2: |measured - true| of [r, ay]
+    x0_halfwidth: tuple[float, float, float, float] = (3.0, 0.0, 0.0, 30.0)  # initial box half-widths
+    gain_limit: float = 1e4                     # certificate: largest admissible |entry| of E, K, J
+
+    def validate(self) -> None:
+        where = f"design {self.name}"
+        if self.edges is not None:
+            e = list(self.edges)
+            if len(e) < 2 or any(not (x > 0 and math.isfinite(x)) for x in e) or e != sorted(set(e)):
+                raise ValueError(f"{where}: edges must be >= 2 positive increasing speeds (m/s), got {self.edges}")
+            if self.speeds is not None and len(self.speeds) != len(e) - 1:
+                raise ValueError(f"{where}: {len(e) - 1} bands need {len(e) - 1} speeds, got {self.speeds}")
+        if self.speeds is not None and self.edges is None and len(self.speeds) != len(PAPER_SPEEDS):
+            raise ValueError(f"{where}: speeds without edges must be one per band of eq. (44)")
+        if not all(0 <= b < 1 for b in self.box):
+            raise ValueError(f"{where}: box half-widths must be in [0, 1) (relative), got {self.box}")
+        if not (self.epsilon > 0 and self.eta > 0):
+            raise ValueError(f"{where}: epsilon and eta must be > 0 (1/s), got {self.epsilon}, {self.eta}")
+        if len(self.y_error_bound) != 2 or any(b < 0 for b in self.y_error_bound):
+            raise ValueError(f"{where}: y_error_bound must be two values >= 0, got {self.y_error_bound}")
+
+
+@dataclass
+class Design:
+    options: DesignOptions
+    vehicle: Vehicle
+    values: dict                        # the model's vehicle parameters (SI)
+    edges: list[float]
+    speeds: list[float]
+    cf_box: tuple[float, float]
+    cr_box: tuple[float, float]
+    q: np.ndarray                       # diagonal of Q
+    gamma: float
+    modes: list[dict]                   # per mode: A, B, N, E, J, H, P, K
+    solver: dict = field(default_factory=dict)
+
+
+def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list[float]]:
+    """(edges, speeds) of the switching law eq. (44): the options', else the paper's, else, for a
+    vehicle with a ``speed`` range (m/s) outside the paper's grid, equal bands covering the range,
+    at most 4 m/s wide like the paper's widest band (16-20 m/s), the model speed at each band's
+    centre. (The runtime bounds the speed mismatch inside a band; its width gain (vx - vx_i)/sigma
+    on the yaw-acceleration state must stay below eta: the certificate checks it.)"""
+    if opts.edges is not None:
+        edges = [float(x) for x in opts.edges]
+        speeds = list(opts.speeds) if opts.speeds is not None else [(a + b) / 2 for a, b in zip(edges, edges[1:])]
+        return edges, [float(s) for s in speeds]
+    rng = vehicle.ranges.get("speed")
+    if rng is not None and rng.unit == "m/s" and (rng.min < PAPER_EDGES[0] or rng.max > PAPER_EDGES[-1]):
+        n = max(1, math.ceil((rng.max - rng.min) / 4.0))
+        edges = [rng.min + (rng.max - rng.min) * k / n for k in range(n + 1)]
+        return edges, [(a + b) / 2 for a, b in zip(edges, edges[1:])]
+    return list(PAPER_EDGES), list(opts.speeds or PAPER_SPEEDS)
+
+
+def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
+    """Solve Theorem 1 (LMIs 34-36) with cvxpy/Clarabel. Raises DesignError naming the LMI."""
+    import cvxpy as cp  # design time only
+
+    opts.validate()
+    v = rm.vehicle_values(vehicle, f"design {opts.name} (paper 001 relaxation model)")
+    edges, speeds = speed_grid(vehicle, opts)
+    for i, (s, lo, hi) in enumerate(zip(speeds, edges, edges[1:])):
+        if not lo <= s <= hi:
+            raise ValueError(f"design {opts.name}: mode {i + 1} model speed {s} m/s outside its band [{lo}, {hi}]")
+    cf_box = (v["Cf"] * (1 - opts.box[0]), v["Cf"] * (1 + opts.box[0]))
+    cr_box = (v["Cr"] * (1 - opts.box[1]), v["Cr"] * (1 + opts.box[1]))
+    A0, A1, B1 = rm.coefficients(v["m"], v["Iz"], v["lf"], v["lr"], v["sigma"], v["Cf"], v["Cr"])
+    C = rm.C
+    n, ny = 4, C.shape[0]
+    tau = opts.eta                                           # 1/s, time scale of the LMIs
+    eps_s, eta_s = opts.epsilon / tau, opts.eta / tau
+
+    q = cp.Variable(n)
+    X = [cp.Variable((n, ny)) for _ in speeds]
+    W = [cp.Variable((n, ny)) for _ in speeds]
+    g = cp.Variable(nonneg=True)
+    Q = cp.diag(q)
+    lmi35, lmi36 = [], []
+    for i, vx in enumerate(speeds):
+        As = (A0 + vx * A1) / tau
+        L = Q @ As - X[i] @ C @ As - W[i] @ C               # = Q N_i / tau
+        M = cp.bmat([[L + L.T + eps_s * Q, Q], [Q, -g * np.eye(n)]])
+        lmi35.append((M + M.T) / 2 << -opts.margin * np.eye(2 * n))
+        lmi36.append(L + eta_s * Q >= 0)
+    base = [q >= 1.0]                                        # (34) with alpha = 1
+    prob = cp.Problem(cp.Minimize(g), base + lmi35 + lmi36)
+    t0 = time.perf_counter()
+    try:
+        prob.solve(solver=cp.CLARABEL)
+        status = prob.status
+    except cp.error.SolverError:
+        status = "solver_error"
+    seconds = time.perf_counter() - t0
+    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or q.value is None:
+        raise DesignError(f"design {opts.name}: no solution (Clarabel: {status}) of Theorem 1 (LMIs 34-36, "
+                          f"eps = {opts.epsilon:g}, eta = {opts.eta:g}) over {len(speeds)} speed modes; "
+                          + _diagnose(base, lmi35, lmi36))
+    qv = np.asarray(q.value, float)
+    Qi = np.diag(1.0 / qv)
+    modes = []
+    for i, vx in enumerate(speeds):
+        A, B = A0 + vx * A1, vx * B1
+        E = Qi @ X[i].value
+        K = tau * Qi @ W[i].value
+        P = np.eye(n) - E @ C
+        N = P @ A - K @ C
+        # rounding leaves off-diagonal entries of order 1e-16 where (36) made them 0: set them to
+        # exactly 0, so that N is Metzler in floating point too (the runtime's order-preserving
+        # update relies on it); the certificate checks N = P A - K C to 1e-9 afterwards
+        tiny = (np.abs(N) <= 1e-12 * np.max(np.abs(N))) & ~np.eye(n, dtype=bool)
+        N[tiny] = 0.0
+        modes.append({"A": A, "B": B, "E": E, "K": K, "P": P, "N": N, "J": K + N @ E, "H": P @ B})
+    return Design(options=opts, vehicle=vehicle, values=v, edges=edges, speeds=speeds, cf_box=cf_box,
+                  cr_box=cr_box, q=qv, gamma=float(g.value) / tau, modes=modes,
+                  solver={"name": "CLARABEL", "status": str(status), "seconds": round(seconds, 4),
+                          "lmis": len(base) + len(lmi35) + len(lmi36), "time_scale_per_s": tau})
+
+
+def _diagnose(base, lmi35, lmi36) -> str:
+    import cvxpy as cp
+
+    def feasible(cons) -> bool:
+        try:
+            p = cp.Problem(cp.Minimize(0), base + cons)
+            p.solve(solver=cp.CLARABEL)
+        except cp.error.SolverError:
+            return False
+        return p.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+    if not feasible(lmi36):
+        return "the Metzler constraint (36) alone is infeasible: raise eta"
+    if not feasible(lmi35):
+        return "the ISS LMI (35) alone is infeasible: lower epsilon"
+    return "(35) and (36) are feasible apart but not together: raise eta or lower epsilon"
+
+
+def to_design_dict(d: Design) -> dict:
+    """Everything the certificate and the FMU runtime need, as plain data (no certificate yet)."""
+    o, v = d.options, d.values
+    A0, A1, B1 = rm.coefficients(v["m"], v["Iz"], v["lf"], v["lr"], v["sigma"], v["Cf"], v["Cr"])
+    dA_lo, dA_hi, dB_lo, dB_hi = rm.stiffness_bounds(v, d.cf_box, d.cr_box)
+    eta_shift = max(o.eta, max(float(-np.min(np.diag(m["N"]))) for m in d.modes))
+    alpha = 1.0
+    return {
+        "schema": "latobs.design/1",
+        "name": o.name,
+        "paper": "001",
+        "title": "Vehicle lateral velocity and lateral tire-road forces estimation based on switched "
+                 "interval observers (Ifqir, Ichalal, Ait-Oufroukh, Mammar, ACC 2020)",
+        "vehicle": d.vehicle.as_dict(),
+        "options": {k: getattr(o, k) for k in o.__dataclass_fields__},
+        "model": {"states": list(rm.STATES), "state_units": list(rm.STATE_UNITS), "input": "delta",
+                  "measurements": list(rm.OUTPUTS), "form": "A(vx) = A0 + vx A1 + dA, B(vx) = vx (B1 + dB1)",
+                  "A0": A0, "A1": A1, "B1": B1, "C": rm.C, "dA_lower": dA_lo, "dA_upper": dA_hi,
+                  "dB1_lower": dB_lo, "dB1_upper": dB_hi, **{k: v[k] for k in rm.PARAMETERS}},
+        "stiffness_box": {"Cf": list(d.cf_box), "Cr": list(d.cr_box), "relative": list(o.box),
+                          "unit": "N/rad (per axle)"},
+        "switching": {"kind": "speed_bands", "variable": "vx", "unit": "m/s", "edges": d.edges,
+                      "rule": "eq. (44): mode i on [V_x^(i-1), V_x^i[; outside the grid the nearest mode"},
+        "modes": [{"index": i + 1, "vx": s, "band": [d.edges[i], d.edges[i + 1]],
+                   **{k: m[k] for k in ("A", "B", "N", "E", "J", "H", "P", "K")}}
+                  for i, (s, m) in enumerate(zip(d.speeds, d.modes))],
+        "Q": d.q,
+        "gamma": d.gamma,
+        "epsilon": o.epsilon,
+        "eta": o.eta,
+        "alpha": alpha,
+        "beta": float(np.max(d.q)),
+        "iss_gain": math.sqrt(d.gamma / (alpha * o.epsilon)),
+        "runtime": {"vx_hold": 1.0, "y_error_bound": list(o.y_error_bound), "x0_halfwidth": list(o.x0_halfwidth),
+                    "eta": eta_shift},
+        "solver": d.solver,
+        "notes": [
+            "The bounds contain the state of the linear relaxation model (eq. 9) whenever the axle "
+            "cornering stiffnesses lie in stiffness_box and the speed in the design bands; the "
+            "runtime bounds the speed mismatch inside a band exactly (not in the paper).",
+            "The common diagonal Q proves ISS of the width under arbitrary switching (eq. 37); the "
+            "certificate adds the small-gain check of the width dynamics that Theorem 1 omits.",
+        ],
+    }
