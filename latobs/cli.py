@@ -1,4 +1,4 @@
-"""Command line ``latobs`` (CONTRACT.md): list, design, build, validate, demo."""
+"""Command line ``latobs`` (CONTRACT.md): list, design, build, validate, replay, demo."""
 from __future__ import annotations
 
 import argparse
@@ -57,6 +57,27 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+def _cmd_replay(args) -> int:
+    from .pipeline import replay
+
+    replay(args.csv, args.observer, vehicle=args.vehicle, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
+           split=_split(args.split), plots=not args.no_plots)
+    return 0
+
+
+def _split(text: str):
+    """--split: a time in s, 'none', or 'auto' (the file's default: 425 s for the MBDS record)."""
+    if text.lower() in ("auto", "none"):
+        return text.lower() if text.lower() == "auto" else None
+    try:
+        value = float(text)
+    except ValueError:
+        raise CliError(f"--split wants a time in s, 'none' or 'auto', got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise CliError(f"--split must be a finite time in s, got {text!r}")
+    return value
+
+
 def _cmd_bench(args) -> int:
     from .bench import main as bench_main
 
@@ -107,6 +128,19 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--tag", default="", help="suffix of the output folder (SCENARIO_TAG)")
     v.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
     v.set_defaults(func=_cmd_validate)
+    r = sub.add_parser("replay", help="drive an observer FMU with recorded signals and score it against the "
+                                      "reference columns present")
+    r.add_argument("csv", metavar="CSV", help="a .csv or .csv.gz file with a header row and a time column t, "
+                                            "or 'mbds' for the bundled MBDS real-vehicle record")
+    r.add_argument("--observer", required=True, help="observer FMU name (see `latobs list`)")
+    r.add_argument("--vehicle", help="vehicle of the FMU: NAME_V.fmu for a non-default vehicle (built if missing)")
+    r.add_argument("--out", default=str(DEFAULT_OUT), help="writes OUT/replay_<csv stem>_<FMU name>/")
+    r.add_argument("--fmu-dir", default=str(DEFAULT_OUT), help="where the FMUs are (built if missing)")
+    r.add_argument("--split", default="auto", metavar="T",
+                   help="also score t < T and t >= T separately (s); 'none', or 'auto' (default: 425 s for the "
+                        "MBDS record, whose t >= 425 s is a held-out test, none for other files)")
+    r.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
+    r.set_defaults(func=_cmd_replay)
     bn = sub.add_parser("bench", help="µs per step of the built FMUs and the coupled run, beside references",
                         add_help=False)
     bn.add_argument("bench_args", nargs=argparse.REMAINDER, help="see `latobs bench --help`")
@@ -123,7 +157,8 @@ def parser() -> argparse.ArgumentParser:
 USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.packaging", "PackagingError"), ("latobs.synthesis.designs", "CertificateError"),
                ("latobs.synthesis.pi_hinf_000", "DesignError"),
-               ("latobs.synthesis.params", "VehicleParameterError"))
+               ("latobs.synthesis.params", "VehicleParameterError"),
+               ("latobs.validation.replay", "ReplayError"))
 
 
 def _user_error_types() -> tuple[type, ...]:

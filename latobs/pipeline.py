@@ -27,13 +27,20 @@ def design_one(name: str, vehicle: str | None, out: Path, quiet: bool = False) -
     data = designs.run(name, vehicle)
     path = design_file.write(data, out)
     if not quiet:
-        s = certificate.summary(data)
-        print(f"{data['name']}: certified ({len(data['checks'])} checks), gamma = {s['gamma']:.4g}, "
-              f"cond(P) = {s['cond_P']:.3g}, Clarabel {data['solver']['status']} in "
-              f"{data['solver']['seconds']:.2f} s -> {path}")
+        s = certificate.summary(data)    # its keys depend on the paper: print those present
+        extra = "".join(f", {label} = {s[key]:{fmt}}" for key, label, fmt in
+                        (("cond_P", "cond(P)", ".3g"), ("iss_gain", "ISS gain", ".4g"))
+                        if isinstance(s.get(key), (int, float)))
+        print(f"{data['name']}: certified ({len(data['checks'])} checks), gamma = {s['gamma']:.4g}{extra}, "
+              f"Clarabel {data['solver']['status']} in {data['solver']['seconds']:.2f} s -> {path}")
         for m in s["per_mode"]:
-            print(f"  mode {m['mode']} @ {m['speed_kmh']:5.1f} km/h: H-inf bank->beta error {m['hinf']:.4g}, "
-                  f"slowest bank pole {m['slowest_bank_pole']:.3f} 1/s, largest gain {m['largest_gain']:.4g}")
+            at = (f"{m['speed_kmh']:5.1f} km/h" if "speed_kmh" in m else
+                  f"{m['speed_ms']:5.2f} m/s" if isinstance(m.get("speed_ms"), (int, float)) else "")
+            parts = [f"{label} {m[key]:{fmt}}" for key, label, fmt in
+                     (("hinf", "H-inf bank->beta error", ".4g"), ("slowest_bank_pole", "slowest bank pole", ".3f"),
+                      ("slowest_pole", "slowest pole", ".3f"), ("largest_gain", "largest gain", ".4g"))
+                     if isinstance(m.get(key), (int, float)) and not (key == "slowest_pole" and "slowest_bank_pole" in m)]
+            print(f"  mode {m['mode']}{' @ ' + at if at else ''}: {', '.join(parts)}")
     return path
 
 
@@ -89,6 +96,44 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     if not quiet:
         print(f"{scenario}{' [' + tag + ']' if tag else ''}: plant parameters {plant_parameters or 'nominal'}, "
               f"noise {'on' if noise else 'off'}")
+        print(text_table(metrics))
+        print(f"wrote {', '.join(str(p) for p in paths)}")
+    return metrics
+
+
+def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("build"),
+           fmu_dir: Path = Path("build"), split: float | None | str = "auto", plots: bool = True,
+           quiet: bool = False) -> dict:
+    """Drive the built observer FMU ``fmu_dir/NAME[_V].fmu`` (built if missing) with the columns of
+    ``csv`` (a .csv/.csv.gz path, or ``"mbds"`` for the bundled MBDS record) and score it against
+    the reference columns present; writes ``out/replay_<csv stem>_<NAME[_V]>/metrics.json`` and
+    PNGs (none with ``plots=False``). ``split``: a time in s scored separately before and after,
+    None for none, ``"auto"`` for the file's default (425 s for the MBDS record, else none).
+    Returns the metrics (structure in :func:`latobs.validation.replay.score`)."""
+    from .synthesis.params import load_vehicle
+    from .validation import replay as rp
+    from .validation.report import text_table
+
+    if observer not in designs.DESIGNS:
+        raise rp.ReplayError(f"unknown observer {observer!r}; known: {', '.join(designs.DESIGNS)}")
+    veh = load_vehicle(vehicle or designs.DESIGNS[observer].default_vehicle)
+    path = rp.resolve_csv(csv)
+    data = rp.load_csv(path)                    # a bad file fails before anything is built
+    rp.uniform_step(data["t"], path)
+    if rp.default_split(path) is not None and veh.name != rp.MBDS_VEHICLE and not quiet:
+        print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
+              f"{veh.name!r} (use --vehicle {rp.MBDS_VEHICLE} for the dataset's own parameters)")
+    name = designs.artefact_name(observer, vehicle)
+    fmu_dir = Path(fmu_dir)
+    fmu = fmu_dir / f"{name}.fmu"
+    if not fmu.is_file():
+        print(f"building missing FMU {name}")
+        build([observer], vehicle, fmu_dir)
+    mass = veh.parameters["m"].value if "m" in veh.parameters else None
+    out_dir = Path(out) / f"replay_{rp.csv_stem(path)}_{name}"
+    metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,
+                            plots=plots, data=data)
+    if not quiet:
         print(text_table(metrics))
         print(f"wrote {', '.join(str(p) for p in paths)}")
     return metrics

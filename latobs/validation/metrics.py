@@ -26,6 +26,12 @@ the entry when a modelDescription declares it). Structure returned by :func:`com
 
 Errors are estimate minus truth (X_hat - X). "after settle" uses samples with t >= settle_time.
 Non-finite statistics are written as null so that the file is strict JSON.
+
+Truth at the point the observer estimates: an estimate ``X_hat`` (or a pair ``X_lower`` /
+``X_upper``) is scored against the bus signal ``X`` unless :data:`REFERENCE_SIGNALS` maps ``X``
+of that observer's FMU model to another signal that is on the bus (e.g. paper 001 estimates the
+lateral velocity of the centre of gravity, CarPlant's ``vy_cg``, not its roll-axis ``vy``). The
+entry's ``"truth"`` names the signal used.
 """
 from __future__ import annotations
 
@@ -42,6 +48,68 @@ import numpy as np
 from .harness import SimResult
 
 ENCLOSURE_TOL = 1e-9  # absolute tolerance of the enclosure test, in the signal's unit
+
+#: Truth signal of an estimated quantity, per observer FMU model (the model name, or its prefix
+#: before ``_<vehicle>`` for a build of another vehicle): {model: {quantity X: bus signal}}. Used
+#: only when the mapped signal is on the bus (else the signal ``X`` itself). CarPlant's ``vy`` and
+#: ``beta`` are at the roll-axis point below the centre of gravity, ``vy_cg``/``beta_cg`` at it.
+REFERENCE_SIGNALS: dict[str, dict[str, str]] = {
+    "LateralIntervalObserver": {"vy": "vy_cg", "beta": "beta_cg"},   # paper 001: CG states
+}
+
+
+def reference_map(model_name: str | None) -> dict[str, str]:
+    """The :data:`REFERENCE_SIGNALS` entry of an FMU model name: an exact key, else the longest
+    key ``K`` with ``model_name`` starting ``K_`` (``LateralIntervalObserver_mbds_250lm``)."""
+    if not model_name:
+        return {}
+    if model_name in REFERENCE_SIGNALS:
+        return REFERENCE_SIGNALS[model_name]
+    keys = [k for k in REFERENCE_SIGNALS if model_name.startswith(k + "_")]
+    return REFERENCE_SIGNALS[max(keys, key=len)] if keys else {}
+
+
+def truth_signal(quantity: str, available, model_name: str | None = None) -> str | None:
+    """The signal an observer of FMU model ``model_name`` estimating ``quantity`` is scored
+    against, among ``available`` signal names (a mapping or a set); None when there is none."""
+    mapped = reference_map(model_name).get(quantity)
+    if mapped is not None and mapped in available:
+        return mapped
+    return quantity if quantity in available else None
+
+
+def estimated_quantities(outputs) -> tuple[list[str], list[str]]:
+    """(X of every ``X_hat`` output, X of every ``X_lower``/``X_upper`` pair) of an observer."""
+    hats = [n[:-4] for n in outputs if n.endswith("_hat")]
+    pairs = [n[:-6] for n in outputs if n.endswith("_lower") and n[:-6] + "_upper" in outputs]
+    return hats, pairs
+
+
+def error_stats(estimate, truth) -> dict[str, Any]:
+    """Statistics of estimate - truth over the given samples (SI unit of the signal)."""
+    e = np.asarray(estimate, dtype=float) - np.asarray(truth, dtype=float)
+    return {"n_samples": int(e.size), "rms": _rms(e), "max_abs": _maxabs(e),
+            "mean_error": _f(np.mean(e)) if e.size else None,
+            "nonfinite_samples": int(np.sum(~np.isfinite(e)))}
+
+
+def enclosure_stats(lower, upper, truth, tol: float = ENCLOSURE_TOL) -> dict[str, Any]:
+    """Enclosure of ``truth`` in [lower, upper] over the given samples: a sample violates when
+    the truth is outside by more than ``tol`` or a bound is not finite."""
+    lo = np.asarray(lower, dtype=float)
+    hi = np.asarray(upper, dtype=float)
+    x = np.asarray(truth, dtype=float)
+    n = int(x.size)
+    viol = (x < lo - tol) | (x > hi + tol) | ~np.isfinite(lo) | ~np.isfinite(hi)
+    nv = int(np.sum(viol))
+    width = hi - lo
+    over = np.maximum(lo - x, x - hi)
+    return {"n_samples": n, "enclosure_violations": nv,
+            "violation_rate": nv / n if n else None,
+            "enclosure_rate": 1.0 - nv / n if n else None,
+            "max_violation": _f(max(0.0, float(np.nanmax(over)))) if n and np.any(np.isfinite(over)) else None,
+            "mean_width": _f(np.mean(width)) if n else None,
+            "nonfinite_samples": int(np.sum(~np.isfinite(width)))}
 
 
 def _f(x) -> float | None:
@@ -93,12 +161,14 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
         "info": result.info,
         "observers": {},
     }
+    models = (result.info or {}).get("observer_models", {})
     for label, outs in result.observers.items():
         o: dict[str, Any] = {"estimates": {}, "intervals": {}}
         scored: set[str] = set()
+        model = models.get(label)
         for name, y in outs.items():
-            if name.endswith("_hat") and name[:-4] in bus:
-                truth = name[:-4]
+            truth = truth_signal(name[:-4], bus, model) if name.endswith("_hat") else None
+            if truth is not None:
                 e = np.asarray(y, dtype=float) - bus[truth]
                 finite = np.isfinite(e)
                 o["estimates"][name] = {
@@ -115,19 +185,20 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
             if name.endswith("_lower"):
                 base = name[:-6]
                 up = base + "_upper"
-                if up in outs and base in bus:
+                truth = truth_signal(base, bus, model)
+                if up in outs and truth is not None:
                     lo = np.asarray(outs[name], dtype=float)
                     hi = np.asarray(outs[up], dtype=float)
-                    x = bus[base]
+                    x = bus[truth]
                     below = lo - x  # > 0 when violated
                     above = x - hi
                     viol = (x < lo - ENCLOSURE_TOL) | (x > hi + ENCLOSURE_TOL) | ~np.isfinite(lo) | ~np.isfinite(hi)
                     width = hi - lo
                     o["intervals"][base] = {
-                        "truth": base,
+                        "truth": truth,
                         "lower": name,
                         "upper": up,
-                        "unit": result.units.get(name) or result.units.get(base),
+                        "unit": result.units.get(name) or result.units.get(truth),
                         "enclosure_violations": int(np.sum(viol)),
                         "enclosure_violations_after_settle": int(np.sum(viol[after])),
                         "max_violation": _f(max(0.0, float(np.nanmax(np.maximum(below, above))))) if x.size else None,
@@ -136,8 +207,9 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
                         "nonfinite_samples": int(np.sum(~np.isfinite(width))),
                     }
                     scored.update((name, up))
-        if "beta_hat" in outs and "beta" in bus and "bank_angle" in bus:
-            e = np.asarray(outs["beta_hat"], dtype=float) - bus["beta"]
+        beta_truth = truth_signal("beta", bus, model)
+        if "beta_hat" in outs and beta_truth is not None and "bank_angle" in bus:
+            e = np.asarray(outs["beta_hat"], dtype=float) - bus[beta_truth]
             phi = bus["bank_angle"]
             for key, sel in (("beta_error_to_bank_l2_ratio", slice(None)),
                              ("beta_error_to_bank_l2_ratio_after_settle", after)):

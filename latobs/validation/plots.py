@@ -3,7 +3,8 @@
 Angles are drawn in degrees and angular rates in deg/s (axis labels say so); other signals in
 their SI unit. Files written by :func:`plot_all` into ``out_dir``:
 
-    estimates.png   truth vs every observer's estimate (and interval band) per estimated signal
+    estimates.png   truth vs every observer's estimate (and interval band) per estimated signal;
+                    the truth of an observer is the one its metrics use (metrics.REFERENCE_SIGNALS)
     modes.png       active mode of each observer over time (observers with a `mode` output)
     bank_angle.png  road bank angle: truth vs each observer's bank_angle_hat
     inputs.png      the scenario's plant inputs (delta, vx, bank_angle)
@@ -84,19 +85,32 @@ def _save(fig: Figure, path: Path) -> Path:
     return path
 
 
+def _truths(result: SimResult) -> dict[str, dict[str, str]]:
+    """{quantity X: {observer label: truth signal}} for every X an observer estimates (X_hat) or
+    bounds (X_lower/X_upper) and that has a truth on the bus, with metrics.REFERENCE_SIGNALS
+    applied (the same truth as the metrics)."""
+    from .metrics import estimated_quantities, truth_signal
+
+    models = (result.info or {}).get("observer_models", {})
+    found: dict[str, dict[str, str]] = {}
+    for label, outs in result.observers.items():
+        hats, pairs = estimated_quantities(outs)
+        for q in dict.fromkeys([*hats, *pairs]):
+            truth = truth_signal(q, result.bus, models.get(label))
+            if truth is not None:
+                found.setdefault(q, {})[label] = truth
+    return found
+
+
 def estimated_signals(result: SimResult) -> list[str]:
-    """Truth signals (on the bus) that some observer estimates (X_hat) or bounds (X_lower/upper)."""
-    found = set()
-    for outs in result.observers.values():
-        for n in outs:
-            if n.endswith("_hat") and n[:-4] in result.bus:
-                found.add(n[:-4])
-            if n.endswith("_lower") and n[:-6] + "_upper" in outs and n[:-6] in result.bus:
-                found.add(n[:-6])
+    """Quantities X that some observer estimates (X_hat) or bounds (X_lower/upper) and that have a
+    truth on the bus (X itself or the observer's metrics.REFERENCE_SIGNALS entry)."""
+    found = set(_truths(result))
     return [s for s in PREFERRED if s in found] + sorted(found - set(PREFERRED))
 
 
 def plot_estimates(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
+    truths = _truths(result)
     sigs = estimated_signals(result)
     if not sigs:
         return None
@@ -105,8 +119,13 @@ def plot_estimates(result: SimResult, out_dir: str | os.PathLike) -> Path | None
     axes = fig.subplots(len(sigs), 1, sharex=True, squeeze=False)[:, 0]
     for ax, s in zip(axes, sigs):
         k, _ = display_scale(s, result.units)
-        _plot(ax, t, k * result.bus[s], color="black", lw=1.6, label=f"{s} (truth)")
+        # one truth line per truth signal used for this quantity (e.g. beta and beta_cg)
+        for j, truth in enumerate(dict.fromkeys(truths[s].values())):
+            _plot(ax, t, k * result.bus[truth], color="black", lw=1.6 if j == 0 else 1.2,
+                  ls="-" if j == 0 else "--", label=f"{truth} (truth)")
         for label, outs in result.observers.items():
+            if label not in truths[s]:
+                continue
             if s + "_hat" in outs:
                 _plot(ax, t, k * np.asarray(outs[s + "_hat"], float), lw=1.0, label=f"{label}: {s}_hat")
             if s + "_lower" in outs and s + "_upper" in outs:

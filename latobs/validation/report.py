@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-IMAGE_ORDER = ("estimates.png", "bank_angle.png", "modes.png", "inputs.png")
+IMAGE_ORDER = ("estimates.png", "bank_angle.png", "modes.png", "inputs.png", "replay.png", "replay_zoom.png")
 
 
 @dataclass
@@ -51,8 +51,74 @@ def _table(header: list[str], rows: list[list[Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+SEGMENTS = ("all", "before_split", "after_split")
+
+
+def _segment_headers(metrics: Mapping[str, Any]) -> list[str]:
+    split = metrics.get("split_s")
+    if split is None:
+        return ["whole record"]
+    return ["whole record", f"t < {split:g} s", f"t ≥ {split:g} s"]
+
+
+def replay_rows(metrics: Mapping[str, Any]) -> tuple[list[str], list[list[Any]]]:
+    """(header, rows) of a replay's metrics (``metrics["kind"] == "replay"``): per scored output
+    its truth column, the metric, and the value on the whole record and each side of the split."""
+    segs = [s for s in SEGMENTS if s in metrics.get("segments", {"all": None})]
+    header = ["observer", "output", "truth", "metric", *_segment_headers(metrics)]
+    rows: list[list[Any]] = []
+    for lab, o in metrics.get("observers", {}).items():
+        for name, e in o.get("estimates", {}).items():
+            for key, what in (("rms", "RMS error"), ("max_abs", "max abs error"), ("mean_error", "mean error")):
+                rows.append([lab, name, e.get("truth"), f"{what} [{e.get('unit') or 'SI'}]",
+                             *[(e.get(s) or {}).get(key) for s in segs]])
+        for name, e in o.get("intervals", {}).items():
+            for key, what in (("violation_rate", "violation rate"), ("enclosure_violations", "violations"),
+                              ("mean_width", f"mean width [{e.get('unit') or 'SI'}]")):
+                rows.append([lab, f"[{e.get('lower')}, {e.get('upper')}]", e.get("truth"), what,
+                             *[(e.get(s) or {}).get(key) for s in segs]])
+        f = o.get("may_in_force_sum")
+        if f and "skipped" not in f:
+            for key, what in (("enclosure_rate", "enclosure rate (eq. 47)"), ("enclosure_violations", "violations"),
+                              ("mean_width", "mean width [N]")):
+                rows.append([lab, f"[{f['lower']}, {f['upper']}]", f"m*ay (m = {f['mass_kg']:g} kg)", what,
+                             *[(f.get(s) or {}).get(key) for s in segs]])
+    return header, rows
+
+
+def _replay_head(metrics: Mapping[str, Any]) -> str:
+    seg = metrics.get("segments", {})
+    parts = [f"{metrics.get('scenario', 'replay')} through {metrics.get('label')} (vehicle {metrics.get('vehicle')})",
+             f"{metrics.get('n_samples')} samples at {metrics.get('dt_s'):.6g} s, t = "
+             f"{metrics.get('t_start_s'):.6g} … {metrics.get('t_end_s'):.6g} s"]
+    if metrics.get("split_s") is not None:
+        parts.append(f"split at {metrics['split_s']:g} s ({(seg.get('before_split') or {}).get('n_samples')} + "
+                     f"{(seg.get('after_split') or {}).get('n_samples')} samples)")
+    return "; ".join(parts)
+
+
+def _nothing_scored(metrics: Mapping[str, Any]) -> str:
+    outs = sorted({x for o in metrics.get("observers", {}).values() for x in o.get("unscored_outputs", [])})
+    return (f"nothing was scored: no reference column for any output (outputs {', '.join(outs) or '(none)'}; "
+            f"columns {', '.join(metrics.get('columns', []))})")
+
+
+def replay_markdown(metrics: Mapping[str, Any]) -> str:
+    """Markdown of a replay's metrics: the header line and the per-segment table."""
+    parts = [_replay_head(metrics) + ".\n"]
+    if metrics.get("nothing_scored"):
+        parts.append(_nothing_scored(metrics) + "\n")
+    else:
+        header, rows = replay_rows(metrics)
+        parts.append("Scores (estimate − recorded truth, SI units):\n\n" + _table(header, rows))
+    return "\n".join(parts)
+
+
 def metrics_markdown(metrics: Mapping[str, Any]) -> str:
-    """Tables of one scenario's metrics (estimates, intervals, per-observer summary)."""
+    """Tables of one scenario's metrics (estimates, intervals, per-observer summary); a replay's
+    metrics (``kind == "replay"``) as :func:`replay_markdown`."""
+    if metrics.get("kind") == "replay":
+        return replay_markdown(metrics)
     obs = metrics.get("observers", {})
     parts = []
     head = []
@@ -129,16 +195,23 @@ def render(report_dir: str | os.PathLike, sections: Iterable, title: str = "lato
     rows = []
     for s in secs:
         if isinstance(s, ReportSection) and s.metrics:
+            replay = s.metrics.get("kind") == "replay"
             for lab, o in s.metrics.get("observers", {}).items():
                 est = o.get("estimates", {})
                 beta = est.get("beta_hat", {})
+                if replay:  # the held-out part when there is one, else the whole record
+                    seg = "after_split" if s.metrics.get("split_s") is not None else "all"
+                    viol = sum((v.get("all") or {}).get("enclosure_violations") or 0
+                               for v in o.get("intervals", {}).values()) if o.get("intervals") else None
+                    rows.append([s.title, lab, (beta.get(seg) or {}).get("rms"), None, viol, len(est)])
+                    continue
                 viol = sum(v.get("enclosure_violations") or 0 for v in o.get("intervals", {}).values()) \
                     if o.get("intervals") else None
                 rows.append([s.title, lab, beta.get("rms_after_settle"), o.get("beta_error_to_bank_l2_ratio"), viol,
                              len(est)])
     if rows:
         out.append("## Overview\n\n" + _table(
-            ["scenario", "observer", "β̂ RMS after settle [rad]", "‖β−β̂‖₂/‖φr‖₂", "enclosure violations",
+            ["scenario", "observer", "β̂ RMS after settle (replay: held-out part) [rad]", "‖β−β̂‖₂/‖φr‖₂", "enclosure violations",
              "scored estimates"], rows))
     for s in secs:
         if isinstance(s, str):
@@ -164,8 +237,33 @@ def write_index(report_dir: str | os.PathLike, sections: Iterable, title: str = 
     return atomic_write_text(report_dir / "index.md", text)
 
 
+def _columns(rows: list[list[str]]) -> str:
+    widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def replay_text_table(metrics: Mapping[str, Any]) -> str:
+    """Plain-text table of a replay's metrics for a terminal (SI units)."""
+    head = _replay_head(metrics)
+    if metrics.get("nothing_scored"):
+        return head + "\n" + _nothing_scored(metrics)
+    header, rows = replay_rows(metrics)
+    header, rows = header[1:], [r[1:] for r in rows]    # one observer per replay
+    shown, last = [], None
+    for r in rows:
+        key = (r[0], r[1])
+        shown.append([*(["", ""] if key == last else [str(r[0]), str(r[1])]), str(r[2]), *(_fmt(c) for c in r[3:])])
+        last = key
+    return head + "\n" + _columns([header, *shown])
+
+
 def text_table(metrics: Mapping[str, Any]) -> str:
-    """Plain-text table of one scenario's metrics for a terminal (SI units)."""
+    """Plain-text table of one scenario's metrics for a terminal (SI units); a replay's metrics as
+    :func:`replay_text_table`."""
+    if metrics.get("kind") == "replay":
+        return replay_text_table(metrics)
     rows = [("observer", "output", "RMS", "max abs", "RMS settled", "max settled")]
     for lab, o in metrics.get("observers", {}).items():
         for name, e in o.get("estimates", {}).items():

@@ -1,0 +1,551 @@
+"""Replay of recorded signals through a built observer FMU, scored against the recorded reference.
+
+``latobs replay CSV --observer NAME`` (CONTRACT.md): the observer FMU is driven, through fmpy
+(:class:`latobs.validation.harness.FmuInstance`), by the columns of a CSV file and scored
+against the reference columns the file has. Only the BUILT FMU is used; its Python internals are
+never imported.
+
+CSV file
+    ``.csv`` or ``.csv.gz``, a header row of column names, one sample per row, SI units (angles
+    in rad). A column ``t`` (s) is required, strictly increasing with a uniform step (within
+    :data:`UNIFORM_RTOL`, relative); every value must be finite. The columns are named as in the
+    MBDS dataset (:data:`MBDS_CSV`: t, delta, vx, vy, yaw_rate, ay, ax, beta) and as the FMUs'
+    variables, so wiring is by name.
+Wiring
+    Each FMU input is the CSV column of the same name (a missing one is a :class:`ReplayError`
+    naming the input and the columns present).
+Timing (as :mod:`latobs.validation.harness`)
+    The communication step is the CSV's time step dt. Initialisation mode gets the first row's
+    inputs; the outputs read after it are recorded at t_0. Step k: inputs of row k (held over the
+    step), doStep(t_k, dt), outputs recorded at t_{k+1}, where they are compared with row k+1.
+Scoring (:mod:`latobs.validation.metrics` conventions)
+    an output ``X_hat`` against column ``X`` (error = estimate - truth: rms, max_abs, mean_error);
+    a pair ``X_lower``/``X_upper`` against column ``X`` (enclosure_violations, violation_rate,
+    enclosure_rate, max_violation, mean_width); :data:`metrics.REFERENCE_SIGNALS` applies when
+    the file has the mapped column. With force bounds ``Fyf_lower/upper``, ``Fyr_lower/upper``
+    and a column ``ay``: ``may_in_force_sum``, the enclosure of m*ay (N) in
+    [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (paper 001 eq. 47), m from the vehicle set.
+    Every metric is given on the whole record (``all``) and, with a split time T, separately on
+    t < T (``before_split``) and t >= T (``after_split``). The MBDS file's default split is 425 s:
+    t >= 425 s is its held-out test part, never used for tuning.
+
+Output: ``metrics.json`` (structure in :func:`score`) and, unless disabled, ``replay.png`` (whole
+record; the held-out part shaded) and ``replay_zoom.png`` (the 20 s window of most activity,
+taken before the split when there is one).
+"""
+from __future__ import annotations
+
+import csv
+import gzip
+import hashlib
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from . import metrics as _metrics
+
+#: The bundled real-vehicle record (MIT, see the README and LICENSE beside it).
+MBDS_CSV = Path(os.fspath(resources.files("latobs").joinpath("data", "mbds-250lm", "mbds_250lm_100hz.csv.gz")))
+#: The word that stands for :data:`MBDS_CSV` on the command line.
+MBDS_ALIAS = "mbds"
+#: The vehicle parameter set of the MBDS record.
+MBDS_VEHICLE = "mbds_250lm"
+#: Default split time (s) per file name: the MBDS record is tuned on t < 425 s, tested on the rest.
+DEFAULT_SPLITS = {"mbds_250lm_100hz.csv.gz": 425.0, "mbds_250lm_100hz.csv": 425.0}
+UNIFORM_RTOL = 1e-6   # allowed relative deviation of each time step from the mean step
+ZOOM_S = 20.0         # length of the zoomed figure's window, s
+FORCE_BOUNDS = ("Fyf_lower", "Fyr_lower", "Fyf_upper", "Fyr_upper")
+
+
+class ReplayError(ValueError):
+    """A user-facing replay failure (file, column, time step, observer); the message names it."""
+
+
+# --------------------------------------------------------------------------------------------
+# the CSV file
+# --------------------------------------------------------------------------------------------
+def resolve_csv(csv_file: str | os.PathLike) -> Path:
+    """The path of a CSV argument: the word ``mbds`` is the bundled :data:`MBDS_CSV`."""
+    if str(csv_file) == MBDS_ALIAS:
+        return MBDS_CSV
+    return Path(csv_file)
+
+
+def csv_stem(path: str | os.PathLike) -> str:
+    """File name without ``.gz`` and ``.csv``: ``mbds_250lm_100hz.csv.gz`` -> ``mbds_250lm_100hz``."""
+    name = Path(path).name
+    for suffix in (".gz", ".csv"):
+        if name.lower().endswith(suffix):
+            name = name[: -len(suffix)]
+    return name
+
+
+def default_split(path: str | os.PathLike) -> float | None:
+    """The split time (s) of a known file (:data:`DEFAULT_SPLITS`), else None."""
+    return DEFAULT_SPLITS.get(Path(path).name)
+
+
+def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a ``.csv`` or ``.csv.gz`` file with a header row into {column: float array}.
+
+    Checks: readable, a header of distinct non-empty names, a column ``t``, every row with as
+    many fields as the header, every value a finite number, ``t`` strictly increasing. Errors
+    are :class:`ReplayError` naming the file, the column and the line (the header is line 1).
+    Blank lines are skipped.
+    """
+    path = Path(path)
+    opener = gzip.open if path.name.lower().endswith(".gz") else open
+    try:
+        with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            rows: list[list[str]] = []
+            lines: list[int] = []
+            for row in reader:
+                if not row or all(not c.strip() for c in row):
+                    continue
+                rows.append(row)
+                lines.append(reader.line_num)
+    except FileNotFoundError:
+        raise ReplayError(f"{path}: no such file") from None
+    except (OSError, EOFError, UnicodeDecodeError, csv.Error) as exc:
+        raise ReplayError(f"{path}: cannot read it as a {'gzip-compressed ' if opener is gzip.open else ''}"
+                          f"CSV file: {exc}") from None
+    if header is None:
+        raise ReplayError(f"{path}: empty file (a header row of column names is needed)")
+    names = [h.strip() for h in header]
+    if any(not n for n in names):
+        raise ReplayError(f"{path}: the header (line 1) has an empty column name: {header}")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ReplayError(f"{path}: column(s) {', '.join(dup)} appear more than once in the header")
+    if "t" not in names:
+        raise ReplayError(f"{path}: no time column 't' (columns: {', '.join(names)})")
+    if len(rows) < 2:
+        raise ReplayError(f"{path}: {len(rows)} data row(s); at least 2 are needed")
+    for row, line in zip(rows, lines):
+        if len(row) != len(names):
+            raise ReplayError(f"{path}: line {line} has {len(row)} field(s), the header {len(names)}")
+    try:
+        data = np.array(rows, dtype=float)
+    except ValueError:
+        for row, line in zip(rows, lines):
+            for name, cell in zip(names, row):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise ReplayError(f"{path}: column {name!r}, line {line}: {cell!r} is not a number") from None
+        raise  # pragma: no cover - numpy rejected something float() accepts
+    bad = ~np.isfinite(data)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise ReplayError(f"{path}: column {names[j]!r}, line {lines[i]}: value {rows[i][j].strip()!r} is not finite")
+    cols = {n: data[:, j].copy() for j, n in enumerate(names)}
+    dt = np.diff(cols["t"])
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise ReplayError(f"{path}: column 't' is not strictly increasing at line {lines[i + 1]} "
+                          f"(t = {rows[i + 1][names.index('t')].strip()} after {rows[i][names.index('t')].strip()})")
+    return cols
+
+
+def uniform_step(t: np.ndarray, source: Any = "the record") -> float:
+    """The time step of ``t`` (s): the mean step, when every step is within UNIFORM_RTOL of it."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 2:
+        raise ReplayError(f"{source}: fewer than 2 samples, no time step")
+    dt = float((t[-1] - t[0]) / (t.size - 1))
+    d = np.diff(t)
+    dev = np.abs(d - dt)
+    if np.any(dev > UNIFORM_RTOL * dt):
+        i = int(np.argmax(dev))
+        raise ReplayError(f"{source}: the time step is not uniform: t[{i + 1}] - t[{i}] = {d[i]:.9g} s at "
+                          f"t = {t[i]:.9g} s against a mean step of {dt:.9g} s (allowed relative deviation "
+                          f"{UNIFORM_RTOL:g}); resample the record to a fixed step")
+    return dt
+
+
+# --------------------------------------------------------------------------------------------
+# driving the FMU
+# --------------------------------------------------------------------------------------------
+@dataclass
+class ReplayRun:
+    """The recorded columns and the FMU's outputs on the same time grid.
+
+    time      t (s) of the CSV, shape (n,)
+    columns   {column: array} every CSV column but t (SI units)
+    outputs   {output: array} every Real/Integer/Boolean output of the FMU (outputs at t_k)
+    inputs    FMU input names (each wired to the column of the same name)
+    units     {variable: unit} as the modelDescription declares them
+    """
+
+    time: np.ndarray
+    columns: dict[str, np.ndarray]
+    outputs: dict[str, np.ndarray]
+    inputs: list[str]
+    dt: float
+    fmu: Path
+    model_name: str
+    label: str
+    units: dict[str, str] = field(default_factory=dict)
+    logs: list[str] = field(default_factory=list)
+
+
+def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: str | None = None,
+          source: Any = "the record") -> ReplayRun:
+    """Drive the FMU at ``fmu_path`` with the columns of ``data`` (``t`` and one column per FMU
+    input; see the module docstring for the timing). ``source`` names the data in errors."""
+    from .harness import FmuInstance, WiringError, _unit_of
+
+    fmu_path = Path(fmu_path)
+    if not fmu_path.is_file():
+        raise ReplayError(f"no FMU {fmu_path}")
+    if "t" not in data:
+        raise ReplayError(f"{source}: no time column 't'")
+    t = np.asarray(data["t"], dtype=float)
+    dt = uniform_step(t, source)
+    cols = {k: np.asarray(v, dtype=float) for k, v in data.items() if k != "t"}
+    label = label or fmu_path.stem
+    try:
+        f = FmuInstance(label, fmu_path)
+    except WiringError as exc:
+        raise ReplayError(str(exc)) from None
+    except Exception as exc:  # not a zip, not an FMU
+        raise ReplayError(f"cannot open FMU {fmu_path}: {exc}") from None
+    try:
+        in_names = [v.name for v in f.inputs]
+        missing = [x for x in in_names if x not in cols]
+        if missing:
+            raise ReplayError(
+                f"{f.describe()}: input(s) {', '.join(repr(m) for m in missing)} have no column in {source} "
+                f"(its columns: {', '.join(['t', *cols])})")
+        units = {v.name: u for v in f.md.modelVariables if (u := _unit_of(v)) and v.causality in ("input", "output")}
+        n = t.size
+        rec = {v.name: np.zeros(n, dtype=float if v.type == "Real" else np.int64) for v in f.outputs}
+        rows = [dict(zip(in_names, r)) for r in zip(*(cols[x].tolist() for x in in_names))] if in_names \
+            else [{} for _ in range(n)]
+
+        def call(what: str, k: int, fn, *args):
+            try:
+                return fn(*args)
+            except Exception as exc:
+                raise ReplayError(f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {exc}. "
+                                  f"Last log messages: {f.log_tail()}") from None
+
+        def record(k: int, values: Mapping[str, float]):
+            for name, val in values.items():
+                rec[name][k] = val
+
+        t0, stop = float(t[0]), float(t[-1])
+        call("instantiate", 0, f.instantiate)
+        f.prepare_io(in_names)
+        call("setupExperiment", 0, f.slave.setupExperiment, None, t0, stop)
+        call("enterInitializationMode", 0, f.slave.enterInitializationMode)
+        f.initialized = True
+        call("setting inputs", 0, f.set_inputs, rows[0])
+        call("exitInitializationMode", 0, f.slave.exitInitializationMode)
+        record(0, call("getting outputs", 0, f.get_outputs))
+        set_inputs, do_step, get_outputs = f.set_inputs, f.slave.doStep, f.get_outputs
+        tl = t.tolist()
+        for k in range(n - 1):
+            what = "setting inputs"
+            try:
+                set_inputs(rows[k])
+                what = "doStep"
+                do_step(tl[k], dt)
+                what = "getting outputs"
+                values = get_outputs()
+            except Exception as exc:
+                raise ReplayError(f"{f.describe()} failed in {what} at t = {tl[k]:.6g} s: {exc}. "
+                                  f"Last log messages: {f.log_tail()}") from None
+            record(k + 1, values)
+        logs = list(f.logs)
+        if f.dropped_logs:
+            logs.append(f"[INFO] replay: {f.dropped_logs} further log messages dropped")
+        return ReplayRun(time=t, columns=cols, outputs=rec, inputs=in_names, dt=dt, fmu=fmu_path,
+                         model_name=f.model_name, label=label, units=units, logs=logs)
+    finally:
+        f.close()
+
+
+# --------------------------------------------------------------------------------------------
+# scoring
+# --------------------------------------------------------------------------------------------
+def segments(t: np.ndarray, split: float | None) -> dict[str, np.ndarray]:
+    """{"all": mask} and, with a split time, "before_split" (t < split), "after_split" (t >= split)."""
+    t = np.asarray(t, dtype=float)
+    segs = {"all": np.ones(t.size, dtype=bool)}
+    if split is not None:
+        segs["before_split"] = t < split
+        segs["after_split"] = t >= split
+    return segs
+
+
+def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
+          vehicle: str | None = None, info: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Metrics of a replay (SI units; non-finite values become null in the file)::
+
+        {"kind": "replay", "scenario": "replay <csv stem>", "csv": path, "csv_sha256": hex,
+         "observer": NAME, "label": FMU name, "fmu": path, "fmu_model": modelName, "vehicle": V,
+         "dt_s", "n_samples", "t_start_s", "t_end_s", "duration_s", "split_s": T | null,
+         "segments": {"all" | "before_split" | "after_split": {"t_from_s", "t_to_s", "n_samples"}},
+         "inputs": [FMU inputs = CSV columns used], "columns": [CSV columns],
+         "scored": [scored outputs], "nothing_scored": bool,
+         "observers": {label: {
+             "estimates": {"X_hat": {"truth": column, "unit", SEG: {"n_samples", "rms", "max_abs",
+                                                                    "mean_error", "nonfinite_samples"}}},
+             "intervals": {"X": {"truth": column, "lower", "upper", "unit",
+                                 SEG: {"n_samples", "enclosure_violations", "violation_rate",
+                                       "enclosure_rate", "max_violation", "mean_width",
+                                       "nonfinite_samples"}}},
+             "may_in_force_sum": {"quantity": "m*ay", "lower": ..., "upper": ..., "mass_kg",
+                                  "vehicle", "unit": "N", SEG: {as an interval}},   # if applicable
+             "modes": {SEG: {"occupancy": {"1": fraction, ...}, "switches": int}},   # if `mode`
+             "unscored_outputs": [...], "log_messages": int, "log_excerpt": [first messages]}}}
+
+    SEG is each key of "segments" (``all``; with a split also ``before_split``/``after_split``).
+    """
+    t = run.time
+    cols = run.columns
+    segs = segments(t, split)
+    outs = run.outputs
+    o: dict[str, Any] = {"estimates": {}, "intervals": {}}
+    scored: set[str] = set()
+    hats, pairs = _metrics.estimated_quantities(outs)
+    for q in hats:
+        truth = _metrics.truth_signal(q, cols, run.model_name)
+        if truth is None:
+            continue
+        name = q + "_hat"
+        y, x = np.asarray(outs[name], dtype=float), cols[truth]
+        o["estimates"][name] = {"truth": truth, "unit": run.units.get(name) or run.units.get(truth),
+                                **{s: _metrics.error_stats(y[m], x[m]) for s, m in segs.items()}}
+        scored.add(name)
+    for q in pairs:
+        truth = _metrics.truth_signal(q, cols, run.model_name)
+        if truth is None:
+            continue
+        lo, hi = np.asarray(outs[q + "_lower"], dtype=float), np.asarray(outs[q + "_upper"], dtype=float)
+        x = cols[truth]
+        o["intervals"][q] = {"truth": truth, "lower": q + "_lower", "upper": q + "_upper",
+                             "unit": run.units.get(q + "_lower") or run.units.get(truth),
+                             **{s: _metrics.enclosure_stats(lo[m], hi[m], x[m]) for s, m in segs.items()}}
+        scored.update((q + "_lower", q + "_upper"))
+    if all(b in outs for b in FORCE_BOUNDS) and "ay" in cols:
+        entry: dict[str, Any] = {"quantity": "m*ay", "lower": "Fyf_lower + Fyr_lower",
+                                 "upper": "Fyf_upper + Fyr_upper", "reference": "paper 001 eq. (47)",
+                                 "mass_kg": mass, "vehicle": vehicle, "unit": "N"}
+        if mass is None:
+            entry["skipped"] = f"vehicle {vehicle!r} has no mass parameter m"
+        else:
+            lo = np.asarray(outs["Fyf_lower"], float) + np.asarray(outs["Fyr_lower"], float)
+            hi = np.asarray(outs["Fyf_upper"], float) + np.asarray(outs["Fyr_upper"], float)
+            x = float(mass) * cols["ay"]
+            entry.update({s: _metrics.enclosure_stats(lo[m], hi[m], x[m]) for s, m in segs.items()})
+            scored.add("may_in_force_sum")
+        o["may_in_force_sum"] = entry
+    if "mode" in outs:
+        mo = np.asarray(outs["mode"])
+        o["modes"] = {s: ({"occupancy": _metrics.mode_occupancy(t[m], mo[m]),
+                           "switches": int(np.sum(mo[m][1:] != mo[m][:-1]))} if m.any() else None)
+                      for s, m in segs.items()}
+    o["unscored_outputs"] = sorted(set(outs) - scored - {"mode"})
+    o["log_messages"] = len(run.logs)
+    o["log_excerpt"] = run.logs[:10]
+    meta = dict(info or {})
+    csv_path = meta.pop("csv", None)
+    out: dict[str, Any] = {
+        "kind": "replay",
+        "scenario": f"replay {csv_stem(csv_path) if csv_path else 'record'}",
+        "csv": str(csv_path) if csv_path else None,
+        **meta,
+        "label": run.label,
+        "fmu": str(run.fmu),
+        "fmu_model": run.model_name,
+        "vehicle": vehicle,
+        "dt_s": run.dt,
+        "n_samples": int(t.size),
+        "t_start_s": float(t[0]),
+        "t_end_s": float(t[-1]),
+        "duration_s": float(t[-1] - t[0]),
+        "split_s": split,
+        "segments": {s: {"t_from_s": float(t[m][0]) if m.any() else None,
+                         "t_to_s": float(t[m][-1]) if m.any() else None,
+                         "n_samples": int(np.sum(m))} for s, m in segs.items()},
+        "inputs": list(run.inputs),
+        "columns": ["t", *run.columns],
+        "scored": sorted(scored),
+        "nothing_scored": not scored,
+        "observers": {run.label: o},
+    }
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# figures
+# --------------------------------------------------------------------------------------------
+def _panels(run: ReplayRun, mass: float | None) -> list[dict[str, Any]]:
+    """What to draw: per estimated quantity its truth (if any), estimate and/or band; m*ay and the
+    force-sum band last."""
+    from .plots import PREFERRED
+
+    outs = run.outputs
+    hats, pairs = _metrics.estimated_quantities(outs)
+    qs = list(dict.fromkeys([*hats, *pairs]))
+    qs = [q for q in PREFERRED if q in qs] + sorted(set(qs) - set(PREFERRED))
+    panels = []
+    for q in qs:
+        truth = _metrics.truth_signal(q, run.columns, run.model_name)
+        p = {"name": q, "truth": truth, "truth_y": run.columns[truth] if truth else None,
+             "hat": outs.get(q + "_hat"), "band": None}
+        if q in pairs:
+            p["band"] = (outs[q + "_lower"], outs[q + "_upper"])
+        panels.append(p)
+    if all(b in outs for b in FORCE_BOUNDS):
+        lo = np.asarray(outs["Fyf_lower"], float) + np.asarray(outs["Fyr_lower"], float)
+        hi = np.asarray(outs["Fyf_upper"], float) + np.asarray(outs["Fyr_upper"], float)
+        have = mass is not None and "ay" in run.columns
+        panels.append({"name": "force_sum", "truth": "m*ay" if have else None,
+                       "truth_y": float(mass) * run.columns["ay"] if have else None, "hat": None,
+                       "band": (lo, hi), "label": "Fyf + Fyr", "unit": "N"})
+    return panels
+
+
+def activity_window(run: ReplayRun, panels: list[dict[str, Any]], length: float = ZOOM_S,
+                    before: float | None = None) -> tuple[int, int]:
+    """Index range [i0, i1) of the ``length``-second window with the most activity: the largest
+    sum over the panels' truths (else estimates) of the squared deviation from the median, each
+    signal normalised by its standard deviation. With ``before`` (the split time), the window is
+    taken from t < before when that part is long enough: the held-out part is not inspected."""
+    n = run.time.size
+    w = int(round(length / run.dt)) + 1
+    if w >= n:
+        return 0, n
+    if before is not None:
+        n_before = int(np.sum(run.time < before))
+        if n_before >= w:
+            n = n_before
+    a = np.zeros(n)
+    for p in panels:
+        y = p["truth_y"] if p["truth_y"] is not None else p["hat"]
+        if y is None and p["band"] is not None:
+            y = 0.5 * (np.asarray(p["band"][0], float) + np.asarray(p["band"][1], float))
+        if y is None:
+            continue
+        y = np.asarray(y, float)[:n]
+        y = np.where(np.isfinite(y), y, np.nanmedian(y) if np.isfinite(y).any() else 0.0)
+        s = float(np.std(y))
+        if s > 0:
+            a += ((y - np.median(y)) / s) ** 2
+    c = np.concatenate([[0.0], np.cumsum(a)])
+    i0 = int(np.argmax(c[w:] - c[:-w]))
+    return i0, i0 + w
+
+
+def _figure(run: ReplayRun, panels, sl: slice, title: str, split: float | None, path: Path) -> Path:
+    from matplotlib.figure import Figure
+
+    from .plots import _save, _ylabel, display_scale, thin
+
+    t = run.time[sl]
+    fig = Figure(figsize=(10, 2.3 * len(panels) + 0.8))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    lab = run.label
+    for ax, p in zip(axes, panels):
+        if p["name"] == "force_sum":
+            k, ylabel = 1.0, "lateral force [N]"
+        else:
+            k, _ = display_scale(p["name"], run.units)
+            ylabel = _ylabel(p["name"], run.units)
+        if p["band"] is not None:
+            lo, hi = (k * np.asarray(b, float)[sl] for b in p["band"])
+            i = thin(t, lo, hi)
+            name = p.get("label") or p["name"]
+            blabel = f"{lab}: {name} bounds" if p["name"] == "force_sum" else \
+                f"{lab}: [{name}_lower, {name}_upper]"
+            ax.fill_between(t[i], lo[i], hi[i], alpha=0.3, color="tab:blue", lw=0, label=blabel)
+        if p["truth_y"] is not None:
+            y = k * np.asarray(p["truth_y"], float)[sl]
+            i = thin(t, y)
+            ax.plot(t[i], y[i], color="black", lw=1.0, label=f"{p['truth']} (recorded)")
+        if p["hat"] is not None:
+            y = k * np.asarray(p["hat"], float)[sl]
+            i = thin(t, y)
+            ax.plot(t[i], y[i], color="tab:red", lw=0.9, label=f"{lab}: {p['name']}_hat")
+        if split is not None and t[0] < split <= t[-1]:
+            ax.axvspan(split, t[-1], color="0.85", alpha=0.5, lw=0, zorder=0,
+                       label=f"held-out test (t ≥ {split:g} s)" if ax is axes[0] else None)
+        ax.set_ylabel(ylabel, fontsize=8)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1].set_xlabel("time [s]")
+    axes[-1].set_xlim(float(t[0]), float(t[-1]))
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def write_plots(run: ReplayRun, metrics: Mapping[str, Any], out_dir: str | os.PathLike,
+                mass: float | None = None) -> list[Path]:
+    """``replay.png`` (whole record) and ``replay_zoom.png`` (the 20 s window of most activity, in
+    t < split when there is a split; only for a record longer than 20 s); returns the paths
+    written (none when the observer has no estimate or interval output)."""
+    panels = _panels(run, mass)
+    if not panels:
+        return []
+    out_dir = Path(out_dir)
+    split = metrics.get("split_s")
+    head = f"{metrics.get('scenario', 'replay')} through {run.label}"
+    paths = [_figure(run, panels, slice(None), f"{head}: whole record", split, out_dir / "replay.png")]
+    i0, i1 = activity_window(run, panels, before=split)
+    if i1 - i0 < run.time.size:
+        t0, t1 = run.time[i0], run.time[i1 - 1]
+        where = "" if split is None else (" (held-out part)" if t0 >= split else
+                                          " (tuning part)" if t1 < split else " (across the split)")
+        paths.append(_figure(run, panels, slice(i0, i1),
+                             f"{head}: {t0:.2f}–{t1:.2f} s, the {ZOOM_S:g} s of most activity{where}",
+                             split, out_dir / "replay_zoom.png"))
+    return paths
+
+
+# --------------------------------------------------------------------------------------------
+# all of it
+# --------------------------------------------------------------------------------------------
+def sha256_file(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.PathLike,
+        split: float | None | str = "auto", observer: str | None = None, vehicle: str | None = None,
+        mass: float | None = None, plots: bool = True,
+        data: Mapping[str, np.ndarray] | None = None) -> tuple[dict[str, Any], list[Path]]:
+    """Replay ``csv_file`` (a path or ``mbds``) through the FMU at ``fmu_path``; write
+    ``out_dir/metrics.json`` and (with ``plots``) the PNGs. ``split``: a time (s), None for none,
+    or ``"auto"`` (:func:`default_split`). ``data``: the already loaded columns of ``csv_file``.
+    Returns (metrics, [metrics.json, PNGs...])."""
+    path = resolve_csv(csv_file)
+    cols = load_csv(path) if data is None else data
+    if isinstance(split, str):
+        if split != "auto":
+            raise ReplayError(f"split must be a time in s, None or 'auto', got {split!r}")
+        split = default_split(path)
+    split = None if split is None else float(split)
+    if split is not None and not np.isfinite(split):
+        raise ReplayError(f"split time must be finite, got {split}")
+    rr = drive(fmu_path, cols, label=Path(fmu_path).stem, source=path)
+    info = {"csv": str(path), "csv_sha256": sha256_file(path) if path.is_file() else None,
+            "observer": observer or rr.label}
+    m = score(rr, split=split, mass=mass, vehicle=vehicle, info=info)
+    out_dir = Path(out_dir)
+    paths = [_metrics.write(m, out_dir)]
+    if plots:
+        paths += write_plots(rr, m, out_dir, mass=mass)
+    return m, paths
