@@ -156,7 +156,7 @@ def parser() -> argparse.ArgumentParser:
 # modules that are loaded: an exception can only be of a class whose module is.
 USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.packaging", "PackagingError"), ("latobs.synthesis.designs", "CertificateError"),
-               ("latobs.synthesis.pi_hinf_000", "DesignError"),
+               ("latobs.synthesis.pi_hinf_000", "DesignError"), ("latobs.synthesis.interval_001", "DesignError"),
                ("latobs.synthesis.params", "VehicleParameterError"),
                ("latobs.validation.replay", "ReplayError"))
 
