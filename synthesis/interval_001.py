@@ -54,6 +54,10 @@ class DesignOptions:
     margin: float = 1e-7                        # strictness of (35) in scaled units
     y_error_bound: tuple[float, float] = (0.0, 0.0)     # rad/s, m/s^2: |measured - true| of [r, ay]
     x0_halfwidth: tuple[float, float, float, float] = (3.0, 0.0, 0.0, 30.0)  # initial box half-widths
+    # bound of an additive model error w of eq. (9), x' = A x + B delta + w (units of x': m/s^2,
+    # rad/s^2, m/s^3, rad/s^3). Not in the paper (0: its model class). E.g. a rolling car's
+    # kinematic slip hr*phidot/vx puts up to ~30 m/s^3 on x3' and ~12 rad/s^3 on x4' (sedan, CarPlant)
+    model_error_bound: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     gain_limit: float = 1e4                     # certificate: largest admissible |entry| of E, K, J
 
     def validate(self) -> None:
@@ -70,6 +74,8 @@ class DesignOptions:
             raise ValueError(f"{where}: box half-widths must be in [0, 1) (relative), got {self.box}")
         if not (self.epsilon > 0 and self.eta > 0):
             raise ValueError(f"{where}: epsilon and eta must be > 0 (1/s), got {self.epsilon}, {self.eta}")
+        if len(self.model_error_bound) != 4 or any(not (b >= 0 and math.isfinite(b)) for b in self.model_error_bound):
+            raise ValueError(f"{where}: model_error_bound must be four finite values >= 0, got {self.model_error_bound}")
         if len(self.y_error_bound) != 2 or any(b < 0 for b in self.y_error_bound):
             raise ValueError(f"{where}: y_error_bound must be two values >= 0, got {self.y_error_bound}")
 
@@ -223,7 +229,7 @@ def to_design_dict(d: Design) -> dict:
         "beta": float(np.max(d.q)),
         "iss_gain": math.sqrt(d.gamma / (alpha * o.epsilon)),
         "runtime": {"vx_hold": 1.0, "y_error_bound": list(o.y_error_bound), "x0_halfwidth": list(o.x0_halfwidth),
-                    "eta": eta_shift},
+                    "disturbance_bound": list(o.model_error_bound), "eta": eta_shift},
         "solver": d.solver,
         "notes": [
             "The bounds contain the state of the linear relaxation model (eq. 9) whenever the axle "

@@ -394,6 +394,56 @@ class Fishhook(Scenario):
 
 
 # --------------------------------------------------------------------------------------------
+# random manoeuvre across paper 001's speed modes (enclosure campaigns)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RandomManoeuvre(Scenario):
+    """A seeded random manoeuvre inside the linear tire range, for enclosure campaigns.
+
+    Speed: a smooth (half-cosine) sweep over the whole duration between a low speed drawn in
+    [``v_min``, 12] m/s and a high speed drawn in [17, ``v_max``] m/s, up or down (drawn), so that
+    every run crosses all three of paper 001's speed bands (10-13-16-20 m/s). Steering: the sum of three sines, frequencies drawn in [0.2, 1.5] Hz and phases
+    drawn, scaled so that the steady-state lateral acceleration of the linear bicycle model at
+    the current speed stays below ``max_ay`` (m/s^2; 3 m/s^2 keeps the slip angles within a few
+    degrees, the linear range of the sedan's tires). No bank. Everything derives from ``seed``
+    (numpy default_rng), so a run is reproducible from its seed alone.
+    """
+
+    name: str = "random-manoeuvre"
+    description: str = ("Seeded random manoeuvre: a speed sweep across paper 001's speed bands and a "
+                        "three-sine steering within the linear tire range (enclosure campaigns).")
+    duration: float = 6.0
+    settle_time: float = 0.0
+    seed: int = 0
+    v_min: float = 10.2  # m/s
+    v_max: float = 19.8  # m/s
+    max_ay: float = 3.0  # m/s^2
+
+    def _draw(self):
+        g = np.random.default_rng(self.seed)
+        lo, hi = g.uniform(self.v_min, 12.0), g.uniform(17.0, self.v_max)
+        v0, v1 = (lo, hi) if g.uniform() < 0.5 else (hi, lo)
+        freqs = g.uniform(0.2, 1.5, size=3)
+        phases = g.uniform(0.0, 2 * np.pi, size=3)
+        weights = g.uniform(0.2, 1.0, size=3)
+        return v0, v1, freqs, phases, weights / weights.sum()
+
+    def signals(self, t, vehicle="sedan"):
+        t = np.asarray(t, dtype=float)
+        v0, v1, freqs, phases, w = self._draw()
+        vx = v0 + (v1 - v0) * _cosine_blend(t / self.duration)
+        shape = sum(wi * np.sin(2 * np.pi * f * t + ph) for wi, f, ph in zip(w, freqs, phases))
+        shape = shape * _cosine_blend(t / 0.5)          # start from straight driving
+        gain = np.array([steer_for_ay(vehicle, float(v), self.max_ay) for v in vx])
+        return {"delta": gain * shape, "vx": vx, "bank_angle": np.zeros_like(t)}
+
+    def _derived(self, vehicle):
+        v0, v1, freqs, _, _ = self._draw()
+        return {"seed": self.seed, "v_from_mps": float(v0), "v_to_mps": float(v1),
+                "steer_freqs_hz": [float(f) for f in freqs], "max_ay_mps2": self.max_ay}
+
+
+# --------------------------------------------------------------------------------------------
 # registry
 # --------------------------------------------------------------------------------------------
 class UnknownScenarioError(KeyError):
@@ -404,7 +454,15 @@ class UnknownScenarioError(KeyError):
 
 
 SCENARIOS: dict[str, Scenario] = {
-    s.name: s for s in (BankBraking(), DoubleLaneChange(), SineWithDwell(), Fishhook())
+    s.name: s for s in (
+        BankBraking(), DoubleLaneChange(), SineWithDwell(), Fishhook(),
+        # paper 001's operating range (speed modes 11.5/14.5/18 m/s): the same lane change at 15 m/s
+        DoubleLaneChange(name="double-lane-change-15",
+                         description="The double lane change at 15 m/s (paper 001's speed range): open-loop "
+                                     "road-wheel steering for a 4 m/s^2 steady-state lateral acceleration.",
+                         speed=15.0),
+        RandomManoeuvre(),
+    )
 }
 
 

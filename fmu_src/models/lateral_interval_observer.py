@@ -1,0 +1,62 @@
+"""FMU model file: LateralIntervalObserver (paper 001).
+
+Interface per CONTRACT.md; the maths is in ``interval_observer.py``; the gains, the stiffness
+box and the speed modes come from the design file baked into the FMU.
+"""
+from ..interval_observer import IntervalObserver
+from ..spec import ModelSpec, Var
+
+
+def _variant(data: dict) -> str:
+    """The stiffness box and the speed modes the design file makes."""
+    parts = []
+    box = data.get("stiffness_box", {})
+    cf, cr = box.get("Cf"), box.get("Cr")
+    if cf and cr:
+        parts.append(f"cornering stiffness box Cf in [{cf[0]:.4g}, {cf[1]:.4g}], Cr in [{cr[0]:.4g}, {cr[1]:.4g}] "
+                     "N/rad (per axle)")
+    modes = data.get("modes", [])
+    edges = data.get("switching", {}).get("edges", [])
+    if modes and len(edges) == len(modes) + 1:
+        bands = ", ".join(f"{m['vx']:g} m/s on [{lo:g}, {hi:g})" for m, lo, hi in zip(modes, edges, edges[1:]))
+        parts.append(f"{len(modes)} speed modes (eq. 44): {bands}")
+    return "; ".join(parts) or "speed modes"
+
+
+SPEC = ModelSpec(
+    description="Switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and "
+                "axle lateral forces for cornering stiffnesses in a box "
+                "(Ifqir, Ichalal, Ait-Oufroukh, Mammar, ACC 2020)",
+    describe=_variant,
+    runtime=IntervalObserver,
+    inputs=(
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
+        Var("vx", "m/s", "longitudinal speed"),
+        Var("yaw_rate", "rad/s", "measured yaw rate"),
+        Var("ay", "m/s2", "measured lateral acceleration"),
+    ),
+    outputs=(
+        Var("vy_lower", "m/s", "lower bound of the lateral velocity at the CG"),
+        Var("vy_upper", "m/s", "upper bound of the lateral velocity at the CG"),
+        Var("beta_lower", "rad", "lower bound of the sideslip angle atan(vy/vx) at the CG"),
+        Var("beta_upper", "rad", "upper bound of the sideslip angle atan(vy/vx) at the CG"),
+        Var("yaw_rate_lower", "rad/s", "lower bound of the yaw rate"),
+        Var("yaw_rate_upper", "rad/s", "upper bound of the yaw rate"),
+        Var("Fyf_lower", "N", "lower bound of the front axle lateral force"),
+        Var("Fyf_upper", "N", "upper bound of the front axle lateral force"),
+        Var("Fyr_lower", "N", "lower bound of the rear axle lateral force"),
+        Var("Fyr_upper", "N", "upper bound of the rear axle lateral force"),
+    ),
+    integer_outputs=(
+        Var("mode", "1", "active switched mode (speed band), 1-based", start=1, min=1),
+        Var("consistent", "1", "1 = the measurement lay inside the bounds, 0 = it did not: the bounds were "
+                               "reset to the measurement for the measured components (and widened to the "
+                               "initial box for the others)", start=1, min=0, max=1),
+    ),
+    bounds=lambda data: {"mode": (1, len(data["modes"])), "consistent": (0, 1)},
+    parameters=(
+        Var("vx_hold", "m/s", "below this speed the observer is frozen and its bounds held",
+            start=1.0, min=0.01, max=10.0),
+    ),
+    stop_time=20.0,
+)

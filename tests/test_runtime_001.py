@@ -1,0 +1,537 @@
+"""Paper-001 interval observer runtime (pure Python): Lemma 3, eq. (24), order preservation,
+guaranteed enclosure of an exact linear model, data validation and the documented clamps."""
+from __future__ import annotations
+
+import copy
+import math
+import time
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.integrate import solve_ivp
+
+from latobs.fmu_src import interval_observer as io
+from latobs.fmu_src.interval_observer import IntervalObserver
+from latobs.fmu_src.models.lateral_interval_observer import SPEC
+from latobs.synthesis import designs, relaxation_model as rm
+
+RNG_SEED = 20200701
+
+
+@pytest.fixture(scope="module")
+def design() -> dict:
+    return designs.run("LateralIntervalObserver")
+
+
+def _pos(a):
+    return np.maximum(a, 0.0)
+
+
+def _neg(a):
+    """a- = a+ - a >= 0: the convention under which eqs. (20), (21) and (24) hold."""
+    return _pos(a) - a
+
+
+# ------------------------------------------------------------------------------------------
+# Lemma 3 (eq. 20 and eq. 21) and eq. (24)
+# ------------------------------------------------------------------------------------------
+def _random_boxes(rng, n, size, scale=10.0):
+    a, b = rng.normal(0, scale, (2, n, size))
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    # a third of the boxes one-signed, some degenerate (x known)
+    lo[: n // 3] = np.abs(lo[: n // 3])
+    hi[: n // 3] = lo[: n // 3] + np.abs(hi[: n // 3])
+    hi[n // 3: n // 3 + n // 20] = lo[n // 3: n // 3 + n // 20]
+    x = lo + rng.uniform(0, 1, (n, size)) * (hi - lo)
+    return lo, hi, x
+
+
+def test_lemma3_eq20_and_eq21_on_random_boxes():
+    """>= 1e5 random boxes each: the bounds of eqs. (20) and (21) contain A x, with A- = A+ - A
+    (>= 0). With the paper's literal A- = A - A+ (<= 0) eq. (20) fails (the text's misprint)."""
+    rng = np.random.default_rng(RNG_SEED)
+    n, k = 100_000, 4
+    xl, xu, x = _random_boxes(rng, n, k)
+    A = rng.normal(0, 5, (n, k, k)) * (rng.uniform(0, 1, (n, k, k)) < 0.8)   # some exact zeros
+    Ax = np.einsum("nij,nj->ni", A, x)
+    lo = np.einsum("nij,nj->ni", _pos(A), xl) - np.einsum("nij,nj->ni", _neg(A), xu)       # eq. (20)
+    hi = np.einsum("nij,nj->ni", _pos(A), xu) - np.einsum("nij,nj->ni", _neg(A), xl)
+    tol = 1e-9 * (1 + np.abs(Ax))
+    assert np.count_nonzero(lo > Ax + tol) == 0 and np.count_nonzero(Ax > hi + tol) == 0
+    literal = -_neg(A)                                                    # A- = A - A+ <= 0
+    lo_lit = np.einsum("nij,nj->ni", _pos(A), xl) - np.einsum("nij,nj->ni", literal, xu)
+    assert np.count_nonzero(lo_lit > Ax + tol) > 0
+
+    # eq. (21): A_lo <= A <= A_hi, every A inside the interval matrix
+    Al, Au = np.minimum(*rng.normal(0, 5, (2, n, k, k))), None
+    Au = Al + np.abs(rng.normal(0, 5, (n, k, k))) * (rng.uniform(0, 1, (n, k, k)) < 0.9)
+    A = Al + rng.uniform(0, 1, (n, k, k)) * (Au - Al)
+    Ax = np.einsum("nij,nj->ni", A, x)
+    xp, xm = _pos(xl), _neg(xl)
+    up, um = _pos(xu), _neg(xu)
+    e = lambda M, v: np.einsum("nij,nj->ni", M, v)  # noqa: E731
+    lo21 = e(_pos(Al), xp) - e(_pos(Au), xm) - e(_neg(Al), up) + e(_neg(Au), um)
+    hi21 = e(_pos(Au), up) - e(_pos(Al), um) - e(_neg(Au), xp) + e(_neg(Al), xm)
+    tol = 1e-9 * (1 + np.abs(Ax))
+    assert np.count_nonzero(lo21 > Ax + tol) == 0 and np.count_nonzero(Ax > hi21 + tol) == 0
+
+    # the runtime's pure-Python forms agree with these, and the exact hull lies inside eq. (21)
+    for i in range(0, n, 50):
+        l20, h20 = io.lemma3_constant(A[i].tolist(), xl[i].tolist(), xu[i].tolist())
+        l21, h21 = io.lemma3_interval(Al[i].tolist(), Au[i].tolist(), xl[i].tolist(), xu[i].tolist())
+        lh, hh = io.interval_product(Al[i].tolist(), Au[i].tolist(), xl[i].tolist(), xu[i].tolist())
+        assert np.allclose(l21, lo21[i], rtol=1e-12, atol=1e-9) and np.allclose(h21, hi21[i], rtol=1e-12, atol=1e-9)
+        assert np.all(np.array(lh) >= np.array(l21) - 1e-9) and np.all(np.array(hh) <= np.array(h21) + 1e-9)
+        assert np.all(np.array(lh) <= Ax[i] + 1e-9) and np.all(Ax[i] <= np.array(hh) + 1e-9)
+        assert np.all(np.array(l20) <= A[i] @ x[i] + 1e-9) and np.all(A[i] @ x[i] <= np.array(h20) + 1e-9)
+    # eq. (21) is not the hull: [-1, 1] [-1, 1]
+    assert io.lemma3_interval([[-1.0]], [[1.0]], [-1.0], [1.0]) == ([-2.0], [2.0])
+    assert io.interval_product([[-1.0]], [[1.0]], [-1.0], [1.0]) == ([-1.0], [1.0])
+
+
+def test_runtime_rhs_bounds_contain_every_model_in_the_box(design):
+    """The compiled G (+ the damped diagonal), i.e. the hull of A(vx, c) x + B(vx, c) delta the
+    runtime uses, against random stiffnesses in the box, speeds and states in random boxes."""
+    obs = IntervalObserver(design, {})
+    v = {k: design["model"][k] for k in rm.PARAMETERS}
+    cf_box, cr_box = design["stiffness_box"]["Cf"], design["stiffness_box"]["Cr"]
+    rng = np.random.default_rng(RNG_SEED + 1)
+    viol = 0
+    xl, xu, _ = _random_boxes(rng, 2000, 4, scale=3.0)
+    for k in range(2000):
+        vx, delta = rng.uniform(-25, 40), rng.normal(0, 0.1)
+        f = np.array(obs.F(vx, delta, xl[k].tolist() + xu[k].tolist()))
+        for _c in range(5):
+            cf, cr = rng.uniform(*cf_box), rng.uniform(*cr_box)
+            A0, A1, B1 = rm.coefficients(v["m"], v["Iz"], v["lf"], v["lr"], v["sigma"], cf, cr)
+            x = xl[k] + rng.uniform(0, 1, 4) * (xu[k] - xl[k])
+            dx = (A0 + vx * A1) @ x + vx * B1 * delta
+            tol = 1e-9 * (1 + np.abs(dx))
+            viol += np.count_nonzero(dx < f[:4] - tol) + np.count_nonzero(dx > f[4:] + tol)
+    assert viol == 0
+
+
+def test_omega_eq24_and_output_injection_sign_conventions():
+    """Eq. (24) with P- = P+ - P: Omega_lo <= P omega <= Omega_up for every omega in its bounds;
+    the J rule (upper J+ y_up - J- y_lo, lower J+ y_lo - J- y_up) likewise; both equal the
+    midpoint-radius form M m +- |M| r that the compiled step uses."""
+    rng = np.random.default_rng(RNG_SEED + 2)
+    n = 100_000
+    P = rng.normal(0, 3, (n, 4, 4))
+    wl, wu, w = _random_boxes(rng, n, 4)
+    Pw = np.einsum("nij,nj->ni", P, w)
+    Olo = np.einsum("nij,nj->ni", _pos(P), wl) - np.einsum("nij,nj->ni", _neg(P), wu)
+    Oup = np.einsum("nij,nj->ni", _pos(P), wu) - np.einsum("nij,nj->ni", _neg(P), wl)
+    tol = 1e-9 * (1 + np.abs(Pw))
+    assert np.count_nonzero(Olo > Pw + tol) == 0 and np.count_nonzero(Pw > Oup + tol) == 0
+    m, r = (wl + wu) / 2, (wu - wl) / 2
+    assert np.allclose(np.einsum("nij,nj->ni", P, m) + np.einsum("nij,nj->ni", np.abs(P), r), Oup, atol=1e-9)
+    assert np.allclose(np.einsum("nij,nj->ni", P, m) - np.einsum("nij,nj->ni", np.abs(P), r), Olo, atol=1e-9)
+    for i in range(0, n, 997):
+        lo, hi = io.omega_bounds(P[i].tolist(), wl[i].tolist(), wu[i].tolist())
+        assert np.allclose(lo, Olo[i], atol=1e-9) and np.allclose(hi, Oup[i], atol=1e-9)
+    # the J rule on y in [y_lo, y_up] (4x2 J)
+    J = rng.normal(0, 50, (n, 4, 2))
+    yl, yu, y = _random_boxes(rng, n, 2)
+    Jy = np.einsum("nij,nj->ni", J, y)
+    up = np.einsum("nij,nj->ni", _pos(J), yu) - np.einsum("nij,nj->ni", _neg(J), yl)
+    lo = np.einsum("nij,nj->ni", _pos(J), yl) - np.einsum("nij,nj->ni", _neg(J), yu)
+    tol = 1e-9 * (1 + np.abs(Jy))
+    assert np.count_nonzero(lo > Jy + tol) == 0 and np.count_nonzero(Jy > up + tol) == 0
+
+
+# ------------------------------------------------------------------------------------------
+# order preservation: the exact discretisation
+# ------------------------------------------------------------------------------------------
+def _rk4_matrix(N, h):
+    X = N * h
+    return np.eye(len(N)) + X + X @ X / 2 + X @ X @ X / 6 + X @ X @ X @ X / 24
+
+
+@pytest.mark.parametrize("h", [0.001, 0.005, 0.02, 0.3])
+def test_phi_gamma_nonnegative_and_exact(design, h):
+    for mode in design["modes"]:
+        N = np.asarray(mode["N"])
+        eta = design["runtime"]["eta"]
+        Phi, Gam, Gam1, Gam2 = (np.array(M) for M in io.phi_gamma(N.tolist(), h, eta, order=3))
+        assert np.min(Phi) >= 0 and np.min(Gam) >= 0 and np.min(Gam1) >= 0 and np.min(Gam2) >= 0
+        # scipy: expm and the augmented expm [[N, I, 0, 0], [0, 0, I, 0], [0, 0, 0, I], 0]
+        Z, I = np.zeros((4, 4)), np.eye(4)
+        M = np.block([[N, I, Z, Z], [Z, Z, I, Z], [Z, Z, Z, I], [Z, Z, Z, Z]])
+        E = scipy.linalg.expm(M * h)
+        ref = [scipy.linalg.expm(N * h), E[:4, 4:8], E[:4, 8:12], E[:4, 12:]]
+        assert np.allclose(ref[1], E[:4, 4:8])
+        for got, want in zip((Phi, Gam, Gam1, Gam2), ref):
+            assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))
+        P2, G2 = io.phi_gamma(N.tolist(), h, eta)
+        assert np.array_equal(np.array(P2), Phi) or np.allclose(P2, Phi, rtol=1e-15, atol=0)
+        assert np.allclose(G2, Gam, rtol=1e-14, atol=0)
+
+
+def test_rk4_breaks_the_order_that_the_exact_map_keeps(design):
+    """The update xi+ = Phi xi + ... preserves xi_lo <= xi_up because Phi >= 0. Classical RK4 of
+    the same ODE with the same h has one-step matrix R = I + X + X^2/2 + X^3/6 + X^4/24 (X = N h),
+    whose off-diagonal entries are h p'(z) N_ij to first order, p'(z) = 1 + z + z^2/2 + z^3/6 < 0
+    for z < -1.6: negative entries, and an ordered pair of bounds that RK4 maps out of order."""
+    # the design's N at a coarse step, and a stiffer Metzler N at the co-simulation step
+    N_design = np.asarray(design["modes"][0]["N"])
+    N_stiff = np.array([[-400.0, 300.0, 0.0], [0.0, -400.0, 50.0], [20.0, 0.0, -300.0]])
+    for N, h in ((N_design, 0.3), (N_stiff, 0.005)):
+        eta = max(0.0, -np.min(np.diag(N)))
+        Phi, _ = (np.array(M) for M in io.phi_gamma(N.tolist(), h, eta))
+        R = _rk4_matrix(N, h)
+        assert np.min(Phi) >= 0
+        assert np.min(R) < 0
+        i, j = np.unravel_index(np.argmin(R), R.shape)
+        xi_lo = np.zeros(len(N))
+        xi_up = np.zeros(len(N))
+        xi_up[j] = 1.0                       # ordered: xi_lo <= xi_up
+        assert np.all(Phi @ xi_lo <= Phi @ xi_up)
+        assert (R @ xi_lo)[i] > (R @ xi_up)[i]          # RK4: out of order
+    # stiff example: the violation is large, not rounding (-0.5 in the (0, 1) entry)
+    assert _rk4_matrix(N_stiff, 0.005)[0, 1] < -0.4
+
+
+# ------------------------------------------------------------------------------------------
+# guaranteed enclosure of the exact linear model
+# ------------------------------------------------------------------------------------------
+def _vx(t, T):
+    """A speed profile crossing all three bands up and down: 10.3 -> 19.7 -> 10.3 m/s."""
+    return 10.3 + 9.4 * 0.5 * (1 - math.cos(2 * math.pi * t / T))
+
+
+def _delta(t):
+    return 0.03 * math.sin(2 * math.pi * 0.5 * t) + 0.012 * math.sin(2 * math.pi * 1.7 * t + 0.4) \
+        + 0.006 * math.sin(2 * math.pi * 3.1 * t)
+
+
+def _simulate(design, h, T, stiffness, x0, nu=(0.0, 0.0), seed=0, vx_fn=None, params=None, cls=IntervalObserver,
+              disturbance=None, delta_fn=_delta):
+    """Truth (solve_ivp per step with delta and vx held, as in co-simulation) and the runtime's
+    published bounds at every communication point."""
+    v = {k: design["model"][k] for k in rm.PARAMETERS}
+    C = rm.C
+    rng = np.random.default_rng(seed)
+    vx_fn = vx_fn or (lambda t: _vx(t, T))
+
+    def model(t):
+        cf, cr = stiffness(t)
+        return rm.coefficients(v["m"], v["Iz"], v["lf"], v["lr"], v["sigma"], cf, cr)
+
+    obs = cls(design, params or {})
+    x = np.array(x0, float)
+    n = int(round(T / h))
+
+    def meas(x):
+        return C @ x + rng.uniform(-1, 1, 2) * np.asarray(nu)
+
+    y = meas(x)
+    obs.initialize({"delta": delta_fn(0.0), "vx": vx_fn(0.0), "yaw_rate": y[0], "ay": y[1]})
+    rows = []
+    for k in range(n):
+        t = k * h
+        vx, dl = vx_fn(t), delta_fn(t)
+        y = meas(x)
+        obs.step(h, {"delta": dl, "vx": vx, "yaw_rate": float(y[0]), "ay": float(y[1])})
+
+        def rhs(s, z):
+            A0, A1, B1 = model(s)
+            w = disturbance(s) if disturbance else 0.0
+            return (A0 + vx * A1) @ z + vx * B1 * dl + w
+
+        sol = solve_ivp(rhs, (t, t + h), x, method="DOP853", rtol=1e-11, atol=1e-12)
+        x = sol.y[:, -1]
+        rows.append((t + h, vx, x.copy(), dict(obs.y), list(obs.box), list(obs.events)))
+        obs.events.clear()
+    return rows, v
+
+
+def _check_enclosure(rows, v):
+    viol, widths = [], []
+    for t, vx, x, out, box, _ in rows:
+        Fyf, Fyr = rm.forces_from_state(x[2], x[3], v)
+        truth = {"vy": x[0], "yaw_rate": x[1], "Fyf": Fyf, "Fyr": Fyr, "beta": math.atan(x[0] / vx)}
+        for name, val in truth.items():
+            lo, hi = out[f"{name}_lower"], out[f"{name}_upper"]
+            tol = 1e-7 * (1 + abs(val))
+            if not (lo - tol <= val <= hi + tol):
+                viol.append((t, name, lo, val, hi))
+        for i in range(4):
+            if not (box[i] - 1e-7 * (1 + abs(x[i])) <= x[i] <= box[4 + i] + 1e-7 * (1 + abs(x[i]))):
+                viol.append((t, f"x{i + 1}", box[i], x[i], box[4 + i]))
+        widths.append([box[4 + i] - box[i] for i in range(4)])
+    return viol, np.array(widths)
+
+
+@pytest.mark.parametrize("h, seed", [(0.005, 1), (0.005, 2), (0.01, 3), (0.002, 4)])
+def test_bounds_enclose_the_exact_linear_model(design, h, seed):
+    """Random constant stiffnesses in the box, vx across all three bands, a sum of sines on the
+    steering, inputs held per step; the truth at every communication point inside the bounds
+    (vy, beta, yaw rate, forces, the whole state); the widths settle and stay bounded."""
+    rng = np.random.default_rng(seed)
+    cf = rng.uniform(*design["stiffness_box"]["Cf"])
+    cr = rng.uniform(*design["stiffness_box"]["Cr"])
+    x0 = [rng.uniform(-1, 1), 0.02, 0.3, rng.uniform(-5, 5)]
+    T = 12.0
+    rows, v = _simulate(design, h, T, lambda t: (cf, cr), x0, seed=seed)
+    viol, w = _check_enclosure(rows, v)
+    assert viol == [], viol[:5]
+    assert {r[3]["consistent"] for r in rows} == {1}
+    assert {r[3]["mode"] for r in rows} == {1, 2, 3}
+    assert not any(r[5] for r in rows)                   # no warning
+    late = w[len(w) // 3:]
+    assert np.max(late[:, 0]) < 0.6                      # vy width (m/s) after the transient
+    assert np.max(late[:, 3]) < 10.0                     # yaw acceleration width (rad/s^2)
+    assert np.mean(w[-len(w) // 6:, 0]) < 1.5 * np.mean(w[len(w) // 3: len(w) // 2, 0]) + 0.05
+    assert np.mean(w[-20:, 0]) < 0.2 * w[0, 0]           # far below the initial +-3 m/s
+
+
+def test_bounds_enclose_with_time_varying_stiffness_and_measurement_noise(design):
+    """The guarantee covers stiffnesses varying inside the box and measurements within +-nu."""
+    d = copy.deepcopy(design)
+    d["runtime"]["y_error_bound"] = [0.002, 0.05]
+    cfb, crb = design["stiffness_box"]["Cf"], design["stiffness_box"]["Cr"]
+
+    def stiffness(t):
+        a, b = 0.5 + 0.5 * math.sin(1.3 * t), 0.5 + 0.5 * math.cos(0.7 * t + 1.0)
+        return cfb[0] + a * (cfb[1] - cfb[0]), crb[0] + b * (crb[1] - crb[0])
+
+    rows, v = _simulate(d, 0.005, 8.0, stiffness, [0.5, 0.0, 0.0, 0.0], nu=(0.002, 0.05), seed=7)
+    viol, w = _check_enclosure(rows, v)
+    assert viol == [], viol[:5]
+    assert {r[3]["consistent"] for r in rows} == {1}
+    assert np.max(w[len(w) // 2:, 0]) < 1.0
+
+
+def test_additive_disturbance_bound_is_enclosed(design):
+    """runtime.disturbance_bound (optional, not in the paper): x' = A x + B delta + w, |w| <= bound."""
+    d = copy.deepcopy(design)
+    wb = np.array([0.01, 0.0, 0.3, 0.4])
+    d["runtime"]["disturbance_bound"] = wb.tolist()
+    cf, cr = design["stiffness_box"]["Cf"][1], design["stiffness_box"]["Cr"][0]
+
+    def w(t):                          # a disturbance hugging its bound, switching sign
+        return wb * np.sign(np.sin(np.array([3.1, 1.0, 4.3, 2.2]) * t + 0.3))
+
+    for steer in (_delta, lambda t: 0.0):
+        rows, v = _simulate(d, 0.005, 6.0, lambda t: (cf, cr), [0.2, 0.0, 0.0, 0.0], disturbance=w, delta_fn=steer)
+        viol, wd = _check_enclosure(rows, v)
+        assert viol == [], viol[:5]
+        assert {r[3]["consistent"] for r in rows} == {1}
+    # without the bound, driving straight: the bounds contract onto the state and the
+    # disturbance shows (bounds missing the state, or inconsistent measurements)
+    rows0, _ = _simulate(design, 0.005, 6.0, lambda t: (cf, cr), [0.2, 0.0, 0.0, 0.0], disturbance=w,
+                         delta_fn=lambda t: 0.0)
+    viol0, _ = _check_enclosure(rows0, v)
+    assert viol0 or min(r[3]["consistent"] for r in rows0) == 0
+    d["runtime"]["disturbance_bound"] = [0.0, 0.0, -1.0, 0.0]
+    with pytest.raises(ValueError, match="disturbance_bound"):
+        IntervalObserver(d, {})
+
+
+def test_a_design_with_many_bands(design):
+    """The real-data vehicle's design: 12 bands over 15-63 m/s (any number of modes)."""
+    d = designs.run("LateralIntervalObserver", "mbds_250lm")
+    obs = IntervalObserver(d, {})
+    obs.initialize(_u(vx=16.0))
+    for k in range(2000):
+        t = k * 0.005
+        obs.step(0.005, _u(vx=16.0 + 4.5 * t))               # straight driving, accelerating
+        assert obs.y["consistent"] == 1
+    assert obs.y["mode"] == 12 and obs.y["vy_upper"] - obs.y["vy_lower"] < 0.5
+
+
+def test_exact_hull_is_tighter_than_eq21_and_both_enclose(design):
+    """PRODUCT = "eq21" (the paper's Lemma 3 part 2 for [dA] x) encloses too, with wider bounds."""
+    class Eq21(IntervalObserver):
+        PRODUCT = "eq21"
+
+    rng = np.random.default_rng(11)
+    cf, cr = rng.uniform(*design["stiffness_box"]["Cf"]), rng.uniform(*design["stiffness_box"]["Cr"])
+    args = (design, 0.005, 6.0, lambda t: (cf, cr), [0.4, 0.0, 0.0, 0.0])
+    rows_h, v = _simulate(*args)
+    rows_21, _ = _simulate(*args, cls=Eq21)
+    (viol_h, w_h), (viol_21, w_21) = _check_enclosure(rows_h, v), _check_enclosure(rows_21, v)
+    assert viol_h == [] and viol_21 == []
+    assert np.all(w_h[:, 0] <= w_21[:, 0] + 1e-9) and np.mean(w_h[:, 0]) < np.mean(w_21[:, 0])
+
+
+# ------------------------------------------------------------------------------------------
+# design file validation, clamps, events
+# ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("change, match", [
+    (lambda d: d["modes"][1]["N"][0].__setitem__(1, -0.5), "mode 2 field N is not Metzler"),
+    (lambda d: d["modes"][0]["P"][0].__setitem__(2, 0.3), "mode 1 field P violates P = I - E C"),
+    (lambda d: d["modes"][2]["J"][3].__setitem__(0, 1.0), "mode 3 field J violates J = K \\+ N E"),
+    (lambda d: d["modes"][0]["H"].__setitem__(3, 0.0), "mode 1 field H violates H = P B_j"),
+    (lambda d: d["modes"][1].__setitem__("E", [[0.0, 0.0]] * 3), "mode 2 field E must be 4x2"),
+    (lambda d: d["modes"][2].pop("K"), "lacks 'K'"),
+    (lambda d: d["modes"][0]["N"][0].__setitem__(0, float("nan")), "mode 1 field N has a non-finite"),
+    (lambda d: d["model"].__setitem__("C", [[1, 0, 0, 0], [0, 0, 1, 0]]), "model.C must measure"),
+    (lambda d: d["model"]["dA_lower"][2].__setitem__(0, 100.0), "dA_lower must be <= model.dA_upper"),
+    (lambda d: d["switching"].__setitem__("edges", [10.0, 13.0, 16.0]), "need as many modes"),
+    (lambda d: d["runtime"].__setitem__("x0_halfwidth", [3.0, 0.0, -1.0, 30.0]), "must be >= 0"),
+])
+def test_bad_design_data_raises_value_error_naming_it(design, change, match):
+    bad = copy.deepcopy(design)
+    for m in bad["modes"]:
+        for k in ("N", "E", "J", "H", "P", "K"):
+            m[k] = np.asarray(m[k]).tolist()
+    for k, val in bad["model"].items():
+        if isinstance(val, np.ndarray):
+            bad["model"][k] = val.tolist()
+    IntervalObserver(bad, {})                            # the lists themselves are fine
+    change(bad)
+    with pytest.raises(ValueError, match=match):
+        IntervalObserver(bad, {})
+
+
+def test_rounding_level_negative_offdiagonal_is_accepted_as_zero(design):
+    """N[0][1] = -1e-14 (K adjusted so that (33) holds, J = K + N E): clipped to exactly 0."""
+    d = copy.deepcopy(design)
+    m = d["modes"][0]
+    N, K, E = (np.array(m[k], float) for k in ("N", "K", "E"))
+    K[0, 0] += N[0, 1] + 1e-14              # N[:, 1] = (P A)[:, 1] - K[:, 0]
+    N[0, 1] = -1e-14
+    m["N"], m["K"], m["J"] = N.tolist(), K.tolist(), (K + N @ E).tolist()
+    obs = IntervalObserver(d, {})
+    assert obs.modes[0]["N"][0][1] == 0.0
+    m["N"][0][1] = -1e-6
+    with pytest.raises(ValueError, match="mode 1 field N is not Metzler"):
+        IntervalObserver(d, {})
+
+
+def _u(vx=15.0, delta=0.0, r=0.0, ay=0.0):
+    return {"delta": delta, "vx": vx, "yaw_rate": r, "ay": ay}
+
+
+def test_below_vx_hold_the_outputs_are_held_and_it_restarts_after(design):
+    obs = IntervalObserver(design, {"vx_hold": 2.0})
+    obs.initialize(_u())
+    for _ in range(50):
+        obs.step(0.005, _u(delta=0.01, r=0.05, ay=0.5))
+    obs.events.clear()
+    held = dict(obs.y)
+    for k in range(20):
+        obs.step(0.005, _u(vx=1.0 if k % 2 else -0.5, delta=0.2, r=0.3, ay=3.0))
+        assert obs.y == held
+    warnings = [m for lvl, m in obs.events if lvl == "warning"]
+    assert len(warnings) == 1 and "vx_hold" in warnings[0]
+    obs.events.clear()
+    obs.step(0.005, _u(vx=12.0, r=0.3, ay=3.0))
+    assert any("resumes" in m for _, m in obs.events)
+    assert obs.y["vy_upper"] - obs.y["vy_lower"] > 5.0          # restarted from +-x0_halfwidth
+    assert obs.y["mode"] == 1
+
+
+def test_speed_outside_the_grid_uses_the_nearest_mode_with_one_warning(design):
+    obs = IntervalObserver(design, {})
+    obs.initialize(_u(vx=25.0))
+    for _ in range(10):
+        obs.step(0.005, _u(vx=25.0))
+    assert obs.y["mode"] == 3
+    assert sum("outside the design grid" in m for _, m in obs.events) == 1
+    obs.events.clear()
+    obs.step(0.005, _u(vx=15.0))
+    obs.step(0.005, _u(vx=8.0))
+    assert obs.y["mode"] == 1 and sum("outside the design grid" in m for _, m in obs.events) == 1
+
+
+def test_inconsistent_measurement_sets_consistent_0_and_warns_once(design):
+    obs = IntervalObserver(design, {})
+    obs.initialize(_u())
+    for _ in range(400):
+        obs.step(0.005, _u())
+    assert obs.y["consistent"] == 1 and obs.y["yaw_rate_upper"] - obs.y["yaw_rate_lower"] < 1e-3
+    obs.events.clear()
+    obs.step(0.005, _u(r=0.5, ay=4.0))                  # a yaw rate the model cannot reach in 5 ms
+    assert obs.y["consistent"] == 0
+    warnings = [m for lvl, m in obs.events if lvl == "warning"]
+    assert len(warnings) == 1 and "outside the bounds" in warnings[0]
+    # the bounds restarted from the measurement; the unmeasured ones cover the initial box
+    assert obs.y["vy_lower"] <= -3.0 + 0.2 and obs.y["vy_upper"] >= 3.0 - 0.2
+    obs.events.clear()
+    for _ in range(5):                                  # the same measurement: consistent again
+        obs.step(0.005, _u(r=0.5, ay=4.0))
+        assert obs.y["consistent"] == 1
+    assert not obs.events
+    obs.step(0.005, _u(r=-0.5, ay=-4.0))                # a new episode: a new warning
+    assert obs.y["consistent"] == 0
+    obs.step(0.005, _u(r=0.5, ay=4.0))                  # still inconsistent: no second warning
+    assert obs.y["consistent"] == 0
+    assert sum("outside the bounds" in m for _, m in obs.events) == 1
+
+
+def test_never_raises_for_finite_inputs(design):
+    obs = IntervalObserver(design, {})
+    rng = np.random.default_rng(3)
+    obs.initialize(_u())
+    for k in range(300):
+        vals = rng.normal(0, 1, 4) * np.array([1.0, 40.0, 2.0, 30.0]) * (10.0 if k % 50 == 0 else 1.0)
+        obs.step([0.001, 0.005, 0.02, 0.1][k % 4], _u(vx=vals[1], delta=vals[0], r=vals[2], ay=vals[3]))
+        obs.events.clear()
+        assert all(math.isfinite(obs.y[k2]) for k2 in io.OUTPUT_NAMES)
+        assert obs.y["mode"] in (1, 2, 3) and obs.y["consistent"] in (0, 1)
+
+
+def test_long_steps_use_substeps_for_the_enclosure_and_still_enclose(design):
+    rng = np.random.default_rng(5)
+    cf, cr = rng.uniform(*design["stiffness_box"]["Cf"]), rng.uniform(*design["stiffness_box"]["Cr"])
+    rows, v = _simulate(design, 0.02, 6.0, lambda t: (cf, cr), [0.3, 0.0, 0.0, 0.0], seed=5)
+    obs = IntervalObserver(design, {})
+    assert obs._core(2, 0.02).nsub >= 2
+    viol, w = _check_enclosure(rows, v)
+    assert viol == []
+
+
+# ------------------------------------------------------------------------------------------
+# model file and speed
+# ------------------------------------------------------------------------------------------
+def test_model_file_interface(design):
+    assert [v.name for v in SPEC.inputs] == ["delta", "vx", "yaw_rate", "ay"]
+    assert [v.unit for v in SPEC.inputs] == ["rad", "m/s", "rad/s", "m/s2"]
+    assert tuple(v.name for v in SPEC.outputs) == io.OUTPUT_NAMES
+    units = {v.name: v.unit for v in SPEC.outputs}
+    assert units["vy_lower"] == "m/s" and units["beta_upper"] == "rad" and units["yaw_rate_lower"] == "rad/s"
+    assert units["Fyf_lower"] == "N" and units["Fyr_upper"] == "N"
+    assert [v.name for v in SPEC.integer_outputs] == ["mode", "consistent"]
+    assert SPEC.bounds(design) == {"mode": (1, 3), "consistent": (0, 1)}
+    (p,) = SPEC.parameters
+    assert (p.name, p.unit, p.start, p.min, p.max) == ("vx_hold", "m/s", 1.0, 0.01, 10.0)
+    assert SPEC.stop_time == 20.0 and "Ifqir" in SPEC.description and "ACC 2020" in SPEC.description
+    text = SPEC.describe(design)
+    assert "Cf in [" in text and "3 speed modes" in text and "11.5 m/s on [10, 13)" in text
+    obs = SPEC.runtime(design, {"vx_hold": 1.0})
+    assert set(obs.y) == {v.name for v in SPEC.outputs} | {"mode", "consistent"}
+    assert IntervalObserver.parameter_defaults(design) == {"vx_hold": 1.0}
+
+
+def test_outputs_change_only_in_initialize_and_step(design):
+    obs = IntervalObserver(design, {})
+    obs.initialize(_u(r=0.1, ay=1.0))
+    before = dict(obs.y)
+    assert before["yaw_rate_lower"] == before["yaw_rate_upper"] == 0.1
+    assert before["vy_lower"] == -3.0 and before["vy_upper"] == 3.0
+    obs.step(0.005, _u(r=0.1, ay=1.0))
+    assert obs.y != before
+
+
+def test_step_time(design):
+    """Warm per-step time of the pure-Python runtime (target < 60 us; reported)."""
+    obs = IntervalObserver(design, {})
+    obs.initialize(_u())
+    us = [_u(vx=_vx(k * 0.005, 10.0), delta=_delta(k * 0.005), r=0.01 * math.sin(k / 50), ay=0.3 * math.sin(k / 50))
+          for k in range(2000)]
+    for u in us:
+        obs.step(0.005, u)          # warm: the three modes compiled
+    best = math.inf
+    for _ in range(3):
+        obs = IntervalObserver(design, {})
+        obs.initialize(us[0])
+        t0 = time.perf_counter()
+        for u in us:
+            obs.step(0.005, u)
+        best = min(best, (time.perf_counter() - t0) / len(us))
+    print(f"\nLateralIntervalObserver runtime: {best * 1e6:.1f} us per step (warm, h = 5 ms)")
+    assert best < 200e-6            # generous: shared CI machines
