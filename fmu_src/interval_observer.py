@@ -267,6 +267,100 @@ def _emit_stiffness(lines, dAl, dAu, l, u, out_lo, out_hi, product, indent="    
     return rows
 
 
+
+def _emit_structured(lines, model, l, u, vd, out_lo, out_hi, tag, product, indent="    "):
+    """Lines adding the bounds of the stiffness part dA(dc) x + vx dB1(dc) d (``vd`` names vx d;
+    None: without the input part, dA(dc) x alone) over x in [l, u] (name lists) and the stiffness
+    box to out_lo[i], out_hi[i], by the STRUCTURE of the uncertainty (``model["stiff"]``):
+        dA x + vx dB1 d = [0, 0, (p + q)/(m sigma), (lf p - lr q)/(Iz sigma)],
+        p = dcf uf, q = dcr ur,  uf = vx d - x1 - lf x2 = vx af,  ur = -x1 + lr x2 = vx ar
+    (af, ar the slip angles of eq. (4)): [uf], [ur] by interval arithmetic, p and q the exact
+    interval products with [dcf], [dcr], and the rows by interval addition with signs (exact: p
+    and q are independent). This is the brief's vx/sigma [af] form multiplied out (vx [af] =
+    [uf] exactly), which needs no division and holds for either sign of vx. For a box that is
+    symmetric about the nominal stiffnesses it lies inside the elementwise bound (see
+    ``STIFFNESS``); otherwise that bound is computed too and the two are intersected (both contain
+    the true value), so it is never wider. Returns the rows touched."""
+    sk = model["stiff"]
+    i3, i4 = sk["rows"]
+    j1, j2 = sk["cols"]
+    lf, lr = sk["lf"], sk["lr"]
+    k3, k4f, k4r = sk["k3"], sk["k4f"], sk["k4r"]
+    pre = "" if vd is None else f"{vd} "
+    lines += [f"{indent}ufl{tag} = {pre}- {u[j1]} - {lf!r}*{u[j2]}".replace("= - ", "= -"),
+              f"{indent}ufu{tag} = {pre}- {l[j1]} - {lf!r}*{l[j2]}".replace("= - ", "= -"),
+              f"{indent}url{tag} = {lr!r}*{l[j2]} - {u[j1]}",
+              f"{indent}uru{tag} = {lr!r}*{u[j2]} - {l[j1]}"]
+    for p, (al, au), n in (("p", sk["dcf"], "f"), ("q", sk["dcr"], "r")):
+        lo, hi = _product_terms(al, au, f"u{n}l{tag}", f"u{n}u{tag}", f"m{n}{tag}", "hull")
+        if f"m{n}{tag}" in lo + hi:
+            lines.append(f"{indent}m{n}{tag} = u{n}u{tag} if u{n}u{tag} > -u{n}l{tag} else -u{n}l{tag}")
+        lines += [f"{indent}{p}l{tag} = {lo}", f"{indent}{p}u{tag} = {hi}"]
+    row = {i3: (f"{k3!r}*(pl{tag} + ql{tag})", f"{k3!r}*(pu{tag} + qu{tag})"),
+           i4: (f"{k4f!r}*pl{tag} - {k4r!r}*qu{tag}", f"{k4f!r}*pu{tag} - {k4r!r}*ql{tag}")}
+    if sk["symmetric"]:
+        for i, (lo, hi) in row.items():
+            lines += [f"{indent}{out_lo[i]} += {lo}", f"{indent}{out_hi[i]} += {hi}"]
+        return set(row)
+    # an asymmetric box: intersected with the elementwise bound ([dA][x] + vd [dB1])
+    el, eu = [f"el{tag}{i}" for i in range(_N)], [f"eu{tag}{i}" for i in range(_N)]
+    for i in row:
+        lines += [f"{indent}{el[i]} = 0.0", f"{indent}{eu[i]} = 0.0"]
+    _emit_stiffness(lines, model["dA_lower"], model["dA_upper"], l, u, el, eu, product, indent)
+    for i, (lo, hi) in row.items():
+        bl, bu = model["dB1_lower"][i], model["dB1_upper"][i]
+        if vd is not None and (bl != 0.0 or bu != 0.0):
+            lines += [f"{indent}if {vd} >= 0.0:",
+                      f"{indent}    {el[i]} += {vd}*{bl!r}",
+                      f"{indent}    {eu[i]} += {vd}*{bu!r}",
+                      f"{indent}else:",
+                      f"{indent}    {el[i]} += {vd}*{bu!r}",
+                      f"{indent}    {eu[i]} += {vd}*{bl!r}"]
+        lines += [f"{indent}sl = {lo}",
+                  f"{indent}su = {hi}",
+                  f"{indent}if {el[i]} > sl: sl = {el[i]}",
+                  f"{indent}if {eu[i]} < su: su = {eu[i]}",
+                  f"{indent}if sl > su: sl, su = su, sl",        # rounding only: both contain the value
+                  f"{indent}{out_lo[i]} += sl",
+                  f"{indent}{out_hi[i]} += su"]
+    return set(row)
+
+
+def structured_stiffness(sk, vx: float, d: float, xl, xu):
+    """Reference form (pure Python, vx > 0) of ``_emit_structured``, as the brief states it:
+    [af] = d - ([x1] + lf [x2])/vx, [ar] = (-[x1] + lr [x2])/vx, p in [dcf][af], q in [dcr][ar]
+    (exact interval products), rows 3 and 4 the hulls of (vx/(sigma m)) (p + q) and
+    (vx/(sigma Iz)) (lf p - lr q). ``sk`` = ``IntervalObserver.model["stiff"]``. (lo, hi) 4-vectors."""
+    i3, i4 = sk["rows"]
+    j1, j2 = sk["cols"]
+    lf, lr = sk["lf"], sk["lr"]
+    afl, afu = d - (xu[j1] + lf * xu[j2]) / vx, d - (xl[j1] + lf * xl[j2]) / vx
+    arl, aru = (-xu[j1] + lr * xl[j2]) / vx, (-xl[j1] + lr * xu[j2]) / vx
+
+    def mul(a, b, c, e):
+        ps = (a * c, a * e, b * c, b * e)
+        return min(ps), max(ps)
+
+    pl, pu = mul(*sk["dcf"], afl, afu)
+    ql, qu = mul(*sk["dcr"], arl, aru)
+    lo, hi = [0.0] * _N, [0.0] * _N
+    lo[i3], hi[i3] = vx * sk["k3"] * (pl + ql), vx * sk["k3"] * (pu + qu)
+    lo[i4], hi[i4] = vx * (sk["k4f"] * pl - sk["k4r"] * qu), vx * (sk["k4f"] * pu - sk["k4r"] * ql)
+    return lo, hi
+
+
+def elementwise_stiffness(model, vx: float, d: float, xl, xu):
+    """Reference form of the elementwise bound: [dA][x] by the exact interval product plus
+    vx d [dB1], entry by entry. (lo, hi) 4-vectors."""
+    lo, hi = interval_product(model["dA_lower"], model["dA_upper"], xl, xu)
+    vd = vx * d
+    for i in range(_N):
+        a, b = vd * model["dB1_lower"][i], vd * model["dB1_upper"][i]
+        lo[i] += min(a, b)
+        hi[i] += max(a, b)
+    return lo, hi
+
+
 def _compile(src: str, name: str, **extra):
     ns = {"__builtins__": {}, "min": min, "max": max, "abs": abs, "range": range, "expm1": math.expm1, **extra}
     exec(compile(src, f"<interval_observer {name}>", "exec"), ns)

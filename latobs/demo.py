@@ -1,7 +1,10 @@
 """``latobs demo``: build every FMU, run the default scenarios, write build/report/index.md.
 
-Covers what exists and grows with the project: today paper 000's two observers on CarPlant,
-nominal and with +-20 % cornering-stiffness mismatch in the plant, with and without sensor noise.
+Covers what exists and grows with the project: paper 000's two observers on CarPlant, nominal
+and with +-20 % cornering-stiffness mismatch in the plant, with and without sensor noise; paper
+001's interval observer on CarPlant inside its guarantee (linear tires) and outside it (Magic
+Formula tires at the handling limit), and replayed on the real MBDS record (default and wider
+stiffness box, tuning and held-out halves).
 """
 from __future__ import annotations
 
@@ -11,22 +14,44 @@ from pathlib import Path
 from .pipeline import build, run_validation
 from .synthesis import certificate, design_file, designs
 
-# (scenario, tag, plant parameters, noise)
+PAPER_000 = None                       # the default observers of `latobs validate` (paper 000)
+INTERVAL = ["LateralIntervalObserver"]
+# (scenario, tag, plant parameters, noise, observers)
 RUNS = [
-    ("bank-braking", "", {}, False),
-    ("bank-braking", "stiffness-20pct", {"scale_f": 0.8, "scale_r": 0.8}, False),
-    ("bank-braking", "stiffness+20pct", {"scale_f": 1.2, "scale_r": 1.2}, False),
-    ("bank-braking", "noise", {}, True),
-    ("double-lane-change", "", {}, False),
-    ("sine-with-dwell", "", {}, False),
-    ("fishhook", "", {}, False),
+    ("bank-braking", "", {}, False, PAPER_000),
+    ("bank-braking", "stiffness-20pct", {"scale_f": 0.8, "scale_r": 0.8}, False, PAPER_000),
+    ("bank-braking", "stiffness+20pct", {"scale_f": 1.2, "scale_r": 1.2}, False, PAPER_000),
+    ("bank-braking", "noise", {}, True, PAPER_000),
+    ("double-lane-change", "", {}, False, PAPER_000),
+    ("sine-with-dwell", "", {}, False, PAPER_000),
+    ("fishhook", "", {}, False, PAPER_000),
+    # paper 001: inside its guarantee (linear tires, stiffnesses at the box's corner) ...
+    ("double-lane-change-15", "001-linear-tires", {"linear_tires": 1.0, "scale_f": 0.8, "scale_r": 1.2}, False, INTERVAL),
+    # ... and outside it: Magic Formula tires, up to the handling limit
+    ("double-lane-change-15", "001", {}, False, INTERVAL),
+    ("sine-with-dwell", "001", {}, False, INTERVAL),
+    ("fishhook", "001", {}, False, INTERVAL),
 ]
+WIDE_BOX = (0.4, 0.4)                  # the replay's wider stiffness box (relative half-widths)
 
 
 def _design_section(path: Path) -> str:
     d = design_file.read(path)            # its checks are the certificate packaging just re-ran
     ok, checks = d["certified"], d["checks"]
     s = certificate.summary(d)
+    if d["paper"] == "001":
+        box = d["stiffness_box"]
+        lines = [f"**{d['name']}** (paper 001, vehicle `{d['vehicle']['name']}`): "
+                 f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c['passed'] for c in checks)}/{len(checks)} checks "
+                 f"passed; gamma = {d['gamma']:.4g}, ISS gain sqrt(gamma/(alpha eps)) = {d['iss_gain']:.4g} "
+                 f"(eps = {d['epsilon']:g}, eta = {d['eta']:g}); stiffness box Cf {box['Cf'][0]:.0f}..{box['Cf'][1]:.0f}, "
+                 f"Cr {box['Cr'][0]:.0f}..{box['Cr'][1]:.0f} N/rad; Clarabel {d['solver']['status']} in "
+                 f"{d['solver']['seconds']:.2f} s.", "",
+                 "| mode | model speed (m/s) | band (m/s) | slowest pole of N (1/s) | largest gain |", "|---|---|---|---|---|"]
+        for m in s["per_mode"]:
+            lines.append(f"| {m['mode']} | {m['speed_ms']:g} | {m['band'][0]:g}-{m['band'][1]:g} | "
+                         f"{m['slowest_pole']:.3g} | {m['largest_gain']:.4g} |")
+        return "\n".join(lines + ["", *(f"- {n}" for n in d["notes"]), ""])
     o = d["options"]
     lines = [f"**{d['name']}** (paper {d['paper']}, vehicle `{d['vehicle']['name']}`): "
              f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c['passed'] for c in checks)}/{len(checks)} checks "
@@ -50,7 +75,7 @@ def _headline(report: Path) -> str:
     rows = ["| run | observer | beta RMS (rad) | beta max (rad) | ||beta err||/||bank|| (paper: 9.5e-4 speed, "
             "8.85e-3 tire) | bank RMS after 3 s (rad) | bank RMS after 3 s (deg) |",
             "|---|---|---|---|---|---|---|"]
-    for scen, tag, params, noise in RUNS:
+    for scen, tag, params, noise, _obs in RUNS:
         if scen != "bank-braking":
             continue
         f = report / (f"{scen}_{tag}" if tag else scen) / "metrics.json"
@@ -70,15 +95,19 @@ def demo(out: Path) -> Path:
     out = Path(out)
     report = out / "report"
     build(None, None, out)
-    for scen, tag, params, noise in RUNS:
-        run_validation(scen, None, report, out, plant_parameters=params, noise=noise, tag=tag)
+    for scen, tag, params, noise, observers in RUNS:
+        run_validation(scen, observers, report, out, plant_parameters=params, noise=noise, tag=tag)
+    replays = _replays(out, report)
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
-                ReportSection(title="bank-braking: paper 000's figures", markdown=_headline(report))]
-    for scen, tag, params, noise in RUNS:
+                ReportSection(title="bank-braking: paper 000's figures", markdown=_headline(report)),
+                ReportSection(title="Paper 001: interval observer, enclosure and widths", markdown=_interval_table(report, replays))]
+    for scen, tag, params, noise, _obs in RUNS:
         d = report / (f"{scen}_{tag}" if tag else scen)
         what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] + (["sensor noise and bias"] if noise else []))
         sections.append(section_from_dir(d, title=f"{scen} ({what or 'nominal plant'})"))
+    for label, (metrics, mdir) in replays.items():
+        sections.append(section_from_dir(mdir, title=f"Real data: {label}"))
     intro = ("Built by `latobs demo`: every FMU designed, certified and packaged, then co-simulated with fmpy "
              "beside the nonlinear CarPlant FMU (sedan, a representative parameter set, not a paper's). "
              "Angles in rad unless stated. The common Lyapunov matrix proves stability under arbitrary "
@@ -86,3 +115,53 @@ def demo(out: Path) -> Path:
     path = write_index(report, sections, title="latobs demo report", intro=intro)
     print(f"report: {path} ({time.perf_counter() - t0:.0f} s)")
     return path
+
+
+def _replays(out: Path, report: Path) -> dict:
+    """Paper 001 on the real MBDS record (vehicle mbds_250lm): the default design and a wider box."""
+    from . import packaging
+    from .pipeline import replay
+    from .validation import replay as rp
+
+    runs = {}
+    m = replay("mbds", "LateralIntervalObserver", "mbds_250lm", out=report, fmu_dir=out)
+    runs["LateralIntervalObserver_mbds_250lm, +-20 % box"] = (m, report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm")
+    wide = designs.run("LateralIntervalObserver", "mbds_250lm", box=WIDE_BOX)
+    wide_dir = out / "wide-box"
+    fmu = packaging.package_design(design_file.write(wide, wide_dir), wide_dir)
+    mdir = report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm_wide_box"
+    m, _ = rp.run(rp.resolve_csv("mbds"), fmu, mdir, split=rp.default_split(rp.resolve_csv("mbds")),
+                  observer="LateralIntervalObserver", vehicle="mbds_250lm", mass=wide["model"]["m"])
+    runs[f"LateralIntervalObserver_mbds_250lm, +-{WIDE_BOX[0]:.0%} box"] = (m, mdir)
+    return runs
+
+
+def _interval_table(report: Path, replays: dict) -> str:
+    """Violation rates and mean widths of paper 001's bounds, co-simulations and real data."""
+    import json
+
+    rows = ["Inside the guarantee (linear tires, stiffness in the box) every bound must contain the truth; "
+            "outside it (Magic Formula tires at the handling limit, real data) the rates show how often the "
+            "model's assumptions fail. Widths in m/s and N.", "",
+            "| run | vy violations | vy mean width | Fyf mean width | Fyr mean width | beta violations |",
+            "|---|---|---|---|---|---|"]
+    for scen, tag, params, noise, obs in RUNS:
+        if obs != INTERVAL:
+            continue
+        m = json.loads((report / f"{scen}_{tag}" / "metrics.json").read_text())
+        iv = next(iter(m["observers"].values()))["intervals"]
+        what = ", ".join(f"{k} = {v:g}" for k, v in params.items()) or "Magic Formula tires"
+        rows.append(f"| {scen} ({what}) | {iv['vy']['enclosure_violations']} of {m['n_samples']} | "
+                    f"{iv['vy']['mean_width']:.3g} | {iv['Fyf']['mean_width']:.4g} | {iv['Fyr']['mean_width']:.4g} | "
+                    f"{iv['beta']['enclosure_violations']} |")
+    rows += ["", "Real data (MBDS record, t < 425 s tuning half / t >= 425 s held-out half): enclosure rate of the "
+             "reference vy, and of m ay within [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (eq. 47).", "",
+             "| design | vy enclosed (t < 425 / t >= 425) | vy mean width | m ay enclosed (t < 425 / t >= 425) |",
+             "|---|---|---|---|"]
+    for label, (m, _d) in replays.items():
+        ob = next(iter(m["observers"].values()))
+        v, f = ob["intervals"]["vy"], ob["may_in_force_sum"]
+        rows.append(f"| {label} | {v['before_split']['enclosure_rate']:.3f} / {v['after_split']['enclosure_rate']:.3f} | "
+                    f"{v['before_split']['mean_width']:.3g} / {v['after_split']['mean_width']:.3g} | "
+                    f"{f['before_split']['enclosure_rate']:.4f} / {f['after_split']['enclosure_rate']:.4f} |")
+    return "\n".join(rows)

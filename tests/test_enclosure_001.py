@@ -1,0 +1,84 @@
+"""Paper 001's guarantee, measured: zero enclosure violations over 200 randomised co-simulations.
+
+Each run: CarPlant FMU with LINEAR tires (the paper's tire model, eq. 6) and axle stiffness
+scales drawn uniformly inside the design's +-20 % box, the LateralIntervalObserver FMU, a seeded
+random manoeuvre whose speed sweeps across all three speed bands (10-13-16-20 m/s) and whose
+steering stays in the linear tire range (random-manoeuvre). Every bound (vy and beta at the CG,
+yaw rate, front and rear axle forces) must contain the truth at every communication point.
+
+Paper 001's model class (eq. 9) has no roll. The sedan's CarPlant rolls (CG 0.5 m above the roll
+axis): its tires see the kinematic slip hr*phidot/vx, a model error of up to ~30 m/s^3 on x3' and
+~12 rad/s^3 on x4' that the stiffness box does not contain (measured in these manoeuvres). So:
+  * the guarantee campaign uses CarPlant on the sedan with the roll coupling removed (hr -> 0),
+    i.e. a plant inside the model class: zero violations required, 200 runs;
+  * on the rolling sedan, the design option ``model_error_bound`` that covers that error restores
+    zero violations (50 runs), at the price of wider bounds.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from latobs import packaging
+from latobs.synthesis import design_file, designs
+from latobs.validation import harness, metrics
+from latobs.validation.scenarios import get_scenario
+
+pytestmark = pytest.mark.slow
+RUNS = 200
+SIGNALS = ("vy", "beta", "yaw_rate", "Fyf", "Fyr")
+
+
+ROLL_ERROR_BOUND = (0.0, 0.0, 36.0, 15.0)   # 1.2 x the largest residual measured on the rolling sedan
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fmus_001")
+    data = designs.run("LateralIntervalObserver")
+    observer = packaging.package_design(design_file.write(data, out), out)
+    rigid = packaging.plant_data("sedan")
+    rigid["vehicle"]["parameters"]["hr"]["value"] = 1e-4        # no roll coupling: paper 001's model class
+    plant_rigid = packaging.build_fmu(packaging.PLANTS["CarPlant"], "CarPlantNoRoll", rigid, out)
+    plant = packaging.package_plant("CarPlant", None, out)
+    robust = designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND)
+    robust_dir = out / "robust"
+    observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir)
+    return {"plant_rigid": plant_rigid, "plant": plant, "observer": observer, "observer_robust": observer_robust,
+            "box": tuple(data["options"]["box"])}
+
+
+def campaign(plant, observer, runs: int, box: tuple[float, float]):
+    rng = np.random.default_rng(2026)
+    rows = []
+    for k in range(runs):
+        sf, sr = (1.0 + rng.uniform(-b, b) for b in box)
+        res = harness.run(get_scenario("random-manoeuvre", seed=k, duration=5.0), plant, {"I": observer},
+                          plant_parameters={"linear_tires": 1.0, "scale_f": sf, "scale_r": sr})
+        m = metrics.compute(res, settle_time=0.0)["observers"]["I"]["intervals"]
+        rows.append({"seed": k, "scale_f": sf, "scale_r": sr,
+                     **{f"{s}_violations": m[s]["enclosure_violations"] for s in SIGNALS},
+                     **{f"{s}_width": m[s]["mean_width"] for s in SIGNALS},
+                     "vmin": float(res.bus["vx"].min()), "vmax": float(res.bus["vx"].max()),
+                     "modes": sorted(set(int(x) for x in res.observers["I"]["mode"]))})
+    return rows
+
+
+def _check(rows, label, box, capsys):
+    violations = {s: sum(r[f"{s}_violations"] for r in rows) for s in SIGNALS}
+    widths = {s: round(float(np.mean([r[f"{s}_width"] for r in rows])), 4) for s in SIGNALS}
+    with capsys.disabled():
+        print(f"\n001 enclosure campaign, {label}: {len(rows)} runs, stiffness scales in +-{box[0]:.0%} / "
+              f"+-{box[1]:.0%}, violations {violations}, mean widths {widths}")
+    assert all(r["modes"] == [1, 2, 3] for r in rows)          # every run crosses the three speed modes
+    assert violations == {s: 0 for s in SIGNALS}, [r for r in rows if any(r[f"{s}_violations"] for s in SIGNALS)][:5]
+
+
+def test_zero_enclosure_violations_over_200_randomised_cosimulations(fmus, capsys):
+    rows = campaign(fmus["plant_rigid"], fmus["observer"], RUNS, fmus["box"])
+    _check(rows, "CarPlant with linear tires, no roll (the model class)", fmus["box"], capsys)
+
+
+def test_a_model_error_bound_covers_the_rolling_car(fmus, capsys):
+    rows = campaign(fmus["plant"], fmus["observer_robust"], 50, fmus["box"])
+    _check(rows, f"CarPlant with linear tires and roll, model_error_bound {ROLL_ERROR_BOUND}", fmus["box"], capsys)
