@@ -45,11 +45,27 @@ One call of ``step(h, u)``, u the inputs at t (held over [t, t + h]):
     changes) the hull alone (ERRATA 001: the bounds stay continuous across switches). Then the
     box at t: x = xi + E y(t), intersected with the prediction.
       * omega = (A(vx, c) - A_j) x + (B(vx, c) - B_j) delta, eq. (25) via Lemma 3: the speed part
-        (vx - vx_j) A1 x by eq. (20), the stiffness part [dA] x by the exact interval product
-        (``PRODUCT = "hull"``; contained in eq. (21)'s bound, which ``PRODUCT = "eq21"`` uses),
-        the input part ((vx - vx_j) B1 + vx [dB1]) delta exactly (delta is known). DEPARTURE: the
-        paper's A_sigma is the grid speed's model and it ignores the speed mismatch inside a band;
-        here it is bounded at the measured speed (the certificate checks the width dynamics).
+        (vx - vx_j) A1 x by eq. (20), the nominal input part (vx - vx_j) B1 delta exactly (delta is
+        known), and the stiffness part dA x + vx dB1 delta by its structure (``STIFFNESS``, below).
+        DEPARTURE: the paper's A_sigma is the grid speed's model and it ignores the speed mismatch
+        inside a band; here it is bounded at the measured speed (the certificate checks the width
+        dynamics).
+      * the stiffness part (DEPARTURE: a tightening of eq. (25) that keeps the guarantee). The
+        uncertainty has rank 2: with dcf, dcr the stiffness errors (stiffness_box minus the nominal
+        model.Cf, model.Cr) and the slip angles of eq. (4), af = delta - (x1 + lf x2)/vx,
+        ar = (-x1 + lr x2)/vx,
+            dA x + vx dB1 delta = (vx/sigma) [0, 0, (dcf af + dcr ar)/m, (lf dcf af - lr dcr ar)/Iz],
+        so ``STIFFNESS = "structured"`` (default) bounds it by [af], [ar] from the box by interval
+        arithmetic, the exact interval products dcf [af], dcr [ar] and interval addition with signs
+        (exact: dcf and dcr are independent); x2 is measured and the vy interval is narrow, so
+        [af], [ar] are narrow (sedan, +-20 % box, steady turn at 15 m/s and ay = 4 m/s^2 with a
+        0.1 m/s wide vy interval: +-27 m/s^3 on x3' and +-20 rad/s^3 on x4', against +-54 and +-38
+        elementwise). For the design's box, symmetric about the nominal stiffnesses, it lies
+        inside the elementwise bound whatever the box of x (term by term: max|uf| <= |vx delta| +
+        max|x1| + lf max|x2|, and likewise for ur); for an asymmetric box both are computed and
+        intersected. ``STIFFNESS = "elementwise"``: [dA][x] by the exact interval product
+        (``PRODUCT = "hull"``; contained in eq. (21)'s bound, which ``PRODUCT = "eq21"`` uses) plus
+        vx [dB1] delta, entry by entry (dA, dB1 bounded over the box independently).
       * Omega, eq. (24): Omega_up = P+ omega_up - P- omega_lo, Omega_lo = P+ omega_lo - P- omega_up
         with P+ = max(P, 0), P- = P+ - P >= 0 (Efimov's convention, under which eqs. (20), (21),
         (24) and (25) hold; the paper's text defines *- = * - *+ <= 0, with which they would not),
@@ -60,14 +76,17 @@ One call of ``step(h, u)``, u the inputs at t (held over [t, t + h]):
     bounds restart from the measurement like at initialisation (the state moved meanwhile).
  4. a priori enclosure T of x over [t, t + h] (validated-ODE style, ``_source_enclose``): G(X) =
     hull of A(vx, c) x + B(vx, c) delta over x in X and c in the box, from (A0 + vx A1)[X] (eq. 20,
-    exact for a point matrix), [dA][X] and vx (B1 + [dB1]) delta, without the known diagonal of
-    the damped rows (x3, x4: -vx/sigma), which is integrated exactly (a convex combination, no
-    wrapping); S is accepted when T(S) lies inside S (then x(s) is in T(S) for all s in the step),
-    starting from X_t extended by twice the extents of T(X_t), doubling, ``ENCLOSURE_TRIES``
-    tries; if all fail (very long steps, extreme speeds): the comparison bound |x(s) - x_t| <=
-    Gamma(M, h) g (M the Metzler majorant of A over the box, g = max |F(X_t)|), rigorous for any
-    h and wider, one warning per episode. Steps with h rho(|A|) > ``SUBSTEP_RHO_H`` chain
-    substeps for T only.
+    exact for a point matrix), vx B1 delta and the stiffness part over X (``STIFFNESS``, as in
+    omega), without the known diagonal of the damped rows (x3, x4: -vx/sigma), which is
+    integrated exactly (a convex combination, no wrapping); S is accepted when T(S) lies inside S
+    (then x(s) is in T(S) for all s in the step), starting from X_t extended by twice the extents
+    of T(X_t), then by twice the (never shrinking) extents of the last T(S) (``ENCLOSURE_MULT`` = 1:
+    the factor stays 2; the former doubling of the factor per try compounded with the growing
+    extents, overshot, and made the enclosure, hence the bounds, wider for a TIGHTER X at
+    h >= 10 ms), ``ENCLOSURE_TRIES`` tries; if all fail (very long steps, extreme speeds): the
+    comparison bound |x(s) - x_t| <= Gamma(M, h) g (M the Metzler majorant of A over the box,
+    g = max |F(X_t)|), rigorous for any h and wider, one warning per episode. Steps with
+    h rho(|A|) > ``SUBSTEP_RHO_H`` chain substeps for T only.
  5. prediction of the box at t + h from the box at t and T; published (step 6 below); the
     correction of this step waits for y(t + h).
  6. outputs (eq. 8 inverted, eq. 45): vy = x1; beta = atan(x1 / vx) (monotone in x1); yaw rate
@@ -377,9 +396,11 @@ def _damped_rows(model) -> list[int]:
 def _source_G(model, product: str) -> str:
     """G(vx, d, l0..l3, u0..u3) -> (lower0..3, upper0..3): the hull of A(vx, c) x + B(vx, c) d over
     x in [l, u] and c in the box WITHOUT the diagonal terms d_i(vx) x_i of the damped rows (for
-    the other rows: the whole right-hand side F)."""
+    the other rows: the whole right-hand side F). The stiffness part dA x + vx dB1 d: by its
+    structure (``_emit_structured``) if ``model["stiff"]``, else elementwise ([dA][X] + vx [dB1] d)."""
     A0, A1, B1, dAl, dAu, dBl, dBu = (model[k] for k in ("A0", "A1", "B1", "dA_lower", "dA_upper",
                                                            "dB1_lower", "dB1_upper"))
+    structured = model.get("stiff") is not None
     damped = _damped_rows(model)
     A0 = [[0.0 if (i == j and i in damped) else A0[i][j] for j in range(_N)] for i in range(_N)]
     A1 = [[0.0 if (i == j and i in damped) else A1[i][j] for j in range(_N)] for i in range(_N)]
@@ -408,7 +429,10 @@ def _source_G(model, product: str) -> str:
             rad.append(f"avx*({r1})")
         rad += [f"abs({A0[i][j]!r} + vx*{A1[i][j]!r})*r{j}" for j in range(_N)
                 if A0[i][j] != 0.0 and A1[i][j] != 0.0]
-        bm, br = (B1[i] + 0.5 * (dBl[i] + dBu[i])), 0.5 * (dBu[i] - dBl[i])
+        if structured:                  # the stiffness part of the input term with dA's, below
+            bm, br = B1[i], 0.0
+        else:
+            bm, br = (B1[i] + 0.5 * (dBl[i] + dBu[i])), 0.5 * (dBu[i] - dBl[i])
         if bm != 0.0:
             mid.append(f"vd*{bm!r}")
         if br != 0.0:
@@ -419,8 +443,35 @@ def _source_G(model, product: str) -> str:
         lines.append(f"    w = {_sum(rad)}")
         lines.append(f"    fl{i} = m - w")
         lines.append(f"    fu{i} = m + w")
-    _emit_stiffness(lines, dAl, dAu, L, U, [f"fl{i}" for i in range(_N)], [f"fu{i}" for i in range(_N)], product)
+    FL, FU = [f"fl{i}" for i in range(_N)], [f"fu{i}" for i in range(_N)]
+    if structured:
+        _emit_structured(lines, model, L, U, "vd", FL, FU, "", product)
+    else:
+        _emit_stiffness(lines, dAl, dAu, L, U, FL, FU, product)
     lines.append(f"    return ({', '.join(f'fl{i}' for i in range(_N))}, {', '.join(f'fu{i}' for i in range(_N))})")
+    return "\n".join(lines)
+
+
+def _source_stiffness(model, product: str) -> str:
+    """S(vx, d, l0..3, u0..3) -> (lower0..3, upper0..3): the runtime's bound of the stiffness part
+    dA(dc) x + vx dB1(dc) d over x in [l, u] and the stiffness box, by the same emitters as G and
+    the correction (for the tests and measurements; the step does not call it)."""
+    L = [f"l{j}" for j in range(_N)]
+    U = [f"u{j}" for j in range(_N)]
+    lines = [f"def S(vx, d, {', '.join(L)}, {', '.join(U)}):", "    vd = vx*d"]
+    SL, SU = [f"sl{i}" for i in range(_N)], [f"su{i}" for i in range(_N)]
+    for i in range(_N):
+        lines += [f"    sl{i} = 0.0", f"    su{i} = 0.0"]
+    if model.get("stiff") is not None:
+        _emit_structured(lines, model, L, U, "vd", SL, SU, "", product)
+    else:
+        _emit_stiffness(lines, model["dA_lower"], model["dA_upper"], L, U, SL, SU, product)
+        for i in range(_N):
+            bl, bu = model["dB1_lower"][i], model["dB1_upper"][i]
+            if bl != 0.0 or bu != 0.0:
+                lines += [f"    sl{i} += vd*{bl!r} if vd >= 0.0 else vd*{bu!r}",
+                          f"    su{i} += vd*{bu!r} if vd >= 0.0 else vd*{bl!r}"]
+    lines.append(f"    return ({', '.join(SL + SU)})")
     return "\n".join(lines)
 
 
@@ -450,12 +501,14 @@ def _emit_extents(lines, model, indent, S, out):
                       f"{indent}{out}u{i} = u{i} + hs*gu{i} if gu{i} > 0.0 else u{i}"]
 
 
-def _source_enclose(model, tries: int, grow: float, refine: bool = True) -> str:
+def _source_enclose(model, tries: int, grow: float, refine: bool = True, mult: float = 2.0) -> str:
     """enclose(hs, vx, d, l0..3, u0..3) -> (lower0..3, upper0..3) of x over the substep, or None.
     S is accepted when T(S) (``_emit_extents`` with G over S) lies inside it: then the solution
     stays in S (the Picard operator maps the functions valued in S into those valued in T(S),
     a subset) and x(s) is in T(S) for all s in [0, hs], which is returned. First S: X_k extended by
-    ``grow`` times the extents of T(X_k); then the extents of the last T, the factor doubled."""
+    ``grow`` times the extents of T(X_k); then by the factor times the extents of the last T (never
+    shrinking), the factor multiplied by ``mult`` per try (1: constant; 2: doubling, which
+    compounds with the growing extents and overshoots)."""
     n = range(_N)
     damped = _damped_rows(model)
     A0, A1 = model["A0"], model["A1"]
@@ -497,7 +550,8 @@ def _source_enclose(model, tries: int, grow: float, refine: bool = True) -> str:
         lines.append(f"        if t < el{i}: el{i} = t")
         lines.append(f"        t = tu{i} - u{i}")
         lines.append(f"        if t > eu{i}: eu{i} = t")
-    lines.append("        g = 2.0*g")
+    if mult != 1.0:
+        lines.append(f"        g = {mult!r}*g")
     lines.append("    return None")
     return "\n".join(lines)
 
@@ -505,13 +559,19 @@ def _source_enclose(model, tries: int, grow: float, refine: bool = True) -> str:
 def _emit_omega(lines, model, product, c, r, lo, hi, tag, with_input):
     """Lines for the midpoint/radius (oc{tag}{i}, or{tag}{i}) of (vx - vx_j) A1 x + [dA] x over the
     box x in [lo, hi] (names; c, r its midpoint/radius names), plus, if ``with_input``, the input
-    part ((vx - vx_j) B1 + vx [dB1]) d. Returns the rows that are not identically 0."""
+    part ((vx - vx_j) B1 + vx [dB1]) d. The stiffness part ([dA] x + vx [dB1] d): by its structure
+    (``_emit_structured``) if ``model["stiff"]``, else elementwise. Returns the rows that are not
+    identically 0."""
     A1, B1, dAl, dAu, dBl, dBu = (model[k] for k in ("A1", "B1", "dA_lower", "dA_upper", "dB1_lower", "dB1_upper"))
+    structured = model.get("stiff") is not None
     for i in range(_N):
         lines.append(f"    sl{tag}{i} = 0.0")
         lines.append(f"    su{tag}{i} = 0.0")
-    stiff = _emit_stiffness(lines, dAl, dAu, lo, hi, [f"sl{tag}{i}" for i in range(_N)],
-                            [f"su{tag}{i}" for i in range(_N)], product)
+    SL, SU = [f"sl{tag}{i}" for i in range(_N)], [f"su{tag}{i}" for i in range(_N)]
+    if structured:
+        stiff = _emit_structured(lines, model, lo, hi, "vd" if with_input else None, SL, SU, tag, product)
+    else:
+        stiff = _emit_stiffness(lines, dAl, dAu, lo, hi, SL, SU, product)
     live = []
     for i in range(_N):
         mid, rad = [], []
@@ -522,7 +582,7 @@ def _emit_omega(lines, model, product, c, r, lo, hi, tag, with_input):
         if with_input:
             if B1[i] != 0.0:
                 mid.append(f"dvd*{B1[i]!r}")
-            bm, br = 0.5 * (dBl[i] + dBu[i]), 0.5 * (dBu[i] - dBl[i])
+            bm, br = (0.0, 0.0) if structured else (0.5 * (dBl[i] + dBu[i]), 0.5 * (dBu[i] - dBl[i]))
             if bm != 0.0:
                 mid.append(f"vd*{bm!r}")
             if br != 0.0:
@@ -602,8 +662,10 @@ def _source_correct(model, mode, h, maps, meas, product: str) -> str:
         measurements this keeps its information up to O(h^2) remainders.)
       * omega(s) = (A(s) - A_j) x_k + (A(s) - A_j)(x(s) - x_k) + (B - B_j) d with x_k in [l, u] and
         x(s) - x_k in s Fbar: omega0 = omega over [l, u] (weight Gam), omega1 = (A - A_j)[Fbar]
-        (weight Gam1); Omega by eq. (24); speed part (vx - vx_j) A1 by eq. (20), stiffness part
-        [dA] by the interval product, input part exact (DEPARTURE: the measured speed).
+        (weight Gam1); Omega by eq. (24); speed part (vx - vx_j) A1 by eq. (20), nominal input
+        part exact (DEPARTURE: the measured speed), stiffness part (dA x_k + vx dB1 d over [l, u],
+        and dA (x(s) - x_k) over Fbar, each over the whole stiffness box, so time-varying
+        stiffnesses are covered) by ``_emit_structured`` or elementwise (``STIFFNESS``).
     Before: xi := [a, b] intersected with the hull of P x over [l, u] (eq. 20). After: the box at
     t + h, x = xi + E y(h), intersected with the predicted box."""
     n = range(_N)
@@ -773,26 +835,34 @@ class IntervalObserver:
     TOL = 1e-9                       # relative tolerance of the design file's structural relations
     CONSISTENCY_TOL = 1e-9           # measurement outside the bounds by less (x (1 + |y|)): rounding
     ENCLOSURE_TRIES = 10             # a priori enclosure attempts before the comparison bound
-    ENCLOSURE_GROW = 2.0             # first inflation of the extents of T(X_k) (doubled per attempt)
+    ENCLOSURE_GROW = 2.0             # inflation of the extents of T(X_k), then of the last T(S) ..
+    ENCLOSURE_MULT = 1.0             # .. times this per failed attempt (2.0: the former doubling)
     SUBSTEP_RHO_H = 0.3              # substeps so that hs * rho(|A|) <= this at the band's top speed
     CACHE_SIZE = 64                  # compiled (design, mode, h) maps kept per process
     PRODUCT = "hull"                 # [dA][x]: "hull" exact interval product, "eq21" the bound of eq. (21)
+    # the stiffness part dA x + vx dB1 delta (of omega and of G): "structured" through the slip
+    # angles (``_emit_structured``; needs the design file's stiffness_box and the relaxation model
+    # of eq. 9, checked), "elementwise" [dA][x] + vx [dB1] delta entry by entry (``PRODUCT``)
+    STIFFNESS = "structured"
 
     def __init__(self, data: dict, params: dict | None = None):
         params = dict(params or {})
         try:
             self._read(data)
+            self._read_structure(data)
         except (KeyError, TypeError, IndexError) as exc:
             raise ValueError(f"design file lacks {exc} needed by the paper-001 interval observer runtime") from exc
         self.vx_hold = float(params.get("vx_hold", self._vx_hold_default))
         if not (math.isfinite(self.vx_hold) and self.vx_hold >= 0):
             raise ValueError(f"parameter vx_hold must be finite and >= 0 m/s, got {self.vx_hold}")
-        self._key = repr((self.model, self.modes, self.edges, self.eta, self.PRODUCT))
+        self._key = repr((self.model, self.modes, self.edges, self.eta, self.PRODUCT, self.STIFFNESS))
+        self._S = None
         self._G = _cached((self._key, "G"), lambda: _compile(_source_G(self.model, self.PRODUCT), "G"),
                           self.CACHE_SIZE)
-        self._enclose = _cached((self._key, "enclose", self.ENCLOSURE_TRIES, self.ENCLOSURE_GROW),
+        self._enclose = _cached((self._key, "enclose", self.ENCLOSURE_TRIES, self.ENCLOSURE_GROW, self.ENCLOSURE_MULT),
                                 lambda: _compile(_source_enclose(self.model, self.ENCLOSURE_TRIES,
-                                                                 self.ENCLOSURE_GROW), "enclose", G=self._G),
+                                                                 self.ENCLOSURE_GROW, mult=self.ENCLOSURE_MULT),
+                                                "enclose", G=self._G),
                                 self.CACHE_SIZE)
         self._predict = _cached((self._key, "predict"), lambda: _compile(_source_predict(self.model), "predict",
                                                                           G=self._G), self.CACHE_SIZE)
@@ -910,6 +980,79 @@ class IntervalObserver:
             g["eta"] = max(eta, max(-N[i][i] for i in range(_N)), 0.0)   # N + eta I >= 0
             self.modes.append(g)
         self.eta = eta
+
+    def _read_structure(self, data: dict) -> None:
+        """``model["stiff"]``: what the structured stiffness bound needs, from the design file's
+        stiffness_box and model.{sigma, Cf, Cr}, after checking that the file's model IS the
+        relaxation model of eq. (9) around (Cf, Cr) with that box: A0's stiffness entries (rows 3,
+        4, columns 1, 2) and B1 at (Cf, Cr), and dA, dB1's elementwise bounds = their extremes
+        over the box's vertices (zero elsewhere). Then dA(dc) x + vx dB1(dc) d is exactly the slip-
+        angle form of ``_emit_structured`` for every dc in the box, and both bounds describe the
+        same uncertainty. ``model["stiff"]`` = None for ``STIFFNESS = "elementwise"``."""
+        model = self.model
+        if self.STIFFNESS == "elementwise":
+            model["stiff"] = None
+            return
+        if self.STIFFNESS != "structured":
+            raise ValueError(f"STIFFNESS must be 'structured' or 'elementwise', got {self.STIFFNESS!r}")
+        md, sb = data["model"], data["stiffness_box"]
+        vals = {}
+        for k in ("sigma", "Cf", "Cr"):
+            vals[k] = v = float(md[k])
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"design file: model.{k} must be finite and > 0, got {md[k]!r}")
+        box = {}
+        for k in ("Cf", "Cr"):
+            b = _vector(sb[k], 2, f"stiffness_box.{k}")
+            if not 0 < b[0] <= b[1]:
+                raise ValueError(f"design file: stiffness_box.{k} must be 0 < lower <= upper, got {sb[k]!r}")
+            box[k] = b
+        m, Iz, lf, lr, sg = model["m"], model["Iz"], model["lf"], model["lr"], vals["sigma"]
+        ms, Is = m * sg, Iz * sg
+
+        def block(cf, cr):    # A0's stiffness entries (rows 3, 4; columns 1, 2) and B1's (rows 3, 4)
+            return ([[-(cf + cr) / ms, (cr * lr - cf * lf) / ms],
+                     [(cr * lr - cf * lf) / Is, -(cf * lf * lf + cr * lr * lr) / Is]],
+                    [cf / ms, cf * lf / Is])
+
+        Cf, Cr = vals["Cf"], vals["Cr"]
+        A0n, B1n = block(Cf, Cr)
+        corners = [block(cf, cr) for cf in box["Cf"] for cr in box["Cr"]]
+        rows, cols = (2, 3), (0, 1)
+        want = {k: [[0.0] * _N for _ in range(_N)] for k in ("dA_lower", "dA_upper")}
+        want.update({k: [0.0] * _N for k in ("dB1_lower", "dB1_upper")})
+        for a, i in enumerate(rows):
+            for b, j in enumerate(cols):
+                vs = [c[0][a][b] - A0n[a][b] for c in corners]
+                want["dA_lower"][i][j], want["dA_upper"][i][j] = min(vs), max(vs)
+            vs = [c[1][a] - B1n[a] for c in corners]
+            want["dB1_lower"][i], want["dB1_upper"][i] = min(vs), max(vs)
+        checks = [("model.A0", [[model["A0"][i][j] for j in cols] for i in rows], A0n),
+                  ("model.B1", [[model["B1"][i] for i in rows]], [B1n])]
+        checks += [(f"model.{k}", model[k] if k.startswith("dA") else [model[k]],
+                    want[k] if k.startswith("dA") else [want[k]]) for k in want]
+        for what, got, ref in checks:
+            err = _rel(got, ref)
+            if not err <= self.TOL:
+                raise ValueError(f"design file: {what} is not the relaxation model (eq. 9) of model.Cf, model.Cr "
+                                 f"and stiffness_box (relative error {err:.3g}): the structured stiffness bound "
+                                 "needs it (STIFFNESS = 'elementwise' does not)")
+        dcf, dcr = (box["Cf"][0] - Cf, box["Cf"][1] - Cf), (box["Cr"][0] - Cr, box["Cr"][1] - Cr)
+
+        def symmetric(lo, hi):
+            return abs(lo + hi) <= 1e-9 * (hi - lo)
+
+        model["stiff"] = {"rows": rows, "cols": cols, "lf": lf, "lr": lr, "k3": 1.0 / ms, "k4f": lf / Is,
+                          "k4r": lr / Is, "dcf": dcf, "dcr": dcr,
+                          "symmetric": symmetric(*dcf) and symmetric(*dcr)}
+
+    def stiffness_bounds(self, vx: float, d: float, box):
+        """(lower0..3, upper0..3): the runtime's bound of dA(dc) x + vx dB1(dc) d over x in the box
+        [box[:4], box[4:]] and the stiffness box (``STIFFNESS``); compiled on first use."""
+        if self._S is None:
+            self._S = _cached((self._key, "S"), lambda: _compile(_source_stiffness(self.model, self.PRODUCT), "S"),
+                              self.CACHE_SIZE)
+        return self._S(vx, d, *box)
 
     def _majorant(self, vx: float, undamped: bool = False):
         """Metzler majorant of A(vx, c) over the stiffness box: the largest diagonal entries and
