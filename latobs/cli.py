@@ -53,7 +53,7 @@ def _cmd_validate(args) -> int:
 
     run_validation(args.scenario, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
                    plant_parameters=dict(_kv(p) for p in args.plant_param), noise=args.noise, seed=args.seed,
-                   tag=args.tag, plots=not args.no_plots)
+                   tag=args.tag, plots=not args.no_plots, plant_vehicle=args.plant_vehicle)
     return 0
 
 
@@ -127,6 +127,8 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--tag", default="", help="suffix of the output folder (SCENARIO_TAG)")
     v.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
+    v.add_argument("--plant-vehicle", default=None, metavar="V",
+                   help="vehicle of the plant FMU (default: the plant's default vehicle), e.g. sedan_no_roll")
     v.set_defaults(func=_cmd_validate)
     r = sub.add_parser("replay", help="drive an observer FMU with recorded signals and score it against the "
                                       "reference columns present")

@@ -16,21 +16,25 @@ from .synthesis import certificate, design_file, designs
 
 PAPER_000 = None                       # the default observers of `latobs validate` (paper 000)
 INTERVAL = ["LateralIntervalObserver"]
-# (scenario, tag, plant parameters, noise, observers)
+LINEAR = {"linear_tires": 1.0}
+# (scenario, tag, plant parameters, noise, observers, plant vehicle (None: the plant's default))
 RUNS = [
-    ("bank-braking", "", {}, False, PAPER_000),
-    ("bank-braking", "stiffness-20pct", {"scale_f": 0.8, "scale_r": 0.8}, False, PAPER_000),
-    ("bank-braking", "stiffness+20pct", {"scale_f": 1.2, "scale_r": 1.2}, False, PAPER_000),
-    ("bank-braking", "noise", {}, True, PAPER_000),
-    ("double-lane-change", "", {}, False, PAPER_000),
-    ("sine-with-dwell", "", {}, False, PAPER_000),
-    ("fishhook", "", {}, False, PAPER_000),
-    # paper 001: inside its guarantee (linear tires, stiffnesses at the box's corner) ...
-    ("double-lane-change-15", "001-linear-tires", {"linear_tires": 1.0, "scale_f": 0.8, "scale_r": 1.2}, False, INTERVAL),
-    # ... and outside it: Magic Formula tires, up to the handling limit
-    ("double-lane-change-15", "001", {}, False, INTERVAL),
-    ("sine-with-dwell", "001", {}, False, INTERVAL),
-    ("fishhook", "001", {}, False, INTERVAL),
+    ("bank-braking", "", {}, False, PAPER_000, None),
+    ("bank-braking", "stiffness-20pct", {"scale_f": 0.8, "scale_r": 0.8}, False, PAPER_000, None),
+    ("bank-braking", "stiffness+20pct", {"scale_f": 1.2, "scale_r": 1.2}, False, PAPER_000, None),
+    ("bank-braking", "noise", {}, True, PAPER_000, None),
+    ("double-lane-change", "", {}, False, PAPER_000, None),
+    ("sine-with-dwell", "", {}, False, PAPER_000, None),
+    ("fishhook", "", {}, False, PAPER_000, None),
+    # paper 001 inside its guarantee: its model class (linear tires, no roll), stiffnesses in the box ...
+    ("double-lane-change-15", "001-model-class-0.8-1.2", {**LINEAR, "scale_f": 0.8, "scale_r": 1.2}, False, INTERVAL, "sedan_no_roll"),
+    ("double-lane-change-15", "001-model-class", LINEAR, False, INTERVAL, "sedan_no_roll"),
+    ("double-lane-change-15", "001-model-class-1.2-0.8", {**LINEAR, "scale_f": 1.2, "scale_r": 0.8}, False, INTERVAL, "sedan_no_roll"),
+    # ... and outside it: the rolling sedan with linear tires, then Magic Formula tires to the handling limit
+    ("double-lane-change-15", "001-rolling-linear-tires", LINEAR, False, INTERVAL, None),
+    ("double-lane-change-15", "001", {}, False, INTERVAL, None),
+    ("sine-with-dwell", "001", {}, False, INTERVAL, None),
+    ("fishhook", "001", {}, False, INTERVAL, None),
 ]
 WIDE_BOX = (0.4, 0.4)                  # the replay's wider stiffness box (relative half-widths)
 
@@ -75,7 +79,7 @@ def _headline(report: Path) -> str:
     rows = ["| run | observer | beta RMS (rad) | beta max (rad) | ||beta err||/||bank|| (paper: 9.5e-4 speed, "
             "8.85e-3 tire) | bank RMS after 3 s (rad) | bank RMS after 3 s (deg) |",
             "|---|---|---|---|---|---|---|"]
-    for scen, tag, params, noise, _obs in RUNS:
+    for scen, tag, params, noise, _obs, _veh in RUNS:
         if scen != "bank-braking":
             continue
         f = report / (f"{scen}_{tag}" if tag else scen) / "metrics.json"
@@ -95,16 +99,18 @@ def demo(out: Path) -> Path:
     out = Path(out)
     report = out / "report"
     build(None, None, out)
-    for scen, tag, params, noise, observers in RUNS:
-        run_validation(scen, observers, report, out, plant_parameters=params, noise=noise, tag=tag)
+    for scen, tag, params, noise, observers, plant_vehicle in RUNS:
+        run_validation(scen, observers, report, out, plant_parameters=params, noise=noise, tag=tag,
+                       plant_vehicle=plant_vehicle)
     replays = _replays(out, report)
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
                 ReportSection(title="bank-braking: paper 000's figures", markdown=_headline(report)),
                 ReportSection(title="Paper 001: interval observer, enclosure and widths", markdown=_interval_table(report, replays))]
-    for scen, tag, params, noise, _obs in RUNS:
+    for scen, tag, params, noise, _obs, plant_vehicle in RUNS:
         d = report / (f"{scen}_{tag}" if tag else scen)
-        what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] + (["sensor noise and bias"] if noise else []))
+        what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] + (["sensor noise and bias"] if noise else [])
+                         + ([f"plant vehicle {plant_vehicle}"] if plant_vehicle else []))
         sections.append(section_from_dir(d, title=f"{scen} ({what or 'nominal plant'})"))
     for label, (metrics, mdir) in replays.items():
         sections.append(section_from_dir(mdir, title=f"Real data: {label}"))
@@ -143,16 +149,18 @@ def _interval_table(report: Path, replays: dict) -> str:
     rows = ["Inside the guarantee (linear tires, stiffness in the box) every bound must contain the truth; "
             "outside it (Magic Formula tires at the handling limit, real data) the rates show how often the "
             "model's assumptions fail. Widths in m/s and N.", "",
-            "| run | vy violations | vy mean width | Fyf mean width | Fyr mean width | beta violations |",
+            "| run | vy violations | vy mean width after settle | Fyf mean width | Fyr mean width | beta violations |",
             "|---|---|---|---|---|---|"]
-    for scen, tag, params, noise, obs in RUNS:
+    for scen, tag, params, noise, obs, plant_vehicle in RUNS:
         if obs != INTERVAL:
             continue
         m = json.loads((report / f"{scen}_{tag}" / "metrics.json").read_text())
         iv = next(iter(m["observers"].values()))["intervals"]
-        what = ", ".join(f"{k} = {v:g}" for k, v in params.items()) or "Magic Formula tires"
+        what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] or ["Magic Formula tires"]) + (
+            ", no roll (model class)" if plant_vehicle == "sedan_no_roll" else ", rolling sedan")
         rows.append(f"| {scen} ({what}) | {iv['vy']['enclosure_violations']} of {m['n_samples']} | "
-                    f"{iv['vy']['mean_width']:.3g} | {iv['Fyf']['mean_width']:.4g} | {iv['Fyr']['mean_width']:.4g} | "
+                    f"{iv['vy']['mean_width_after_settle']:.3g} | {iv['Fyf']['mean_width_after_settle']:.4g} | "
+                    f"{iv['Fyr']['mean_width_after_settle']:.4g} | "
                     f"{iv['beta']['enclosure_violations']} |")
     rows += ["", "Real data (MBDS record, t < 425 s tuning half / t >= 425 s held-out half): enclosure rate of the "
              "reference vy, and of m ay within [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (eq. 47).", "",

@@ -78,18 +78,28 @@ def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
 
 def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_dir: Path,
                    plant_parameters: dict | None = None, noise: bool = False, seed: int = 0,
-                   tag: str = "", quiet: bool = False, plots: bool = True) -> dict:
+                   tag: str = "", quiet: bool = False, plots: bool = True,
+                   plant_vehicle: str | None = None) -> dict:
     """Co-simulate plant + observers on a scenario; writes out/SCENARIO[_TAG]/metrics.json and PNGs
-    (no PNGs with ``plots=False``)."""
+    (no PNGs with ``plots=False``). ``plant_vehicle``: the plant FMU's vehicle (its FMU is
+    ``PLANT_V``, built if missing); default the plant's default vehicle."""
+    from . import packaging
     from .validation import get_scenario, validate
     from .validation.harness import NoiseSpec
     from .validation.report import text_table
 
     sc = get_scenario(scenario)
     observers = observers or [n for n, e in designs.DESIGNS.items() if e.paper in ("000",)]
-    fmus = ensure_fmus([sc.plant, *observers], fmu_dir)
+    fmus = ensure_fmus(observers, fmu_dir)
+    kind = packaging.PLANTS[sc.plant]
+    plant_vehicle = plant_vehicle or kind.default_vehicle
+    plant_name = sc.plant if plant_vehicle == kind.default_vehicle else f"{sc.plant}_{plant_vehicle}"
+    plant = fmu_dir / f"{plant_name}.fmu"
+    if not plant.is_file():
+        print(f"building missing FMU: {plant_name}")
+        build([sc.plant], plant_vehicle, fmu_dir)
     out_dir = out / (f"{scenario}_{tag}" if tag else scenario)
-    _, metrics, paths = validate(sc, fmus[sc.plant], {n: fmus[n] for n in observers}, out_dir,
+    _, metrics, paths = validate(sc, plant, {n: fmus[n] for n in observers}, out_dir, vehicle=plant_vehicle,
                                  plant_parameters=plant_parameters or {},
                                  noise=NoiseSpec(signals=DEFAULT_NOISE) if noise else None, seed=seed,
                                  plots=plots)

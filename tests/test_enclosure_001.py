@@ -37,9 +37,7 @@ def fmus(tmp_path_factory):
     out = tmp_path_factory.mktemp("fmus_001")
     data = designs.run("LateralIntervalObserver")
     observer = packaging.package_design(design_file.write(data, out), out)
-    rigid = packaging.plant_data("sedan")
-    rigid["vehicle"]["parameters"]["hr"]["value"] = 1e-4        # no roll coupling: paper 001's model class
-    plant_rigid = packaging.build_fmu(packaging.PLANTS["CarPlant"], "CarPlantNoRoll", rigid, out)
+    plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out)   # no roll: paper 001's model class
     plant = packaging.package_plant("CarPlant", None, out)
     robust = designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND)
     robust_dir = out / "robust"
