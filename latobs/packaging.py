@@ -35,7 +35,7 @@ from pathlib import Path
 
 from . import __version__
 from .atomic import atomic_path
-from .synthesis import certificate, design_file
+from .synthesis import design_file
 from .synthesis.params import load_vehicle
 
 from . import fmu_src as _fmu_src  # the runtime's sources are copied, not run, here
@@ -238,6 +238,8 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
 
 def package_design(design_path: Path, out_dir: Path) -> Path:
     """Re-certify a design file and package its observer FMU (never an uncertified one)."""
+    from .synthesis import certificate  # scipy: only when packaging a design
+
     data = design_file.read(design_path)
     ok, checks = certificate.certify(data)
     if not ok or not data.get("certified"):
