@@ -25,11 +25,11 @@ small-gain check that Theorem 1 omits (ERRATA 001).
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import lmi
 from . import relaxation_model as rm
 from .params import Vehicle
 
@@ -145,14 +145,8 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         lmi36.append(L + eta_s * Q >= 0)
     base = [q >= 1.0]                                        # (34) with alpha = 1
     prob = cp.Problem(cp.Minimize(g), base + lmi35 + lmi36)
-    t0 = time.perf_counter()
-    try:
-        prob.solve(solver=cp.CLARABEL)
-        status = prob.status
-    except cp.error.SolverError:
-        status = "solver_error"
-    seconds = time.perf_counter() - t0
-    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or q.value is None:
+    status, seconds = lmi.solve(prob)
+    if not lmi.solved(status) or q.value is None:
         raise DesignError(f"design {opts.name}: no solution (Clarabel: {status}) of Theorem 1 (LMIs 34-36, "
                           f"eps = {opts.epsilon:g}, eta = {opts.eta:g}) over {len(speeds)} speed modes; "
                           + _diagnose(base, lmi35, lmi36))
@@ -178,19 +172,9 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
 
 
 def _diagnose(base, lmi35, lmi36) -> str:
-    import cvxpy as cp
-
-    def feasible(cons) -> bool:
-        try:
-            p = cp.Problem(cp.Minimize(0), base + cons)
-            p.solve(solver=cp.CLARABEL)
-        except cp.error.SolverError:
-            return False
-        return p.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
-
-    if not feasible(lmi36):
+    if not lmi.feasible(base + lmi36):
         return "the Metzler constraint (36) alone is infeasible: raise eta"
-    if not feasible(lmi35):
+    if not lmi.feasible(base + lmi35):
         return "the ISS LMI (35) alone is infeasible: lower epsilon"
     return "(35) and (36) are feasible apart but not together: raise eta or lower epsilon"
 

@@ -31,13 +31,13 @@ under both, the gains and P are mapped back (K = tau S K_bar, P = S^-T P_bar S^-
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 
 from . import bicycle_roll_model as brm
+from . import lmi
 from . import tire
 from .params import Vehicle
 
@@ -220,14 +220,8 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         families[disk_key].append((D + D.T) / 2 << -eps * np.eye(2 * na))
     base = [P >> eps * np.eye(na)]
     prob = cp.Problem(cp.Minimize(g), base + [c for cs in families.values() for c in cs])
-    t0 = time.perf_counter()
-    try:
-        prob.solve(solver=cp.CLARABEL)
-        status = prob.status
-    except cp.error.SolverError:
-        status = "solver_error"
-    seconds = time.perf_counter() - t0
-    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or P.value is None:
+    status, seconds = lmi.solve(prob)
+    if not lmi.solved(status) or P.value is None:
         raise DesignError(f"design {opts.name}: no solution (Clarabel: {status}) of Theorem 2 + pole region "
                           f"on a common P over {len(vertices)} mode/speed vertices; "
                           + _diagnose(base, families, opts))
@@ -246,15 +240,8 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
 
 def _diagnose(base: list, families: dict, opts: DesignOptions) -> str:
     """Name the LMI family that is infeasible on its own (feasibility problems, Clarabel)."""
-    import cvxpy as cp
-
     def feasible(cons) -> bool:
-        prob = cp.Problem(cp.Minimize(0), base + cons)
-        try:
-            prob.solve(solver=cp.CLARABEL)
-        except cp.error.SolverError:
-            return False
-        return prob.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+        return lmi.feasible(base + cons)
 
     region = [name for name in families if not name.startswith("H-infinity")]
     relax = f"Relax the pole region (alpha = {opts.alpha:g} 1/s, radius = {opts.radius:g} rad/s)."
