@@ -420,3 +420,242 @@ def evaluate_estimator(box: Box | str, y, x, box_grid: int = 0) -> dict:
     if isinstance(box, str):
         box = boxes()[box]
     return evaluate(polytope(box), y, x, box_grid=box_grid)
+
+
+# ----------------------------------------------------------------------------------------------
+# 4. Issue 7: certificate independent of the LMI, polish, full order
+# ----------------------------------------------------------------------------------------------
+#
+# The estimator is open loop (beta_hat = (y/x) r, no feedback), so d = df1 df2 a x: a closed loop
+# is stable iff x and the plant's a are Hurwitz (the weights are). Both the vertex plants
+# (the 64 vertices of the over-bounding coefficient polytope) and the TRUE plants (the
+# multi-affine coefficients of ``bicycle_tf`` on a dense (Cf, Cr, v) grid) are certified.
+# The polytope contains every true plant, so the grid worst case never exceeds the vertex worst
+# case; on both boxes it is well below it (the vertex worst case is the DC floor).
+
+def plant_grid(box: Box, grid=(9, 9, 9)):
+    """(pts, b1, b2, a): the k_cf x k_cr x k_v grid of true plants (rows, ascending coefs)."""
+    if isinstance(grid, int):
+        grid = (grid,) * 3
+    axes = [np.linspace(lo, hi, k) for (lo, hi), k in zip((box.cf, box.cr, box.v), grid)]
+    pts = np.array(list(itertools.product(*axes)), float)
+    tfs = [box.tf(*p) for p in pts]
+    return pts, np.array([t[0] for t in tfs]), np.array([t[1] for t in tfs]), np.array([t[2] for t in tfs])
+
+
+def _vertex_arrays(poly: Polytope):
+    return (np.array([v[0] for v in poly.vertices]), np.array([v[1] for v in poly.vertices]),
+            np.array([v[2] for v in poly.vertices]))
+
+
+def _rows_polyval(C, s):
+    """C (N, k) ascending coefficient rows, s (W,) -> (N, W) values."""
+    out = np.zeros((C.shape[0], s.size), complex)
+    for k in range(C.shape[1] - 1, -1, -1):
+        out = out * s + C[:, k:k + 1]
+    return out
+
+
+_WN, _WD = P.polymul(NF1, NF2), P.polymul(DF1, DF2)
+
+
+def error_magnitude(b1, b2, a, y, x, w):
+    """|G(jw)| = |W1 W2 (b1 - b2 y/x)/a| for plant rows (N, .) and frequencies w (W,): (N, W)."""
+    s = 1j * np.asarray(w, float)
+    Wt = P.polyval(s, _WN) / P.polyval(s, _WD)
+    k = P.polyval(s, np.asarray(y, float)) / P.polyval(s, np.asarray(x, float))
+    return np.abs(Wt * (_rows_polyval(b1, s) - _rows_polyval(b2, s) * k) / _rows_polyval(a, s))
+
+
+def _max_real_pole(b1, b2, a, y, x):
+    """Per plant: the largest real part of the roots of d = df1 df2 a x."""
+    fixed = max(np.roots(_WD[::-1]).real.max(), np.roots(np.asarray(x, float)[::-1]).real.max()
+                if len(x) > 1 else -np.inf)
+    return np.array([max(fixed, np.roots(ai[::-1]).real.max()) for ai in a])
+
+
+def _worst_case(b1, b2, a, y, x, n_w=2000, wmin=1e-5, wmax=1e3, rtol=0.02):
+    """(peak, w_peak, plant index, per-plant sweep max): dense log sweep plus w = 0 over all
+    plants; every local maximum (of any plant) within ``rtol`` of the overall sweep max is
+    refined by a bounded scalar search in log w."""
+    lw = np.linspace(math.log10(wmin), math.log10(wmax), n_w)
+    w = np.concatenate([[0.0], 10 ** lw])
+    M = error_magnitude(b1, b2, a, y, x, w)
+    per = M.max(axis=1)
+    i0 = int(np.argmax(per))
+    best, wbest, ibest = float(per[i0]), float(w[int(np.argmax(M[i0]))]), i0
+    if best < 1e-14:                                # zero error (exact inverse): nothing to refine
+        return best, wbest, ibest, per
+    thr = (1 - rtol) * best
+    for i in np.flatnonzero(per >= thr):
+        m = M[i, 1:]
+        for j in np.flatnonzero((m >= np.roll(m, 1)) & (m >= np.roll(m, -1)) & (m >= thr)):
+            lo, hi = lw[max(j - 1, 0)], lw[min(j + 1, n_w - 1)]
+            f = lambda t: -error_magnitude(b1[i:i + 1], b2[i:i + 1], a[i:i + 1], y, x, [10 ** t])[0, 0]
+            r = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-10})
+            if -r.fun > best:
+                best, wbest, ibest = float(-r.fun), float(10 ** r.x), int(i)
+    return best, wbest, ibest, per
+
+
+def certify_002(y, x, box: Box | str, grid=(9, 9, 9), n_w: int = 2000, wmin: float = 1e-5,
+                wmax: float = 1e3) -> dict:
+    """Certificate of an estimator y/x on ``box``, independent of the LMI (numpy/scipy only).
+
+    vertex_*: the 64 vertex plants of the over-bounding polytope; grid_*: the true plants
+    (``bicycle_tf``) on a k_cf x k_cr x k_v grid. Stability from the roots of d = df1 df2 a x;
+    worst H-infinity norm of the weighted error from a dense log-frequency sweep (plus w = 0)
+    refined at the peaks. Returns also the argmax vertex / parameters (Cf, Cr, v) and frequency.
+    """
+    if isinstance(box, str):
+        box = boxes()[box]
+    y, x = np.atleast_1d(np.asarray(y, float)), np.atleast_1d(np.asarray(x, float))
+    poly = polytope(box)
+    vb1, vb2, va = _vertex_arrays(poly)
+    pts, gb1, gb2, ga = plant_grid(box, grid)
+    out = {"box": box.name, "grid": tuple(grid) if not isinstance(grid, int) else (grid,) * 3}
+    for tag, (b1, b2, a) in (("vertex", (vb1, vb2, va)), ("grid", (gb1, gb2, ga))):
+        mrp = _max_real_pole(b1, b2, a, y, x)
+        stable = bool(np.all(mrp < 0))
+        out[f"{tag}_stable"] = stable
+        out[f"{tag}_max_real_pole"] = float(mrp.max())
+        if stable:
+            g, wpk, i, _ = _worst_case(b1, b2, a, y, x, n_w, wmin, wmax)
+        else:
+            g, wpk, i = float("inf"), float("nan"), int(np.argmax(mrp))
+        out[f"{tag}_gamma"], out[f"{tag}_w"] = g, wpk
+        out[f"{tag}_argmax"] = i if tag == "vertex" else tuple(float(t) for t in pts[i])
+    out["stable"] = out["vertex_stable"] and out["grid_stable"]
+    return out
+
+
+def grid_dc_floor(box: Box, grid=(9, 9, 9)) -> tuple[float, float]:
+    """(floor, k): min over k = y(0)/x(0) of the max over the TRUE grid plants of |G(0)| =
+    |b1_0 - k b2_0|/a_0 (unit-DC weights). No estimator of any order has a grid worst case below
+    it: the lower bound against which the certified grid worst cases are compared."""
+    from scipy.optimize import linprog
+    _, b1, b2, a = plant_grid(box, grid)
+    u, v = b1[:, 0] / a[:, 0], b2[:, 0] / a[:, 0]          # G(0) = u - k v
+    # min t s.t. +-(u - k v) <= t: an LP in (k, t), exact for the piecewise-linear max
+    A = np.vstack([np.column_stack([-v, -np.ones_like(v)]), np.column_stack([v, -np.ones_like(v)])])
+    r = linprog([0.0, 1.0], A_ub=A, b_ub=np.concatenate([-u, u]), bounds=[(None, None), (0, None)],
+                method="highs")
+    k = float(r.x[0])
+    return float(np.max(np.abs(u - k * v))), k
+
+
+def _unpack(p, order):
+    """Coefficient parametrisation with x monic and Hurwitz by construction (order <= 2: all
+    coefficients positive): p = [y_0..y_order, log x_0..log x_{order-1}]."""
+    y = np.asarray(p[: order + 1], float)
+    x = np.append(np.exp(np.asarray(p[order + 1:], float)), 1.0)
+    return y, x
+
+
+def _pack(y, x):
+    order = len(x) - 1
+    if order > 2:
+        raise ValueError("polish: orders 0, 1, 2 only (positive coefficients <=> Hurwitz)")
+    x = np.asarray(x, float) / x[-1]
+    y = np.asarray(y, float) / 1.0
+    if np.any(x[:-1] <= 0):
+        raise ValueError("x is not Hurwitz")
+    return np.concatenate([_pad(y, order + 1), np.log(x[:-1])])
+
+
+def grid_objective(box: Box, order: int, grid=(9, 9, 9), n_w: int = 200, wmin=1e-5, wmax=1e3):
+    """Fast (unrefined) grid worst case as a function of the parameter vector of ``_unpack``."""
+    _, b1, b2, a = plant_grid(box, grid)
+    w = np.concatenate([[0.0], np.logspace(math.log10(wmin), math.log10(wmax), n_w)])
+    s = 1j * w
+    Wt = P.polyval(s, _WN) / P.polyval(s, _WD)
+    A, B = Wt * _rows_polyval(b1, s) / _rows_polyval(a, s), Wt * _rows_polyval(b2, s) / _rows_polyval(a, s)
+
+    def f(p):
+        y, x = _unpack(p, order)
+        if not np.all(np.isfinite(x)):
+            return 1e9
+        k = P.polyval(s, y) / P.polyval(s, x)
+        return float(np.abs(A - B * k).max())
+    return f
+
+
+def polish(box: Box | str, y, x, grid=(9, 9, 9), rounds: int = 4, maxiter: int = 2000, seed=None):
+    """Certified local optimisation: Nelder-Mead on the estimator coefficients (x monic, Hurwitz
+    by construction) minimising the grid worst case, restarted ``rounds`` times from its own
+    result, then certified by ``certify_002``. Returns (y, x, certificate) of the better of the
+    start and the result by the CERTIFIED grid worst case, so it never increases it."""
+    from scipy.optimize import minimize
+    if isinstance(box, str):
+        box = boxes()[box]
+    y, x = np.atleast_1d(np.asarray(y, float)), np.atleast_1d(np.asarray(x, float))
+    y, x = y / x[-1], x / x[-1]
+    order = len(x) - 1
+    f = grid_objective(box, order, grid)
+    p = _pack(y, x)
+    for _ in range(rounds):
+        r = minimize(f, p, method="Nelder-Mead",
+                     options={"maxiter": maxiter, "xatol": 1e-9, "fatol": 1e-10, "adaptive": True})
+        if r.fun >= f(p) - 1e-12 and _ > 0:
+            p = r.x if r.fun < f(p) else p
+            break
+        p = r.x if r.fun < f(p) else p
+    y1, x1 = _unpack(p, order)
+    c0, c1 = certify_002(y, x, box, grid), certify_002(y1, x1, box, grid)
+    if c1["stable"] and c1["grid_gamma"] < c0["grid_gamma"]:
+        return y1, x1, c1
+    return y, x, c0
+
+
+def design_order2(box: Box | str, recentre: int = 2, extra_poles=(1.0, 3.0, 10.0, 0.3)):
+    """Order 2 via Lemma 5. The nominal central polynomial is infeasible on the physical box;
+    start instead from the order-1 design's nominal closed loop times (s + p), trying the poles
+    ``extra_poles`` in turn, then ``recentre`` rounds. Returns the best Design by vertex gamma."""
+    if isinstance(box, str):
+        box = boxes()[box]
+    d1 = design(box, order=1, recentre=recentre)
+    _, den = closed_loop(*box.tf(*box.centre()), d1.y, d1.x)
+    best, errors = None, []
+    for p in extra_poles:
+        c = P.polymul(den / den[-1], [p, 1.0])
+        try:
+            d = design(box, order=2, central=c, recentre=recentre)
+        except DesignError as e:
+            errors.append(str(e))
+            continue
+        if best is None or (d.evaluation["stable"] and d.gamma < best.gamma):
+            best = d
+        if best.evaluation["stable"] and best.gamma <= dc_floor(polytope(box))[0] * (1 + 1e-6):
+            break                                   # the floor: no central polynomial does better
+    if best is None:
+        raise DesignError("order 2: every central polynomial infeasible: " + "; ".join(errors))
+    return best
+
+
+def full_order_hinfsyn(box: Box | str, eps: float = 1e-3):
+    """Full-order H-infinity estimator by python-control ``hinfsyn`` on the NOMINAL generalised
+    plant (box centre): w = [delta, n_r] (steering, yaw-rate noise eps), u = beta_hat,
+    z = [W2 (beta - u), eps u] with beta = p1 W1 delta (D12, D21 regularised by eps),
+    measurement r + eps n_r with r = p2 W1 delta. K: r -> beta_hat is the estimator.
+    Returns (y, x) ascending (x monic), the hinfsyn gamma (nominal, regularised) and seconds."""
+    import time
+    import control as ct
+    if isinstance(box, str):
+        box = boxes()[box]
+    b1, b2, a = box.tf(*box.centre())
+    W1 = ct.tf(NF1[::-1], DF1[::-1])
+    W2 = ct.tf(NF2[::-1], DF2[::-1])
+    p1, p2 = ct.tf(b1[::-1], a[::-1]), ct.tf(b2[::-1], a[::-1])
+    # outputs [z1, z2, y], inputs [delta, n, u]
+    z1 = [W2 * W1 * p1, ct.tf([0.0], [1.0]), -W2]
+    z2 = [ct.tf([0.0], [1.0]), ct.tf([0.0], [1.0]), ct.tf([eps], [1.0])]
+    yy = [W1 * p2, ct.tf([eps], [1.0]), ct.tf([0.0], [1.0])]
+    G = ct.tf([[z.num[0][0] for z in row] for row in (z1, z2, yy)],
+              [[z.den[0][0] for z in row] for row in (z1, z2, yy)])
+    Pss = ct.minreal(ct.ss(G), verbose=False)
+    t0 = time.perf_counter()
+    K, CL, gam, _ = ct.hinfsyn(Pss, 1, 1)
+    sec = time.perf_counter() - t0
+    Kt = ct.tf(K)
+    num, den = np.asarray(Kt.num[0][0], float)[::-1], np.asarray(Kt.den[0][0], float)[::-1]
+    return num / den[-1], den / den[-1], float(gam), sec

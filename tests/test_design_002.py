@@ -181,3 +181,81 @@ def test_pole_region_on_top_of_the_performance_lmi(boxes):
     with pytest.raises(f.DesignError):
         c = P.polyfromroots([-4.4429 + 4.4429j, -4.4429 - 4.4429j, -0.2, -0.3, -0.4, -0.5]).real
         f.lemma5(f.polytope(box), c, 1, stability_region=f.alpha_region(0.05))
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 7: certificate (vertices and the true-plant grid), polish
+# ---------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def physical_order1(boxes):
+    return f.design(boxes["physical"], order=1)
+
+
+def test_certify_analytic_single_plant(boxes):
+    """A degenerate box (one plant): the exact inverse y/x = b1/b2 is first order and gives zero
+    error; y/x = b1/b2 + eps gives G = -eps W1 W2 p2, whose norm is eps ||W1 W2 p2||."""
+    ph = boxes["physical"]
+    Cf, Cr, v = ph.centre()
+    pt = f.Box("point", ph.m, ph.Iz, ph.lf, ph.lr, (Cf, Cf), (Cr, Cr), (v, v))
+    b1, b2, a = pt.tf(Cf, Cr, v)
+    y, x = b1 / b2[1], b2 / b2[1]
+    c = f.certify_002(y, x, pt, grid=(3, 3, 3))
+    assert c["stable"] and c["vertex_gamma"] < 1e-12 and c["grid_gamma"] < 1e-12
+    ref, wref = f.hinf_norm(P.polymul(f._WN, b2), P.polymul(f._WD, a))
+    for eps in (1e-3, 0.1):
+        c = f.certify_002(y + eps * x, x, pt, grid=(2, 2, 2))
+        assert c["grid_gamma"] == pytest.approx(eps * ref, rel=1e-8)
+        assert c["vertex_gamma"] == pytest.approx(eps * ref, rel=1e-8)
+        assert c["grid_w"] == pytest.approx(wref, rel=1e-3, abs=1e-9)
+    # an unstable estimator pole is flagged at the vertices and on the grid
+    c = f.certify_002([1.0, 0.0], [-0.5, 1.0], pt, grid=(2, 2, 2))
+    assert not c["vertex_stable"] and not c["grid_stable"] and c["grid_gamma"] == float("inf")
+    assert c["grid_max_real_pole"] == pytest.approx(0.5)
+
+
+def test_certify_agrees_with_evaluate(boxes, physical_order1):
+    d = physical_order1
+    c = f.certify_002(d.y, d.x, d.box, grid=(4, 4, 4))
+    ev = f.evaluate(f.polytope(d.box), d.y, d.x, box_grid=4)
+    assert c["vertex_gamma"] == pytest.approx(ev["gamma"], rel=1e-7)
+    assert c["grid_gamma"] == pytest.approx(ev["grid_gamma"], rel=1e-7)
+
+
+@pytest.mark.parametrize("name", ["paper", "physical"])
+def test_grid_worst_case_below_vertex_worst_case(boxes, name):
+    """The polytope over-bounds the true plants, so the grid worst case never exceeds it."""
+    box = boxes[name]
+    rng = np.random.default_rng(11)
+    ests = [f.EST32, ([0.19], [1.0])]
+    for _ in range(4):
+        ests.append((rng.uniform(-2, 2, 2), np.array([10 ** rng.uniform(-2, 2), 1.0])))
+    for y, x in ests:
+        c = f.certify_002(y, x, box, grid=(5, 5, 5))
+        assert c["stable"]
+        assert c["grid_gamma"] <= c["vertex_gamma"] * (1 + 1e-9)
+        assert f.grid_dc_floor(box, (5, 5, 5))[0] <= c["grid_gamma"] * (1 + 1e-9)
+
+
+def test_physical_first_order_design_certifies_on_the_grid(physical_order1):
+    d = physical_order1
+    c = f.certify_002(d.y, d.x, d.box)                     # 9 x 9 x 9 true plants
+    assert c["stable"] and c["grid_stable"] and c["vertex_stable"]
+    floor = f.dc_floor(f.polytope(d.box))[0]
+    assert floor * (1 - 1e-9) <= c["vertex_gamma"] <= floor * (1 + 1e-3)     # floor-limited
+    assert f.grid_dc_floor(d.box)[0] <= c["grid_gamma"] < c["vertex_gamma"]
+
+
+def test_polish_never_increases_and_reaches_the_grid_floor(physical_order1):
+    d = physical_order1
+    c0 = f.certify_002(d.y, d.x, d.box)
+    y, x, c1 = f.polish(d.box, d.y, d.x)
+    assert c1["stable"] and c1["grid_gamma"] <= c0["grid_gamma"]
+    # the grid DC floor is a lower bound for every order; the polished first order attains it
+    floor = f.grid_dc_floor(d.box)[0]
+    assert c1["grid_gamma"] == pytest.approx(floor, rel=1e-5)
+    # polishing an optimum (or any start) returns nothing worse
+    y2, x2, c2 = f.polish(d.box, y, x, rounds=1, maxiter=200)
+    assert c2["grid_gamma"] <= c1["grid_gamma"]
+    y3, x3, c3 = f.polish(d.box, [0.5], [1.0], rounds=1, maxiter=200)
+    assert c3["grid_gamma"] <= f.certify_002([0.5], [1.0], d.box)["grid_gamma"]
