@@ -48,15 +48,9 @@ def _fmu_step_time(path: Path, inputs: dict[str, np.ndarray], n: int, repeats: i
     times = []
     for _ in range(repeats):
         fmu = FmuInstance(path.stem, path)
-        fmu.instantiate()
         names = [v.name for v in fmu.inputs]
-        fmu.prepare_io(names)
-        fmu.slave.setupExperiment(startTime=0.0)
-        fmu.slave.enterInitializationMode()
         rows = [{k: float(inputs[k][i]) for k in names} for i in range(n)]
-        fmu.set_inputs(rows[0])
-        fmu.slave.exitInitializationMode()
-        fmu.initialized = True
+        fmu.start(rows[0])
         do_step = fmu.slave.doStep
         set_inputs, get_outputs = fmu.set_inputs, fmu.get_outputs
         t0 = time.perf_counter()

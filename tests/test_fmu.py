@@ -23,16 +23,7 @@ OBS_INPUTS = ("delta", "vx", "yaw_rate", "roll_angle", "roll_rate")
 def open_fmu(path: Path, label: str, params: dict | None = None, u0: dict | None = None) -> FmuInstance:
     """Instantiate and initialise, with parameters and the initial inputs set in initialisation mode."""
     fmu = FmuInstance(label, Path(path))
-    fmu.instantiate()
-    fmu.prepare_io([v.name for v in fmu.inputs])
-    fmu.slave.setupExperiment(startTime=0.0)
-    fmu.slave.enterInitializationMode()
-    if params:
-        fmu.set_parameters(params)
-    if u0:
-        fmu.set_inputs(u0)
-    fmu.slave.exitInitializationMode()
-    fmu.initialized = True
+    fmu.start(u0, params)
     return fmu
 
 

@@ -31,13 +31,7 @@ def inputs(k: int) -> dict:
 
 def open_fmu(path):
     fmu = FmuInstance("I", path)
-    fmu.instantiate()
-    fmu.prepare_io([v.name for v in fmu.inputs])
-    fmu.slave.setupExperiment(startTime=0.0)
-    fmu.slave.enterInitializationMode()
-    fmu.set_inputs(inputs(0))
-    fmu.slave.exitInitializationMode()
-    fmu.initialized = True
+    fmu.start(inputs(0))
     return fmu
 
 

@@ -171,14 +171,8 @@ def test_outputs_declare_no_direct_feedthrough_and_it_is_true(fmus):
         unknowns = root.find("ModelStructure/Outputs").findall("Unknown")
         assert unknowns and all(u.get("dependencies") == "" for u in unknowns), k
         fmu = FmuInstance(k, path)
-        fmu.instantiate()
         names = [v.name for v in fmu.inputs]
-        fmu.prepare_io(names)
-        fmu.slave.setupExperiment(startTime=0.0)
-        fmu.slave.enterInitializationMode()
-        fmu.set_inputs({n: {"vx": 20.0}.get(n, 0.01) for n in names})
-        fmu.slave.exitInitializationMode()
-        fmu.initialized = True
+        fmu.start({n: {"vx": 20.0}.get(n, 0.01) for n in names})
         try:
             for i in range(20):
                 fmu.set_inputs({n: {"vx": 20.0}.get(n, 0.02 * math.sin(i + len(n))) for n in names})
@@ -215,13 +209,7 @@ def test_model_description_bounds_units_and_experiment(fmus):
 def test_a_parameter_outside_its_declared_range_is_refused(fmus):
     path = fmus["plant"]
     fmu = FmuInstance("mu", path)
-    fmu.instantiate()
-    fmu.prepare_io([v.name for v in fmu.inputs])
-    fmu.slave.setupExperiment(startTime=0.0)
-    fmu.slave.enterInitializationMode()
-    fmu.set_parameters({"mu": -1.0})
-    fmu.slave.exitInitializationMode()
-    fmu.initialized = True
+    fmu.start(parameters={"mu": -1.0})
     try:
         fmu.set_inputs({"delta": 0.0, "vx": 10.0, "bank_angle": 0.0})
         with pytest.raises(Exception, match="discard"):

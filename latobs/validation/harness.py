@@ -225,6 +225,33 @@ class FmuInstance:
         self.slave.instantiate(callbacks=self.callbacks, loggingOn=True)
         self.instantiated = True
 
+    def start(self, inputs: Mapping[str, float] | None = None, parameters: Mapping[str, Any] | None = None,
+              start_time: float = 0.0, stop_time: float | None = None) -> dict[str, float]:
+        """Instantiate and initialise, as every latobs host does: prebuilt I/O for all inputs,
+        setupExperiment, parameters, initialisation mode with the initial ``inputs`` (so the FMU
+        starts consistent with them), exit. Returns the outputs at the start time. A failure is
+        raised naming the FMI call that failed."""
+        stage = "instantiate"
+        try:
+            self.instantiate()
+            self.prepare_io([v.name for v in self.inputs])
+            stage = "setupExperiment"
+            self.slave.setupExperiment(startTime=start_time, stopTime=stop_time)
+            stage = "setting parameters"
+            self.set_parameters(parameters or {})
+            stage = "enterInitializationMode"
+            self.slave.enterInitializationMode()
+            self.initialized = True
+            stage = "setting inputs"
+            if inputs:
+                self.set_inputs(inputs)
+            stage = "exitInitializationMode"
+            self.slave.exitInitializationMode()
+            stage = "getting outputs"
+            return self.get_outputs()
+        except Exception as exc:
+            raise RuntimeError(f"{stage}: {exc}") from exc
+
     # prebuilt get/set ------------------------------------------------------------------------
     def prepare_io(self, input_names: list[str]):
         """Group inputs and outputs by type with ctypes arrays built once."""
@@ -464,27 +491,13 @@ class CoSimulation:
                     f"{f.log_tail()}") from exc
 
         # ---- initialisation: plant first (its outputs at t0 feed the observers)
-        stop = float(t[-1])
-        call(plant, "instantiate", 0, plant.instantiate)
-        plant.prepare_io(plant_in)
-        call(plant, "setupExperiment", 0, plant.slave.setupExperiment, None, float(t[0]), stop)
-        call(plant, "setting parameters", 0, plant.set_parameters, self.plant_parameters)
-        call(plant, "enterInitializationMode", 0, plant.slave.enterInitializationMode)
-        plant.initialized = True
+        t0, stop = float(t[0]), float(t[-1])
         u0 = {x: scen[x][0] for x in plant_in}
-        call(plant, "setting inputs", 0, plant.set_inputs, u0)
-        call(plant, "exitInitializationMode", 0, plant.slave.exitInitializationMode)
-        fill_bus(0, call(plant, "getting outputs", 0, plant.get_outputs))
+        fill_bus(0, call(plant, "initialisation", 0, plant.start, u0, self.plant_parameters, t0, stop))
         for lab, f in observers.items():
-            call(f, "instantiate", 0, f.instantiate)
-            f.prepare_io(obs_in[lab])
-            call(f, "setupExperiment", 0, f.slave.setupExperiment, None, float(t[0]), stop)
-            call(f, "setting parameters", 0, f.set_parameters, self.observer_parameters.get(lab, {}))
-            call(f, "enterInitializationMode", 0, f.slave.enterInitializationMode)
-            f.initialized = True
-            call(f, "setting inputs", 0, f.set_inputs, meas(0, obs_in[lab]))
-            call(f, "exitInitializationMode", 0, f.slave.exitInitializationMode)
-            for name, val in call(f, "getting outputs", 0, f.get_outputs).items():
+            y0 = call(f, "initialisation", 0, f.start, meas(0, obs_in[lab]), self.observer_parameters.get(lab, {}),
+                      t0, stop)
+            for name, val in y0.items():
                 obs_rec[lab][name][0] = val
 
         # ---- fixed-step loop

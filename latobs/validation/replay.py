@@ -240,15 +240,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
             for name, val in values.items():
                 rec[name][k] = val
 
-        t0, stop = float(t[0]), float(t[-1])
-        call("instantiate", 0, f.instantiate)
-        f.prepare_io(in_names)
-        call("setupExperiment", 0, f.slave.setupExperiment, None, t0, stop)
-        call("enterInitializationMode", 0, f.slave.enterInitializationMode)
-        f.initialized = True
-        call("setting inputs", 0, f.set_inputs, rows[0])
-        call("exitInitializationMode", 0, f.slave.exitInitializationMode)
-        record(0, call("getting outputs", 0, f.get_outputs))
+        record(0, call("initialisation", 0, f.start, rows[0], None, float(t[0]), float(t[-1])))
         set_inputs, do_step, get_outputs = f.set_inputs, f.slave.doStep, f.get_outputs
         tl = t.tolist()
         for k in range(n - 1):
