@@ -48,7 +48,10 @@ wheel at (-lr, +-t/2) carries (0, Fy_i); the moment of (Fx, Fy) at (x, y) is x F
         Fy_ss = mu Fz sin(C atan(B a - E (B a - atan(B a))))
      C = mf_C, E = mf_E; B is fixed per axle so that mu Fz_static B C = scale * C_axle / 2 with
      Fz_static the flat-road static wheel load: at nominal load the wheel's linear cornering
-     stiffness is exactly C_axle/2 (times the scale parameter) for ANY mu.
+     stiffness is exactly C_axle/2 (times the scale) for ANY mu. The scale of an axle is the
+     product of the parameter (scale_f, scale_r: fixed for the run) and the input
+     (stiffness_scale_f, stiffness_scale_r: time-varying, see "Time-varying cornering stiffness"
+     below); it multiplies B only, so the peak force mu Fz is unchanged.
      Parameter linear_tires = 1: the Magic Formula is replaced by its linearisation at zero slip,
         Fy_ss = mu Fz B C a          (same B, C: no saturation, no peak),
      i.e. a cornering stiffness per unit load mu B C, so that at nominal load each axle's
@@ -62,6 +65,23 @@ At straight driving with linear tires and no relaxation, E1-E4 linearise exactly
 model of ``synthesis/bicycle_roll_model.py`` (beta = vy/vx); tests/test_car_plant.py checks it.
 With relaxation, linear_tires = 1 and hr -> 0 they linearise to the bicycle model with tire
 relaxation of paper 001 (states vy, r, (Fyf + Fyr)/m, (lf Fyf - lr Fyr)/Iz); tests/test_car_plant_001.py.
+
+Time-varying cornering stiffness (inputs stiffness_scale_f, stiffness_scale_r)
+------------------------------------------------------------------------------
+Two optional inputs (unit 1, start 1.0) multiply the front / rear axle cornering stiffness on
+top of the parameters scale_f / scale_r: C_axle,eff(t) = C_axle * scale * stiffness_scale(t).
+Like every input they are sampled at the communication point and held over the ``step`` call
+(zero-order hold; within one step B is constant). At 1.0 (their start value) every result is
+bit-identical to a plant without them (x * 1.0 == x in IEEE arithmetic, same substeps).
+Used to sweep a stiffness box during a run (paper 002's validation: the delibasi box).
+Clamping (documented departure; the step never raises):
+* a finite input outside [SCALE_IN_MIN, SCALE_IN_MAX] = [0.1, 10] (the range of the parameters
+  scale_f / scale_r; non-positive values included) is clamped into it, with a warning on
+  entering the clamp;
+* a non-finite value (only possible when the runtime is driven directly: the FMU glue refuses a
+  step with any non-finite input, logs an error, returns fmi2Discard and keeps the state) holds
+  the last valid value (1.0 before the first one), with a warning.
+The substep rule below scales its stiffness-dependent mode estimate by max(1, scales).
 
 Outputs at the centre of gravity
 --------------------------------
@@ -190,7 +210,13 @@ class CarPlantModel:
     STATE_UNITS = ("m/s", "rad/s", "rad", "rad/s", "N", "N", "N", "N")
     INPUTS = {"delta": ("rad", "road-wheel steering angle, > 0 steers left"),
               "vx": ("m/s", "longitudinal speed (prescribed)"),
-              "bank_angle": ("rad", "road bank angle; > 0 gives -g sin(bank) along body +y")}
+              "bank_angle": ("rad", "road bank angle; > 0 gives -g sin(bank) along body +y"),
+              "stiffness_scale_f": ("1", "multiplies the front cornering stiffness on top of scale_f; "
+                                         "optional, default 1.0, held per step, clamped to [0.1, 10]"),
+              "stiffness_scale_r": ("1", "multiplies the rear cornering stiffness on top of scale_r; "
+                                         "optional, default 1.0, held per step, clamped to [0.1, 10]")}
+    #: inputs a caller may omit from ``u`` (their value when never given)
+    OPTIONAL_INPUTS = {"stiffness_scale_f": 1.0, "stiffness_scale_r": 1.0}
     OUTPUTS = {"beta": ("rad", "sideslip angle atan(vy/vx) at the roll axis below the CG"),
                "vy": ("m/s", "lateral velocity at the roll axis below the CG"),
                "yaw_rate": ("rad/s", "yaw rate"),
@@ -212,6 +238,8 @@ class CarPlantModel:
     DELTA_MAX = 0.8       # rad, clamp of the road-wheel angle (~46 deg)
     BANK_MAX = 0.6        # rad, clamp of the road bank angle (~34 deg)
     ALPHA_SPIN = 0.5      # rad, |alpha_r| beyond which a "spun out" warning is issued (rear far past peak)
+    SCALE_IN_MIN = 0.1    # 1, clamp of the stiffness_scale_f/r inputs (= the scale_f/r parameter range)
+    SCALE_IN_MAX = 10.0   # 1
 
     # ------------------------------------------------------------------ construction
     @staticmethod
@@ -328,12 +356,15 @@ class CarPlantModel:
         self._vx_prev = None
         self._flags = set()
         self._last_u = (0.0, 0.0, 0.0, 0.0)  # delta, vx, bank, ax used for the outputs
+        self._scales = (1.0, 1.0)            # stiffness_scale_f, _r used for the outputs (last valid)
         self.y: dict = {}
         self._update_outputs()
 
     # ------------------------------------------------------------------ the physics
-    def _make_rhs(self, delta, vx, phir, ax):
+    def _make_rhs(self, delta, vx, phir, ax, sf=1.0, sr=1.0):
         """Right-hand side E1-E7 for held inputs (already clamped): returns ``f``.
+
+        ``sf``, ``sr``: the stiffness_scale_f/r inputs (clamped), multiplying the axles' B.
 
         ``f(vy, r, phi, phid, F1, F2, F3, F4)`` gives the 8 derivatives as a tuple (the tire ones
         0.0 with algebraic tires, whose forces are then computed from the body states and F1..F4
@@ -348,6 +379,11 @@ class CarPlantModel:
         """
         (lf, lr, t2, m, hr, Ix, Iz, Kr, br, mkyf, mkyr, mef, mer, C, E, mu, nBf, nBr, Wf, Wr, kx,
          relax, sigma, linear, nBCf, nBCr) = self._consts
+        # time-varying cornering stiffness: the inputs multiply B (exact no-op at 1.0)
+        nBf *= sf
+        nBr *= sr
+        nBCf *= sf
+        nBCr *= sr
         vmin = self.V_SLIP_MIN
         atan, sin, cos = _atan, _sin, _cos
         sd = sin(delta)
@@ -512,19 +548,56 @@ class CarPlantModel:
         phir = min(max(phir, -self.BANK_MAX), self.BANK_MAX)
         return delta, vx, phir
 
+    def _clamp_scales(self, u, warn: bool):
+        """The stiffness_scale_f/r inputs of ``u`` (1.0 if absent), clamped to [SCALE_IN_MIN,
+        SCALE_IN_MAX]; a non-finite value holds the last valid one (module docstring)."""
+        get = u.get
+        out = []
+        lo, hi = self.SCALE_IN_MIN, self.SCALE_IN_MAX
+        for i, key in enumerate(("stiffness_scale_f", "stiffness_scale_r")):
+            try:
+                x = float(get(key, self.OPTIONAL_INPUTS[key]))
+            except (TypeError, ValueError):
+                x = math.nan
+            if lo <= x <= hi:          # the common case (False for nan)
+                if warn and self._flags:
+                    self._flags.discard(key)
+                    self._flags.discard(key + "_nf")
+                out.append(x)
+                continue
+            if not math.isfinite(x):
+                held = self._scales[i]
+                if warn and key + "_nf" not in self._flags:
+                    self._flags.add(key + "_nf")
+                    self.events.append(("warning", f"CarPlant: {key} = {x!r} is not finite: held at {held}"))
+                out.append(held)
+                continue
+            c = lo if x < lo else hi
+            if warn:
+                self._flags.discard(key + "_nf")
+                if key not in self._flags:
+                    self._flags.add(key)
+                    self.events.append(("warning", f"CarPlant: {key} = {x} clamped to {c} "
+                                                   f"(allowed {lo} ... {hi})"))
+            out.append(c)
+        return out[0], out[1]
+
     # ------------------------------------------------------------------ public API
     def derivatives(self, x, u, ax: float = 0.0) -> list:
         """State derivative d/dt [vy, r, phi, phidot, Fy_fl, Fy_fr, Fy_rl, Fy_rr] (SI units).
 
         ``x`` has 8 entries (or 4 with algebraic tires, sigma <= 0: the tire entries are then
-        ignored and their derivatives are 0); ``u`` = {delta, vx, bank_angle}; ``ax`` (m/s^2)
-        the longitudinal acceleration used for the load transfer. Inputs are clamped as in
-        ``step`` (silently). A pure function of its arguments.
+        ignored and their derivatives are 0); ``u`` = {delta, vx, bank_angle} and optionally
+        stiffness_scale_f, stiffness_scale_r (default 1.0); ``ax`` (m/s^2) the longitudinal
+        acceleration used for the load transfer. Inputs are clamped as in ``step`` (silently; a
+        non-finite stiffness scale takes the last valid one of ``step``). For finite inputs a pure
+        function of its arguments.
         """
         delta, vx, phir = self._clamp_inputs(u, warn=False)
+        sf, sr = self._clamp_scales(u, warn=False)
         ax = min(max(float(ax), -self.AX_MAX), self.AX_MAX)
         xs = list(x) + [0.0] * (8 - len(x))
-        d = self._make_rhs(delta, vx, phir, ax)(*xs[:8])
+        d = self._make_rhs(delta, vx, phir, ax, sf, sr)(*xs[:8])
         return list(d[:len(x)]) if len(x) == 4 else list(d)
 
     def tire_state(self, x=None, u=None, ax: float = 0.0) -> dict:
@@ -532,12 +605,14 @@ class CarPlantModel:
         total force S, wheel forces F (wheel frame) and loads Fz (fl, fr, rl, rr), slip angles."""
         if u is None:
             delta, vx, phir, ax = self._last_u
+            sf, sr = self._scales
         else:
             delta, vx, phir = self._clamp_inputs(u, warn=False)
+            sf, sr = self._clamp_scales(u, warn=False)
             ax = min(max(float(ax), -self.AX_MAX), self.AX_MAX)
         xs = list(self.x if x is None else x)
         xs += [0.0] * (8 - len(xs))
-        return self._make_rhs(delta, vx, phir, ax)(*xs[:8], aux=2)
+        return self._make_rhs(delta, vx, phir, ax, sf, sr)(*xs[:8], aux=2)
 
     @property
     def ax(self) -> float:
@@ -545,10 +620,12 @@ class CarPlantModel:
         return self._last_u[3]
 
     def step(self, h: float, u: dict) -> None:
-        """Advance ``h`` seconds with inputs ``u`` (delta, vx, bank_angle) held; Heun's method,
-        <= 1 ms substeps (module docstring, "Numerics")."""
+        """Advance ``h`` seconds with inputs ``u`` (delta, vx, bank_angle and optionally
+        stiffness_scale_f, stiffness_scale_r, default 1.0) held; Heun's method, <= 1 ms substeps
+        (module docstring, "Numerics")."""
         h = float(h)
         delta, vx, phir = self._clamp_inputs(u, warn=True)
+        sf, sr = self._clamp_scales(u, warn=True)
         if not h > 0.0:
             if h < 0.0:
                 self.events.append(("warning", f"CarPlant: step size h = {h} s < 0 ignored"))
@@ -565,17 +642,23 @@ class CarPlantModel:
             self._flags.discard("ax")
         self._vx_prev = vx
         self._last_u = (delta, vx, phir, ax)
+        self._scales = (sf, sr)
 
         # substeps: <= H_MAX, and fastest-mode estimate * substep <= 1
+        # the tire-stiffness part of the estimate grows linearly (algebraic) or as the square
+        # root (relaxation oscillation) with the stiffness; scales < 1 keep the nominal estimate
+        smax = sf if sf > sr else sr
         if self._relax:
             vrel = vx if vx > self.V_RELAX_MIN else self.V_RELAX_MIN
-            lam = vrel / self._sigma + self._lam_osc_s + self._lam_roll
+            osc = self._lam_osc_s * math.sqrt(smax) if smax > 1.0 else self._lam_osc_s
+            lam = vrel / self._sigma + osc + self._lam_roll
         else:
             vs = vx if vx > self.V_SLIP_MIN else self.V_SLIP_MIN
-            lam = self._lam_alg / vs + self._lam_roll
+            alg = self._lam_alg * smax if smax > 1.0 else self._lam_alg
+            lam = alg / vs + self._lam_roll
         n = max(math.ceil(h / self.H_MAX - 1e-9), math.ceil(h * lam - 1e-9), 1)
         dt = h / n
-        f = self._make_rhs(delta, vx, phir, ax)
+        f = self._make_rhs(delta, vx, phir, ax, sf, sr)
         s0, s1, s2, s3, s4, s5, s6, s7 = self.x
         # Heun's method (explicit trapezoidal rule, 2nd order): k1 = f(s), k2 = f(s + dt k1),
         # s+ = s + dt/2 (k1 + k2)
@@ -615,7 +698,7 @@ class CarPlantModel:
         x = self.x
         vx = self._last_u[1]
         if f is None:
-            f = self._make_rhs(*self._last_u)
+            f = self._make_rhs(*self._last_u, *self._scales)
         S, Fyf, Fyr, af, ar, F1, F2, F3, F4 = f(*x, aux=1)
         if not self._relax:
             x[4] = F1   # algebraic tires: report the current forces as states

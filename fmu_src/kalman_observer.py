@@ -18,9 +18,12 @@ One call ``step(h, u)`` (inputs of the step held, v = vx clamped):
        x = Phi x + Gam delta, P = Phi P Phi' + Q h.
 Outputs at the end of the step: x_{k+1|k}, beta_hat = atan(vy_hat / v) with the step's v.
 
-Data file (``kalman_baseline.to_data_dict``)::
+Data file (``kalman_baseline.to_data_dict``, or the design file of ``kalman_baseline.design``)::
 
-    {"vehicle": {"m", "lf", "lr", "Iz", "Cf", "Cr"},            all finite > 0
+    {"vehicle": {"m", "lf", "lr", "Iz", "Cf", "Cr"},            all finite > 0 (kg, m, m, kg m^2,
+                                                                 N/rad, N/rad), or a vehicle set as
+                                                                 in design files: {"name", "parameters":
+                                                                 {"m": {"value": ..., "unit": ...}, ...}}
      "noise": {"q": 2x2 (PSD; process-noise intensity on [vy', r'], per s),
                "r": 2x2 (positive definite; measurement covariance on [ay, r])},
      "initial": {"P0": 2x2 positive definite},                   (optional, default diag(1, 0.01))
@@ -30,8 +33,12 @@ Documented clamps (never an exception for finite inputs):
   * ``initialize(u)`` (or else the first step): x = [0, yaw_rate], P = P0; outputs beta 0;
   * vx outside [vx_min, vx_max] (the model has 1/vx; reversing is not modelled): the model is
     evaluated at the nearest bound, one warning per excursion;
-  * h <= 0: no step, outputs held, with a warning; a step whose discretised model or result is
-    not finite (an absurd h): refused, state held, with a warning.
+  * h <= 0 or a non-finite input or h: no step, outputs held, with a warning (the FMI framework
+    already refuses non-finite inputs); a step whose discretised model or result is not finite
+    (an absurd h): refused, state held, with a warning.
+
+``model(v)`` gives the (A, B, C, D) that ``step`` uses at the (clamped) speed v (m/s); the design
+certificate compares it with an independent derivation.
 """
 from __future__ import annotations
 
@@ -89,14 +96,20 @@ class KalmanObserver:
     def __init__(self, data: dict, params: dict | None = None):
         try:
             veh = data["vehicle"]
+            where = "vehicle"
+            if isinstance(veh.get("parameters"), dict):      # a vehicle set as in design files
+                veh, where = veh["parameters"], "vehicle.parameters"
             vals = {}
             for k in _VEHICLE:
                 if k not in veh:
-                    raise ValueError(f"data file: vehicle.{k} is missing")
+                    raise ValueError(f"data file: {where}.{k} is missing")
+                entry = veh[k]
+                if isinstance(entry, dict):
+                    entry = entry.get("value")
                 try:
-                    vals[k] = float(veh[k])
+                    vals[k] = float(entry)
                 except (TypeError, ValueError):
-                    raise ValueError(f"data file: vehicle.{k} must be a number, got {veh[k]!r}") from None
+                    raise ValueError(f"data file: {where}.{k} must be a number, got {veh[k]!r}") from None
                 if not (math.isfinite(vals[k]) and vals[k] > 0):
                     raise ValueError(f"data file: vehicle.{k} must be finite and > 0, got {vals[k]!r}")
             self.Q = _mat2(data["noise"]["q"], "noise.q")
@@ -145,58 +158,78 @@ class KalmanObserver:
         self.y["vy_hat"] = vy
         self.y["yaw_rate_hat"] = r
 
-    def initialize(self, u: dict) -> None:
-        self.x = [0.0, float(u["yaw_rate"])]
-        self.P = [row[:] for row in self.P0]
-        self._started = True
-        self._publish(self._speed(float(u["vx"])))
-
-    def step(self, h: float, u: dict) -> None:
-        if not self._started:
-            self.initialize(u)
-        if not h > 0:
-            self.events.append(("warning", f"step size h = {h!r} s <= 0: no step, outputs held"))
-            return
-        v = self._speed(u["vx"])
-        delta, ay, yr = u["delta"], u["ay"], u["yaw_rate"]
+    def model(self, v: float):
+        """(A, B, C, D) of the model at the speed v (m/s, already clamped) as lists: A 2x2 (1/s),
+        B 2 (m/s^2/rad, rad/s^2/rad), C 2x2 (rows ay, r), D 2 (m/s^2/rad, 0)."""
         a00, a01, a10, a11 = self._a
         b0, b1 = self._b
-        c00, c01 = a00 / v, a01 / v                    # ay row of C; the r row is [0, 1]
-        d0 = b0
+        A = [[a00 / v, a01 / v - v], [a10 / v, a11 / v]]
+        C = [[a00 / v, a01 / v], [0.0, 1.0]]               # ay = vy' + v r: A's first row + [0, v]
+        return A, [b0, b1], C, [b0, 0.0]
+
+    def initialize(self, u: dict) -> None:
+        """x = [0, yaw_rate] (a non-finite yaw rate: 0, with a warning), P = P0; outputs at vx."""
+        r0, vx = float(u["yaw_rate"]), float(u["vx"])
+        if not (math.isfinite(r0) and math.isfinite(vx)):
+            self.events.append(("warning", f"non-finite initial input (yaw_rate, vx) = {(r0, vx)!r}: "
+                                           "the filter starts from x = 0 at vx_min"))
+            r0 = r0 if math.isfinite(r0) else 0.0
+            vx = vx if math.isfinite(vx) else self.vx_min
+        self.x = [0.0, r0]
+        self.P = [row[:] for row in self.P0]
+        self._started = True
+        self._publish(self._speed(vx))
+
+    def step(self, h: float, u: dict) -> None:
+        """Update with y = [ay, yaw_rate], then predict over h (s) with the inputs u held."""
+        delta, vx, ay, yr = u["delta"], u["vx"], u["ay"], u["yaw_rate"]
+        if not (math.isfinite(delta) and math.isfinite(vx) and math.isfinite(ay) and math.isfinite(yr)):
+            self.events.append(("warning", f"non-finite input (delta, vx, ay, yaw_rate) = {(delta, vx, ay, yr)!r}: "
+                                           "no step, outputs held"))
+            return
+        if not self._started:
+            self.initialize(u)
+        if not h > 0 or not math.isfinite(h):
+            self.events.append(("warning", f"step size h = {h!r} s is not finite and > 0: no step, outputs held"))
+            return
+        v = self._speed(vx)
+        A, B, C, D = self.model(v)
+        (a00, a01), (a10, a11) = A
+        b0, b1 = B
+        (c00, c01), (c10, c11) = C
+        d0, d1 = D
         x0, x1 = self.x
         (p00, p01), (p10, p11) = self.P
         (r00, r01), (r10, r11) = self.R
-        # 1. update
-        cp0 = c00 * p00 + c01 * p10
-        cp1 = c00 * p01 + c01 * p11
-        s00 = cp0 * c00 + cp1 * c01 + r00
-        s01 = cp1 + r01
-        s10 = p10 * c00 + p11 * c01 + r10
-        s11 = p11 + r11
+        # 1. update with y = [ay, yaw_rate]: S = C P C' + R, K = P C' S^-1 (P symmetric: P C' = (C P)')
+        cp00, cp01 = c00 * p00 + c01 * p10, c00 * p01 + c01 * p11
+        cp10, cp11 = c10 * p00 + c11 * p10, c10 * p01 + c11 * p11
+        s00 = cp00 * c00 + cp01 * c01 + r00
+        s01 = cp00 * c10 + cp01 * c11 + r01
+        s10 = cp10 * c00 + cp11 * c01 + r10
+        s11 = cp10 * c10 + cp11 * c11 + r11
         det = s00 * s11 - s01 * s10
         i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
-        pc00 = p00 * c00 + p01 * c01
-        pc10 = p10 * c00 + p11 * c01
-        pc01, pc11 = p01, p11
-        k00 = pc00 * i00 + pc01 * i10
-        k01 = pc00 * i01 + pc01 * i11
-        k10 = pc10 * i00 + pc11 * i10
-        k11 = pc10 * i01 + pc11 * i11
+        k00 = cp00 * i00 + cp10 * i10
+        k01 = cp00 * i01 + cp10 * i11
+        k10 = cp01 * i00 + cp11 * i10
+        k11 = cp01 * i01 + cp11 * i11
         e0 = ay - (c00 * x0 + c01 * x1) - d0 * delta
-        e1 = yr - x1
+        e1 = yr - (c10 * x0 + c11 * x1) - d1 * delta
         x0 += k00 * e0 + k01 * e1
         x1 += k10 * e0 + k11 * e1
-        q00, q01, q10, q11 = (1.0 - k00 * c00, -(k00 * c01 + k01), -k10 * c00, 1.0 - (k10 * c01 + k11))
+        q00, q01 = 1.0 - (k00 * c00 + k01 * c10), -(k00 * c01 + k01 * c11)       # I - K C
+        q10, q11 = -(k10 * c00 + k11 * c10), 1.0 - (k10 * c01 + k11 * c11)
         n00, n01 = q00 * p00 + q01 * p10, q00 * p01 + q01 * p11
         n10, n11 = q10 * p00 + q11 * p10, q10 * p01 + q11 * p11
         p00, p11 = n00, n11
         p01 = p10 = 0.5 * (n01 + n10)
         # 2. predict over h (exact ZOH of the model at v)
         try:
-            E = _expm3([[a00 / v * h, (a01 / v - v) * h, b0 * h],
-                        [a10 / v * h, a11 / v * h, b1 * h],
+            E = _expm3([[a00 * h, a01 * h, b0 * h],
+                        [a10 * h, a11 * h, b1 * h],
                         [0.0, 0.0, 0.0]])
-        except (OverflowError, ValueError):
+        except (OverflowError, ValueError, ZeroDivisionError):
             E = None
         if E is None or not all(math.isfinite(a) for row in E for a in row):
             self.events.append(("warning", f"the model discretised over h = {h!r} s is not finite: step refused, "

@@ -4,7 +4,9 @@ Covers what exists and grows with the project: paper 000's two observers on CarP
 and with +-20 % cornering-stiffness mismatch in the plant, with and without sensor noise; paper
 001's interval observer on CarPlant inside its guarantee (linear tires) and outside it (Magic
 Formula tires at the handling limit), and replayed on the real MBDS record (default and wider
-stiffness box, tuning and held-out halves).
+stiffness box, tuning and held-out halves); paper 002's fixed-order estimator beside the Kalman
+baseline on CarPlant (W1-filtered steering, sine with dwell and fishhook with time-varying
+stiffness) and on the MBDS record (one estimator, speed-scheduled estimators, baseline).
 """
 from __future__ import annotations
 
@@ -17,6 +19,15 @@ from .synthesis import certificate, design_file, designs
 PAPER_000 = None                       # the default observers of `latobs validate` (paper 000)
 INTERVAL = ["LateralIntervalObserver"]
 LINEAR = {"linear_tires": 1.0}
+P002 = ["SideslipFixedOrderEstimator", "SideslipKalmanFilter_delibasi"]
+#: Paper 002 on the real record: (label, design, vehicle), the estimators side by side.
+REPLAYS_002 = [
+    ("fixed-order estimator, one for 15..63 m/s", "SideslipFixedOrderEstimator", "mbds_250lm"),
+    ("fixed-order estimators scheduled on speed (4 m/s bands)", "SideslipFixedOrderEstimatorScheduled", None),
+    ("Kalman baseline (ay and yaw rate)", "SideslipKalmanFilter", None),
+]
+#: beta RMS (deg) of the dataset authors' filter, reference port (issue 7): t < 425 s, t >= 425 s.
+REFERENCE_PORT_DEG = (0.678, 1.015)
 # (scenario, tag, plant parameters, noise, observers, plant vehicle (None: the plant's default))
 RUNS = [
     ("bank-braking", "", {}, False, PAPER_000, None),
@@ -35,6 +46,10 @@ RUNS = [
     ("double-lane-change-15", "001", {}, False, INTERVAL, None),
     ("sine-with-dwell", "001", {}, False, INTERVAL, None),
     ("fishhook", "001", {}, False, INTERVAL, None),
+    # paper 002 beside its Kalman baseline, on CarPlant built for paper 002's vehicle (20..40 km/h)
+    ("w1-steer", "002", {}, False, P002, "delibasi"),
+    ("sine-with-dwell-varying-stiffness", "002", {}, False, P002, "delibasi"),
+    ("fishhook-varying-stiffness", "002", {}, False, P002, "delibasi"),
 ]
 WIDE_BOX = (0.4, 0.4)                  # the replay's wider stiffness box (relative half-widths)
 
@@ -56,6 +71,8 @@ def _design_section(path: Path) -> str:
             lines.append(f"| {m['mode']} | {m['speed_ms']:g} | {m['band'][0]:g}-{m['band'][1]:g} | "
                          f"{m['slowest_pole']:.3g} | {m['largest_gain']:.4g} |")
         return "\n".join(lines + ["", *(f"- {n}" for n in d["notes"]), ""])
+    if d["paper"] == "002":
+        return _design_section_002(d, s)
     o = d["options"]
     lines = [f"**{d['name']}** (paper {d['paper']}, vehicle `{d['vehicle']['name']}`): "
              f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c['passed'] for c in checks)}/{len(checks)} checks "
@@ -70,6 +87,57 @@ def _design_section(path: Path) -> str:
                      f"{m['slowest_bank_pole']:.3f} | {m['largest_gain']:.4g} |")
     lines += ["", *(f"- {n}" for n in d["notes"]), ""]
     return "\n".join(lines)
+
+
+def _design_section_002(d: dict, s: dict) -> str:
+    ok, checks = d["certified"], d["checks"]
+    head = (f"**{d['name']}** (paper 002, vehicle `{d['vehicle']['name']}`): "
+            f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c['passed'] for c in checks)}/{len(checks)} checks passed")
+    if d.get("kind") == "kalman_baseline":
+        return (head + f"; worst spectral radius of the steady-state error dynamics {d['gamma']:.4g} (< 1) over "
+                f"the speed range; noise tuned on the MBDS record's t < 425 s ({d['solver']['name']}).\n")
+    lines = [head + f"; order {d['order']}; certified worst weighted H-inf error {d['gamma']:.4g} over the "
+             f"coefficient-polytope vertices, {d['gamma_grid']:.4g} over a grid of true plants "
+             f"({'x'.join(map(str, d['certificate_grid']))} per band).", "",
+             "| mode | v band (m/s) | Cf box (kN/rad) | Cr box (kN/rad) | LMI gamma | vertex worst | grid worst | "
+             "grid DC floor | y(s) / x(s), ascending |", "|---|---|---|---|---|---|---|---|---|"]
+    for m in d["modes"]:
+        b = m["box"]
+        lines.append(f"| {m['index']} | {m['vx_band'][0]:.4g}-{m['vx_band'][1]:.4g} | "
+                     f"{b['Cf'][0] / 1e3:.4g}-{b['Cf'][1] / 1e3:.4g} | {b['Cr'][0] / 1e3:.4g}-{b['Cr'][1] / 1e3:.4g} | "
+                     f"{m['gamma_lmi']:.4g} | {m['gamma_vertex']:.4g} | {m['gamma_grid']:.4g} | "
+                     f"{m['grid_dc_floor']:.4g} | {[round(c, 5) for c in m['estimator']['num']]} / "
+                     f"{[round(c, 5) for c in m['estimator']['den']]} |")
+    lines += ["", f"- method: {d['modes'][0]['method']}", ""]
+    return "\n".join(lines)
+
+
+def _table_002(report: Path, replays: dict) -> str:
+    """Paper 002: beta RMS of the estimators and the Kalman baseline, co-simulations and real data."""
+    import json
+    import math
+
+    rows = ["On CarPlant built for paper 002's vehicle (`delibasi`, 20..40 km/h), the estimator sees the yaw "
+            "rate only; the Kalman baseline also ay, the steering angle and the speed. Truth: the CG sideslip.", "",
+            "| run | observer | beta RMS (deg) | beta max abs (deg) |", "|---|---|---|---|"]
+    for scen, tag, params, noise, obs, plant_vehicle in RUNS:
+        if obs != P002:
+            continue
+        m = json.loads((report / f"{scen}_{tag}" / "metrics.json").read_text())
+        for lab, o in m["observers"].items():
+            b = o["estimates"]["beta_hat"]
+            rows.append(f"| {scen} | {lab} | {math.degrees(b['rms']):.3f} | {math.degrees(b['max_abs']):.3f} |")
+    rows += ["", "Real data (MBDS record): beta RMS error in degrees, tuned on t < 425 s, held out t >= 425 s. "
+             f"A reference port of the dataset authors' filter gives {REFERENCE_PORT_DEG[0]} / {REFERENCE_PORT_DEG[1]}.",
+             "", "| estimator | FMU | t < 425 s | t >= 425 s |", "|---|---|---|---|"]
+    for label, (m, _d) in replays.items():
+        if not label.startswith("002"):
+            continue
+        ob = next(iter(m["observers"].values()))
+        b = ob["estimates"]["beta_hat"]
+        rows.append(f"| {label[5:]} | {next(iter(m['observers']))} | "
+                    f"{math.degrees(b['before_split']['rms']):.3f} | {math.degrees(b['after_split']['rms']):.3f} |")
+    return "\n".join(rows)
 
 
 def _headline(report: Path) -> str:
@@ -106,7 +174,9 @@ def demo(out: Path) -> Path:
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
                 ReportSection(title="bank-braking: paper 000's figures", markdown=_headline(report)),
-                ReportSection(title="Paper 001: interval observer, enclosure and widths", markdown=_interval_table(report, replays))]
+                ReportSection(title="Paper 001: interval observer, enclosure and widths", markdown=_interval_table(report, replays)),
+                ReportSection(title="Paper 002: fixed-order sideslip estimator beside the Kalman baseline",
+                              markdown=_table_002(report, replays))]
     for scen, tag, params, noise, _obs, plant_vehicle in RUNS:
         d = report / (f"{scen}_{tag}" if tag else scen)
         what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] + (["sensor noise and bias"] if noise else [])
@@ -139,6 +209,9 @@ def _replays(out: Path, report: Path) -> dict:
     m, _ = rp.run(rp.resolve_csv("mbds"), fmu, mdir, split=rp.default_split(rp.resolve_csv("mbds")),
                   observer="LateralIntervalObserver", vehicle="mbds_250lm", mass=wide["model"]["m"])
     runs[f"LateralIntervalObserver_mbds_250lm, +-{WIDE_BOX[0]:.0%} box"] = (m, mdir)
+    for label, name, vehicle in REPLAYS_002:
+        m = replay("mbds", name, vehicle, out=report, fmu_dir=out)
+        runs[f"002: {label}"] = (m, report / f"replay_mbds_250lm_100hz_{designs.artefact_name(name, vehicle)}")
     return runs
 
 
@@ -167,6 +240,8 @@ def _interval_table(report: Path, replays: dict) -> str:
              "| design | vy enclosed (t < 425 / t >= 425) | vy mean width | m ay enclosed (t < 425 / t >= 425) |",
              "|---|---|---|---|"]
     for label, (m, _d) in replays.items():
+        if label.startswith("002"):
+            continue
         ob = next(iter(m["observers"].values()))
         v, f = ob["intervals"]["vy"], ob["may_in_force_sum"]
         rows.append(f"| {label} | {v['before_split']['enclosure_rate']:.3f} / {v['after_split']['enclosure_rate']:.3f} | "

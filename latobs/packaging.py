@@ -63,6 +63,12 @@ OBSERVERS = {
     "SideslipBankObserver": FmuKind("SideslipBankObserver", "sideslip_bank_observer", "design", "sedan"),
     "SideslipBankObserverTire": FmuKind("SideslipBankObserverTire", "sideslip_bank_observer", "design", "sedan"),
     "LateralIntervalObserver": FmuKind("LateralIntervalObserver", "lateral_interval_observer", "design", "sedan"),
+    "SideslipFixedOrderEstimator": FmuKind("SideslipFixedOrderEstimator", "sideslip_fixed_order_estimator",
+                                           "design", "delibasi"),
+    "SideslipFixedOrderEstimatorScheduled": FmuKind("SideslipFixedOrderEstimatorScheduled",
+                                                    "sideslip_fixed_order_estimator_scheduled", "design",
+                                                    "mbds_250lm"),
+    "SideslipKalmanFilter": FmuKind("SideslipKalmanFilter", "sideslip_kalman_filter", "design", "mbds_250lm"),
 }
 
 

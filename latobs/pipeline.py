@@ -32,13 +32,16 @@ def design_one(name: str, vehicle: str | None, out: Path, quiet: bool = False) -
                         (("cond_P", "cond(P)", ".3g"), ("iss_gain", "ISS gain", ".4g"))
                         if isinstance(s.get(key), (int, float)))
         print(f"{data['name']}: certified ({len(data['checks'])} checks), gamma = {s['gamma']:.4g}{extra}, "
-              f"Clarabel {data['solver']['status']} in {data['solver']['seconds']:.2f} s -> {path}")
+              f"{data['solver']['name']} {data['solver']['status']} in {data['solver']['seconds']:.2f} s -> {path}")
         for m in s["per_mode"]:
             at = (f"{m['speed_kmh']:5.1f} km/h" if "speed_kmh" in m else
-                  f"{m['speed_ms']:5.2f} m/s" if isinstance(m.get("speed_ms"), (int, float)) else "")
+                  f"{m['speed_ms']:5.2f} m/s" if isinstance(m.get("speed_ms"), (int, float)) else
+                  f"{m['vx_band'][0]:.4g}-{m['vx_band'][1]:.4g} m/s" if "vx_band" in m else "")
             parts = [f"{label} {m[key]:{fmt}}" for key, label, fmt in
                      (("hinf", "H-inf bank->beta error", ".4g"), ("slowest_bank_pole", "slowest bank pole", ".3f"),
-                      ("slowest_pole", "slowest pole", ".3f"), ("largest_gain", "largest gain", ".4g"))
+                      ("slowest_pole", "slowest pole", ".3f"), ("largest_gain", "largest gain", ".4g"),
+                      ("gamma_lmi", "LMI gamma", ".4g"), ("gamma_vertex", "certified vertex worst case", ".4g"),
+                      ("gamma_grid", "certified grid worst case", ".4g"))
                      if isinstance(m.get(key), (int, float)) and not (key == "slowest_pole" and "slowest_bank_pole" in m)]
             print(f"  mode {m['mode']}{' @ ' + at if at else ''}: {', '.join(parts)}")
     return path
@@ -72,7 +75,9 @@ def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
     missing = [n for n in names if not (fmu_dir / f"{n}.fmu").is_file()]
     if missing:
         print(f"building missing FMU(s): {', '.join(missing)}")
-        build(missing, None, fmu_dir)
+        for n in missing:                     # NAME or NAME_VEHICLE (a design for another vehicle)
+            design, vehicle = designs.parse_artefact(n)
+            build([design], vehicle, fmu_dir)
     return {n: fmu_dir / f"{n}.fmu" for n in names}
 
 

@@ -20,6 +20,7 @@ mismatch; the ISS gain sqrt(gamma/(alpha eps)) of eq. (37); the largest gain.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import asdict, dataclass
 
@@ -63,6 +64,10 @@ def certify(data: dict) -> tuple[bool, list[Check]]:
         checks = _certify_000(data)
     elif paper == "001":
         checks = _certify_001(data)
+    elif paper == "002" and data.get("kind") == "kalman_baseline":
+        checks = _certify_kalman(data)
+    elif paper == "002":
+        checks = _certify_002(data)
     else:
         raise ValueError(f"design {data.get('name')!r}: no certificate for paper {paper!r}")
     return all(c.passed for c in checks) and bool(checks), checks
@@ -211,12 +216,256 @@ def _certify_001(d: dict) -> list[Check]:
     return checks
 
 
+# -- paper 002's baseline peer: the MBDS authors' linear bicycle-model Kalman filter -----------------
+KALMAN_STEP = 0.01      # s, certificate step when the file names none: the MBDS record's 100 Hz
+KALMAN_SPEEDS = 50      # speeds of the certificate's grid when the file names no number
+
+
+def _kalman_force_model(p: dict, v: float):
+    """(A, B, C, D) of the single-track model at the speed v (m/s), states [vy, r], input delta,
+    outputs [ay, r], derived from the force balance alone (not from any filter code): slip angles
+    af = delta - (vy + lf r)/v, ar = -(vy - lr r)/v, axle forces Fy = C alpha, m (vy' + v r) =
+    Fyf + Fyr, Iz r' = lf Fyf - lr Fyr, ay = (Fyf + Fyr)/m. The map is linear, so each column is
+    the response to a unit state or input."""
+    def respond(vy, r, delta):
+        fyf = p["Cf"] * (delta - (vy + p["lf"] * r) / v)
+        fyr = p["Cr"] * (-(vy - p["lr"] * r) / v)
+        ay = (fyf + fyr) / p["m"]
+        return np.array([ay - v * r, (p["lf"] * fyf - p["lr"] * fyr) / p["Iz"]]), np.array([ay, r])
+    cols = [respond(*e) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))]
+    A = np.column_stack([cols[0][0], cols[1][0]])
+    C = np.column_stack([cols[0][1], cols[1][1]])
+    return A, cols[2][0], C, cols[2][1]
+
+
+def _certify_kalman(d: dict) -> list[Check]:
+    """Certificate of the Kalman baseline's design file (``kalman_baseline.design``), numpy/scipy
+    only: the covariances (Q PSD, R and P0 positive definite, symmetric); the model the filter
+    runs (``kalman_baseline.model``, the stored coefficients, the FMU runtime's ``model``) against
+    the force-balance derivation ``_kalman_force_model``; the runtime's zero-order hold against
+    scipy's; and, on a grid of speeds over each mode's range at the step h of the file's
+    ``certificate`` section (default 0.01 s, the MBDS rate), the discretised model observable
+    from [ay, r] and the steady-state Kalman filter of the discrete algebraic Riccati equation
+    (Q h, R) Schur stable, its worst spectral radius <= the stored gamma. Frozen speed: the
+    time-varying filter is not covered between grid speeds or under fast speed changes."""
+    import scipy.linalg
+    import scipy.signal
+
+    from ..fmu_src.kalman_observer import KalmanObserver, _expm3
+    from . import kalman_baseline as kb
+
+    checks: list[Check] = []
+    name = d.get("name")
+    vehicle = parse_vehicle(d["vehicle"], f"design file {name}")
+    p = vehicle.require(("m", "lf", "lr", "Iz", "Cf", "Cr"), f"the certificate of {name}")
+    Q, R, P0 = (np.asarray(x, float) for x in (d["noise"]["q"], d["noise"]["r"], d["initial"]["P0"]))
+    checks.append(_le("Q, R, P0 are 2x2 and symmetric: max |M - M'|",
+                      max(float(np.max(np.abs(M - M.T))) if M.shape == (2, 2) else math.inf for M in (Q, R, P0)), 0.0))
+    if any(M.shape != (2, 2) for M in (Q, R, P0)):
+        return checks
+    checks.append(_ge("Q positive semidefinite: min eig(Q) (process noise on [vy', r'])",
+                      float(np.min(np.linalg.eigvalsh(Q))), 0.0))
+    checks.append(_ge("R positive definite: min eig(R) (measurement noise on [ay, r])",
+                      float(np.min(np.linalg.eigvalsh(R))), 1e-12))
+    checks.append(_ge("P0 positive definite: min eig(P0)", float(np.min(np.linalg.eigvalsh(P0))), 1e-12))
+    cert = d.get("certificate", {}) or {}
+    h = float(cert.get("step_s", KALMAN_STEP))
+    n = int(cert.get("n_speeds", KALMAN_SPEEDS))
+    rt = d.get("runtime", {}) or {}
+    vx_min, vx_max = float(rt.get("vx_min", 1.0)), float(rt.get("vx_max", 200.0))
+    try:
+        runtime = KalmanObserver(d, {})
+        runtime_error = ""
+    except ValueError as exc:
+        runtime, runtime_error = None, str(exc)
+    checks.append(_le("the FMU runtime accepts the design file (0 = yes)", 0.0 if runtime else 1.0, 0.0, runtime_error))
+    mod = d.get("model", {})
+    for mode in d["modes"]:
+        lo, hi = (float(x) for x in mode["scheduling"]["range"])
+        where = f"mode {mode['index']}, vx in [{lo:g}, {hi:g}] m/s"
+        checks.append(_le(f"certified speeds inside the runtime's clamp [vx_min, vx_max] = [{vx_min:g}, {vx_max:g}] "
+                          f"m/s: max(vx_min - min, max - vx_max), {where}", max(vx_min - lo, hi - vx_max), 0.0))
+        speeds = np.linspace(lo, hi, max(n, 1)) if hi > lo else np.array([lo])
+        err_kb = err_stored = err_rt = err_zoh = 0.0
+        obs, rho_max, res_max = math.inf, 0.0, 0.0
+        for v in speeds:
+            A, B, C, D = _kalman_force_model(p, float(v))
+            A1, B1, C1, D1 = kb.model(p, v)
+            err_kb = max(err_kb, _rel_err(A1[0], A), _rel_err(B1[0], B), _rel_err(C1[0], C), _rel_err(D1[0], D))
+            if mod:
+                As = np.asarray(mod["A_inv_v"], float) / v + np.asarray(mod["A_v"], float) * v
+                Cs = np.asarray(mod["C_inv_v"], float) / v + np.asarray(mod["C_0"], float)
+                err_stored = max(err_stored, _rel_err(As, A), _rel_err(mod["B"], B), _rel_err(Cs, C),
+                                 _rel_err(mod["D"], D))
+            Phi, Gam, *_ = scipy.signal.cont2discrete((A, B[:, None], C, D[:, None]), h, method="zoh")
+            if runtime is not None:
+                Ar, Br, Cr_, Dr = runtime.model(float(v))
+                err_rt = max(err_rt, _rel_err(Ar, A), _rel_err(Br, B), _rel_err(Cr_, C), _rel_err(Dr, D))
+                E = np.asarray(_expm3([[*(a * h for a in Ar[0]), Br[0] * h], [*(a * h for a in Ar[1]), Br[1] * h],
+                                       [0.0, 0.0, 0.0]]))
+                err_zoh = max(err_zoh, _rel_err(E[:2, :2], Phi), _rel_err(E[:2, 2], Gam[:, 0]))
+            sv = np.linalg.svd(np.vstack([C, C @ Phi]), compute_uv=False)
+            obs = min(obs, float(sv[-1] / sv[0]))
+            try:
+                P = scipy.linalg.solve_discrete_are(Phi.T, C.T, Q * h, R)
+                S = C @ P @ C.T + R
+                K = P @ C.T @ np.linalg.inv(S)
+                res = Phi @ (P - K @ C @ P) @ Phi.T + Q * h - P         # the Riccati recursion's fixed point
+                res_max = max(res_max, float(np.max(np.abs(res)) / max(1e-300, float(np.max(np.abs(P))))))
+                rho = float(np.max(np.abs(np.linalg.eigvals(Phi @ (np.eye(2) - K @ C)))))
+            except (np.linalg.LinAlgError, ValueError):
+                rho, res_max = math.inf, math.inf
+            rho_max = max(rho_max, rho if math.isfinite(rho) else math.inf)
+        grid = f"{len(speeds)} speeds in [{lo:g}, {hi:g}] m/s"
+        checks.append(_le(f"kalman_baseline.model equals the force-balance model (A, B, C, D; max rel. error), {grid}",
+                          err_kb, 1e-12))
+        if mod:
+            checks.append(_le(f"stored model coefficients equal the force-balance model (max rel. error), {grid}",
+                              err_stored, 1e-12))
+        checks.append(_le(f"FMU runtime's model(v) equals the force-balance model (max rel. error), {grid}",
+                          err_rt if runtime is not None else math.inf, 1e-12))
+        checks.append(_le(f"FMU runtime's zero-order hold (Taylor expm) equals scipy's at h = {h:g} s "
+                          f"(max rel. error), {grid}", err_zoh if runtime is not None else math.inf, 1e-12))
+        checks.append(_ge(f"discretised model observable from [ay, r]: min sigma_min/sigma_max of [C; C Phi] "
+                          f"at h = {h:g} s, {grid}", obs, 1e-9))
+        checks.append(_le(f"discrete algebraic Riccati equation (Q h, R) solved: max relative residual at "
+                          f"h = {h:g} s, {grid}", res_max, 1e-8))
+        checks.append(Check(f"steady-state Kalman error dynamics Phi (I - K C) Schur stable: max spectral radius "
+                            f"at h = {h:g} s, {grid}", float(rho_max), 1.0, bool(rho_max < 1.0), "<"))
+        checks.append(_le(f"max spectral radius <= the stored gamma, {grid}", rho_max,
+                          float(d["gamma"]) * (1 + 1e-9)))
+    return checks
+
+
+def _bicycle_coefficients_002(m, Iz, lf, lr, Cf, Cr, v):
+    """(b1, b2, a) ascending, a monic, of beta/delta and r/delta, derived here from the state-space
+    force equations in (vy, r) and ``scipy.signal.ss2tf`` (independent of the design module's
+    closed form): m (vy' + v r) = Fyf + Fyr, Iz r' = lf Fyf - lr Fyr, Fyf = Cf (delta - (vy + lf r)/v),
+    Fyr = Cr (lr r - vy)/v, beta = vy / v."""
+    import scipy.signal
+    A = np.array([[-(Cf + Cr) / (m * v), (lr * Cr - lf * Cf) / (m * v) - v],
+                  [(lr * Cr - lf * Cf) / (Iz * v), -(lf ** 2 * Cf + lr ** 2 * Cr) / (Iz * v)]])
+    B = np.array([[Cf / m], [lf * Cf / Iz]])
+    C = np.array([[1.0 / v, 0.0], [0.0, 1.0]])
+    num, den = scipy.signal.ss2tf(A, B, C, np.zeros((2, 1)))
+    den = np.asarray(den, float)
+    num = np.asarray(num, float) / den[0]
+    den = den / den[0]
+    # descending (s^2, s, 1) -> ascending; the s^2 terms of num are 0 (strictly proper)
+    return num[0][::-1][:2], num[1][::-1][:2], den[::-1]
+
+
+def _weighted_error_002(b1, b2, a, y, x, W1, W2, w):
+    """|W1 W2 (b1 - b2 y/x)/a| (jw) for plant rows (N, .) and frequencies w: (N, W)."""
+    s = 1j * np.asarray(w, float)
+    pv = lambda c: np.polyval(np.asarray(c, float)[::-1], s)
+    Wt = pv(W1["num"]) / pv(W1["den"]) * pv(W2["num"]) / pv(W2["den"])
+    k = pv(y) / pv(x)
+    rows = lambda M: np.array([np.polyval(np.asarray(c, float)[::-1], s) for c in M])
+    return np.abs(Wt * (rows(b1) - rows(b2) * k) / rows(a))
+
+
+def _peak_002(b1, b2, a, y, x, W1, W2, wmin=1e-5, wmax=1e3, n=4000):
+    """Worst |G(jw)| over the plants: a dense log sweep plus w = 0, then a 400-point linear
+    re-sweep between the neighbours of the largest sample (a plain sweep, no optimiser)."""
+    w = np.concatenate([[0.0], np.logspace(math.log10(wmin), math.log10(wmax), n)])
+    M = _weighted_error_002(b1, b2, a, y, x, W1, W2, w)
+    i, j = np.unravel_index(int(np.argmax(M)), M.shape)
+    lo, hi = w[max(j - 1, 0)], w[min(j + 1, len(w) - 1)]
+    fine = _weighted_error_002(b1[i:i + 1], b2[i:i + 1], a[i:i + 1], y, x, W1, W2, np.linspace(lo, hi, 400))
+    return float(max(M.max(), fine.max()))
+
+
+def _certify_002(d: dict) -> list[Check]:
+    """Paper 002 (fixed-order estimator y/x, per speed band), independent of Lemma 5 and of the
+    design module: the plant coefficients are re-derived from the state-space model
+    (``_bicycle_coefficients_002``), the coefficient polytope from its box corners, and every
+    worst case by a plain frequency sweep.
+
+    Per mode: x Hurwitz; every vertex plant and every grid plant stable; the polytope contains a
+    5^3 grid of true plants (the multi-affine over-bound holds); the worst weighted error over the
+    64 vertices <= the file's ``gamma_vertex`` and over the (k_Cf, k_Cr, k_v) grid of true plants
+    <= ``gamma_grid`` (each also within 1 % of the claim, so that a claim is not vacuous); the
+    file's overall ``gamma`` / ``gamma_grid`` are the modes' maxima. Scheduled: the bands are
+    contiguous, cover the vehicle's speed range and match the runtime's ``estimators``."""
+    checks: list[Check] = []
+    par = d["vehicle"]["parameters"]
+    m, Iz, lf, lr = (float(par[k]) for k in ("m", "Iz", "lf", "lr"))
+    W1, W2 = d["weights"]["W1"], d["weights"]["W2"]
+    grid = tuple(int(k) for k in d.get("certificate_grid", (9, 9, 9)))
+    ests = d["estimators"] if d.get("scheduled") else [d["estimator"]]
+    if len(ests) != len(d["modes"]):
+        checks.append(_le("runtime estimators match the modes (count difference)",
+                          abs(len(ests) - len(d["modes"])), 0))
+        return checks
+    for mode, est in zip(d["modes"], ests):
+        where = f"mode {mode['index']} (v in [{mode['box']['v'][0]:.4g}, {mode['box']['v'][1]:.4g}] m/s)"
+        y, x = np.asarray(est["num"], float), np.asarray(est["den"], float)
+        same = max(float(np.max(np.abs(np.asarray(mode["estimator"][k], float) - np.asarray(est[k], float))))
+                   for k in ("num", "den")) if all(len(mode["estimator"][k]) == len(est[k]) for k in ("num", "den")) \
+            else math.inf
+        checks.append(_le(f"runtime estimator = the mode's estimator (max coefficient difference), {where}", same, 0.0))
+        xr = float(np.max(np.roots(x[::-1]).real)) if len(x) > 1 else -math.inf
+        checks.append(_le(f"estimator denominator x(s) Hurwitz (max Re root), {where}", xr, -1e-9))
+        cf, cr, vv = mode["box"]["Cf"], mode["box"]["Cr"], mode["box"]["v"]
+        corners = [_bicycle_coefficients_002(m, Iz, lf, lr, a_, b_, c_) for a_ in cf for b_ in cr for c_ in vv]
+        flat = lambda t: np.concatenate([t[0], t[1], t[2][:2]])        # b1_0 b1_1 b2_0 b2_1 a_0 a_1
+        C = np.array([flat(t) for t in corners])
+        lo, hi = C.min(axis=0), C.max(axis=0)
+        verts = np.array([[(lo, hi)[p][k] for k, p in enumerate(pick)] for pick in itertools.product((0, 1), repeat=6)])
+        vb1, vb2 = verts[:, 0:2], verts[:, 2:4]
+        va = np.column_stack([verts[:, 4:6], np.ones(len(verts))])
+        axes = [np.linspace(lo_, hi_, k) for (lo_, hi_), k in zip((cf, cr, vv), grid)]
+        pts = list(itertools.product(*axes))
+        gt = [_bicycle_coefficients_002(m, Iz, lf, lr, *p) for p in pts]
+        gb1, gb2, ga = (np.array([t[i] for t in gt]) for i in range(3))
+        G = np.array([flat(t) for t in gt])
+        tol = 1e-9 * np.maximum(np.abs(lo), np.abs(hi))
+        outside = float(np.max(np.maximum(lo - tol - G, G - hi - tol).clip(min=0)))
+        checks.append(_le(f"coefficient polytope contains the grid's true plants (max excess), {where}", outside, 0.0))
+        for tag, (b1, b2, a), claim in (("64 polytope vertices", (vb1, vb2, va), mode["gamma_vertex"]),
+                                        (f"{len(pts)} true plants on the grid", (gb1, gb2, ga), mode["gamma_grid"])):
+            # a monic quadratic is Hurwitz iff its two lower coefficients are > 0
+            worst_plant = float(-np.min(a[:, :2]))
+            checks.append(_le(f"plants stable ({tag}): -min(a_0, a_1), {where}", worst_plant, 0.0))
+            g = _peak_002(b1, b2, a, y, x, W1, W2) if worst_plant < 0 and xr < 0 else math.inf
+            checks.append(_le(f"worst weighted H-inf error over the {tag} <= claimed, {where}", g,
+                              float(claim) * (1 + REL_TOL)))
+            checks.append(_le(f"claimed worst case over the {tag} is tight (relative gap), {where}",
+                              abs(float(claim) - g) / max(g, 1e-300) if math.isfinite(g) else math.inf, 1e-2))
+    checks.append(_le("gamma = max over the modes of the vertex worst case (difference)",
+                      abs(d["gamma"] - max(mm["gamma_vertex"] for mm in d["modes"])), 0.0))
+    checks.append(_le("gamma_grid = max over the modes of the grid worst case (difference)",
+                      abs(d["gamma_grid"] - max(mm["gamma_grid"] for mm in d["modes"])), 0.0))
+    if d.get("scheduled"):
+        bands = [e["vx_band"] for e in ests]
+        gap = max([abs(b1_[0] - b0[1]) for b0, b1_ in zip(bands, bands[1:])] + [0.0])
+        checks.append(_le("speed bands contiguous (max gap or overlap, m/s)", gap, 0.0))
+        rv = d["vehicle"].get("ranges", {}).get("speed")
+        if rv:
+            k = {"m/s": 1.0, "km/h": 1 / 3.6}.get(rv.get("unit", "m/s"), 1.0)
+            cover = max(bands[0][0] - k * rv["min"], k * rv["max"] - bands[-1][1], 0.0)
+            checks.append(_le("speed bands cover the vehicle's speed range (uncovered, m/s)", cover, 0.0))
+        checks.append(_le("each mode's box speed range = its band (max difference, m/s)",
+                          max(abs(e["vx_band"][i] - mm["box"]["v"][i]) for e, mm in zip(ests, d["modes"])
+                              for i in (0, 1)), 0.0))
+    return checks
+
+
 def as_dicts(checks: list[Check]) -> list[dict]:
     return [asdict(c) for c in checks]
 
 
 def summary(data: dict) -> dict:
     """Headline figures of a certified design (for notes and reports)."""
+    if data.get("paper") == "002" and data.get("kind") == "fixed_order_estimator":
+        return {"gamma": data["gamma"], "gamma_grid": data["gamma_grid"],
+                "per_mode": [{"mode": m["index"], "vx_band": m["vx_band"], "gamma_lmi": m["gamma_lmi"],
+                              "gamma_vertex": m["gamma_vertex"], "gamma_grid": m["gamma_grid"],
+                              "grid_dc_floor": m["grid_dc_floor"], "estimator": m["estimator"]}
+                             for m in data["modes"]]}
+    if data.get("paper") == "002":          # the Kalman baseline: no modes to tabulate
+        return {"gamma": data.get("gamma"), "per_mode": []}
     if data.get("paper") == "001":
         return {"gamma": data["gamma"], "iss_gain": data["iss_gain"],
                 "per_mode": [{"mode": m["index"], "speed_ms": m["vx"], "band": m["band"],

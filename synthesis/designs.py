@@ -46,6 +46,32 @@ def _options_001(name: str):
     return interval_001.DesignOptions(name=name)
 
 
+def _solve_002(vehicle: Vehicle, opts) -> dict:
+    from . import fixed_order_002
+
+    return fixed_order_002.to_design_dict(fixed_order_002.design_for_vehicle(vehicle, opts))
+
+
+def _options_002(scheduled: bool):
+    def options(name: str):
+        from . import fixed_order_002
+
+        return fixed_order_002.DesignOptions(name=name, scheduled=scheduled)
+    return options
+
+
+def _solve_kalman(vehicle: Vehicle, opts) -> dict:
+    from . import kalman_baseline
+
+    return kalman_baseline.design(vehicle, opts)
+
+
+def _options_kalman(name: str):
+    from . import kalman_baseline
+
+    return kalman_baseline.DesignOptions(name=name)
+
+
 def _options_000(switching: str):
     def options(name: str):
         from . import pi_hinf_000
@@ -68,6 +94,21 @@ DESIGNS: dict[str, DesignEntry] = {
         "switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and axle "
         "forces for cornering stiffnesses in a +-20 % box, speed modes 11.5/14.5/18 m/s (Theorem 1)",
         _options_001, _solve_001),
+    "SideslipFixedOrderEstimator": DesignEntry(
+        "SideslipFixedOrderEstimator", "002", "delibasi",
+        "fixed-order robust H-inf sideslip estimator beta^ = (y/x) r from the yaw rate alone, one filter for "
+        "the whole (Cf, Cr, v) box, Lemma 5 + certified polish (Delibasi 2014)",
+        _options_002(False), _solve_002),
+    "SideslipFixedOrderEstimatorScheduled": DesignEntry(
+        "SideslipFixedOrderEstimatorScheduled", "002", "mbds_250lm",
+        "speed-scheduled fixed-order robust H-inf sideslip estimator: one Lemma 5 design per speed band, "
+        "switched on vx (extension of paper 002)",
+        _options_002(True), _solve_002),
+    "SideslipKalmanFilter": DesignEntry(
+        "SideslipKalmanFilter", "002", "mbds_250lm",
+        "baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's authors "
+        "(measurements ay and yaw rate), noise tuned on the record's t < 425 s",
+        _options_kalman, _solve_kalman),
 }
 
 
@@ -81,6 +122,19 @@ def artefact_name(name: str, vehicle: str | None) -> str:
     """CONTRACT: a build for a vehicle other than the design's default is named NAME_V."""
     entry = get(name)
     return name if vehicle in (None, entry.default_vehicle) else f"{name}_{vehicle}"
+
+
+def parse_artefact(artefact: str) -> tuple[str, str | None]:
+    """(design, vehicle) of an artefact name ``NAME`` or ``NAME_V`` (V a known vehicle set);
+    the longest design name that fits wins. Unknown -> KeyError naming the known designs."""
+    from .params import vehicle_names
+
+    if artefact in DESIGNS:
+        return artefact, None
+    for name in sorted(DESIGNS, key=len, reverse=True):
+        if artefact.startswith(name + "_") and artefact[len(name) + 1:] in vehicle_names():
+            return name, artefact[len(name) + 1:]
+    raise KeyError(f"unknown design {artefact!r}; known: {', '.join(DESIGNS)} (optionally _VEHICLE)")
 
 
 def run(name: str, vehicle: str | None = None, **overrides) -> dict:

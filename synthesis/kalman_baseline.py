@@ -29,10 +29,21 @@ Tuning (``tune``): Q = diag(q_vy, q_r), R = diag(r_ay, r_r); the estimate depend
 ratios Q/R, so r_r is fixed and (q_vy, q_r, r_ay) are searched on a log grid, on t < 425 s of
 the MBDS record only (its held-out part t >= 425 s is only evaluated). See ``TUNED`` and
 ``report`` for the figures.
+
+Design file (``design(vehicle, DesignOptions(name))``, catalogue entry ``SideslipKalmanFilter``,
+certified by ``certificate._certify_kalman``): nothing is solved; the file holds the vehicle (its
+name and m, lf, lr, Iz, Cf, Cr), the covariances (the "gains" of its one mode, the speed range
+its scheduling range), the model coefficients and everything ``to_data_dict`` gives the runtime.
+Its ``gamma`` is the worst spectral radius of the steady-state (frozen-speed, DARE) error
+dynamics Phi (I - K C) over a 50-speed grid of the certified range at h = 0.01 s: dimensionless,
+< 1, not an H-infinity level (0.913 for mbds_250lm on 15..63 m/s, time constant 0.11 s).
 """
 from __future__ import annotations
 
 import itertools
+import math
+import time
+from dataclasses import dataclass, fields
 from typing import Mapping
 
 import numpy as np
@@ -40,6 +51,9 @@ import scipy.linalg
 
 VEHICLE_KEYS = ("m", "lf", "lr", "Iz", "Cf", "Cr")
 VX_MIN = 1.0                    # m/s, the model's speed is clamped to >= VX_MIN
+VX_MAX = 200.0                  # m/s, ... and to <= VX_MAX (the runtime's default)
+CERT_STEP = 0.01                # s, step of the certificate's discretisation: the MBDS record's 100 Hz
+DEFAULT_SPEED_RANGE = (5.0, 60.0)   # m/s, certified speeds of a vehicle without a ``speed`` range
 P0 = (1.0, 0.01)                # initial covariance diag: vy (m/s)^2, r (rad/s)^2
 SPLIT = 425.0                   # s, the MBDS record's held-out split
 
@@ -175,13 +189,201 @@ def tune(cols: Mapping, vehicle_values: Mapping, split: float = SPLIT, r_r: floa
     return best[0], best[1], best[2], table
 
 
-def to_data_dict(vehicle_values: Mapping, q, r_meas, p0=P0, vx_min: float = VX_MIN) -> dict:
-    """The data file of the runtime ``fmu_src/kalman_observer.py``."""
+def to_data_dict(vehicle_values: Mapping, q, r_meas, p0=P0, vx_min: float = VX_MIN,
+                 vx_max: float = VX_MAX) -> dict:
+    """The data file of the runtime ``fmu_src/kalman_observer.py``: vehicle {m (kg), lf, lr (m),
+    Iz (kg m^2), Cf, Cr (N/rad)}, noise {q: 2x2 ((m/s^2)^2 s, (rad/s^2)^2 s), r: 2x2 ((m/s^2)^2,
+    (rad/s)^2)}, initial {P0: 2x2 ((m/s)^2, (rad/s)^2)}, runtime {vx_min, vx_max (m/s)}."""
     return {"kind": "kalman_baseline",
             "vehicle": vehicle_dict(vehicle_values),
             "noise": {"q": _mat2(q, "q").tolist(), "r": _mat2(r_meas, "r_meas").tolist()},
             "initial": {"P0": _mat2(p0, "p0").tolist()},
-            "runtime": {"vx_min": float(vx_min)}}
+            "runtime": {"vx_min": float(vx_min), "vx_max": float(vx_max)}}
+
+
+# --------------------------------------------------------------------------------------------
+# the design file (``latobs design SideslipKalmanFilter``)
+# --------------------------------------------------------------------------------------------
+class DesignError(RuntimeError):
+    """The options make no usable filter (e.g. no stabilising Riccati solution); names the design."""
+
+
+@dataclass(frozen=True)
+class DesignOptions:
+    """Options of the Kalman baseline's design file (SI units).
+
+    q, r_meas, p0   noise covariances as in ``run_kalman`` (2 variances or 2x2): q the continuous
+                    process-noise intensity on [vy', r'] ((m/s^2)^2 s, (rad/s^2)^2 s), r_meas the
+                    measurement covariance of [ay, r] ((m/s^2)^2, (rad/s)^2), p0 the initial
+                    covariance of [vy, r] ((m/s)^2, (rad/s)^2); default ``TUNED`` and ``P0``
+    vx_min, vx_max  m/s, the runtime evaluates the model at vx clamped to [vx_min, vx_max]
+    speed_range     m/s, the speeds the certificate covers; None: the vehicle's ``speed`` range
+                    (``vehicle.ranges``), else ``DEFAULT_SPEED_RANGE``
+    step            s, the sample time the certificate discretises at (the MBDS record's 0.01 s)
+    n_speeds        number of speeds of the certificate's grid over ``speed_range``
+    """
+
+    name: str
+    q: tuple = TUNED["q"]
+    r_meas: tuple = TUNED["r_meas"]
+    p0: tuple = P0
+    vx_min: float = VX_MIN
+    vx_max: float = VX_MAX
+    speed_range: tuple[float, float] | None = None
+    step: float = CERT_STEP
+    n_speeds: int = 50
+
+    def validate(self) -> None:
+        where = f"design {self.name}"
+        try:
+            Q, R, P = _mat2(self.q, "q"), _mat2(self.r_meas, "r_meas"), _mat2(self.p0, "p0")
+        except ValueError as exc:
+            raise DesignError(f"{where}: {exc}") from None
+        for M, what, strict in ((Q, "q", False), (R, "r_meas", True), (P, "p0", True)):
+            if not np.allclose(M, M.T, rtol=0, atol=1e-12 * max(1.0, float(np.abs(M).max()))):
+                raise DesignError(f"{where}: {what} must be symmetric, got {M.tolist()}")
+            low = float(np.min(np.linalg.eigvalsh(M)))
+            if (low <= 0) if strict else (low < 0):
+                raise DesignError(f"{where}: {what} must be positive {'definite' if strict else 'semidefinite'}, "
+                                  f"its smallest eigenvalue is {low:g}")
+        if not (math.isfinite(self.vx_min) and math.isfinite(self.vx_max) and 0 < self.vx_min < self.vx_max):
+            raise DesignError(f"{where}: need finite 0 < vx_min < vx_max (m/s), got {self.vx_min}, {self.vx_max}")
+        if self.speed_range is not None:
+            lo, hi = (float(x) for x in self.speed_range)
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+                raise DesignError(f"{where}: speed_range must be finite with 0 < min <= max (m/s), got {self.speed_range}")
+        if not (math.isfinite(self.step) and self.step > 0):
+            raise DesignError(f"{where}: step must be a finite time > 0 s, got {self.step}")
+        if int(self.n_speeds) < 1:
+            raise DesignError(f"{where}: n_speeds must be >= 1, got {self.n_speeds}")
+
+
+def speed_range(vehicle, opts: DesignOptions) -> tuple[float, float]:
+    """The certified speed range (m/s): the options', else the vehicle's ``speed`` range, else
+    ``DEFAULT_SPEED_RANGE``."""
+    if opts.speed_range is not None:
+        return float(opts.speed_range[0]), float(opts.speed_range[1])
+    rng = getattr(vehicle, "ranges", {}).get("speed")
+    per = {"m/s": 1.0, "km/h": 1.0 / 3.6}
+    if rng is not None and rng.unit in per:
+        return float(rng.min * per[rng.unit]), float(rng.max * per[rng.unit])
+    return DEFAULT_SPEED_RANGE
+
+
+def steady_state(vehicle_values: Mapping, q, r_meas, speeds, h: float) -> dict:
+    """The steady-state (frozen-speed) filter at each speed (m/s) for the sample time h (s): the
+    a-priori covariance P of the discrete algebraic Riccati equation of (Phi, C, Q h, R), the
+    update gain K = P C' (C P C' + R)^-1 the runtime's gain converges to, and the spectral radius
+    of the error dynamics e_{k+1|k} = Phi (I - K C) e_{k|k-1} (< 1: the filter forgets its start)
+    with its time constant -h / ln(rho) (s). A speed without a stabilising solution gets rho = inf."""
+    Q, R = _mat2(q, "q"), _mat2(r_meas, "r_meas")
+    speeds = np.atleast_1d(np.asarray(speeds, dtype=float))
+    Phi, _, C, _ = discretise(vehicle_values, speeds, h)
+    out = {"speeds": speeds.tolist(), "K": [], "P": [], "spectral_radius": [], "time_constant_s": []}
+    for Ph, Ck in zip(Phi, C):
+        try:
+            P = scipy.linalg.solve_discrete_are(Ph.T, Ck.T, Q * h, R)
+            K = P @ Ck.T @ np.linalg.inv(Ck @ P @ Ck.T + R)
+            rho = float(np.max(np.abs(np.linalg.eigvals(Ph @ (np.eye(2) - K @ Ck)))))
+        except (np.linalg.LinAlgError, ValueError):
+            P = K = np.full((2, 2), np.nan)
+            rho = math.inf
+        if not (np.all(np.isfinite(P)) and np.all(np.isfinite(K))):
+            rho = math.inf
+        out["K"].append(K.tolist())
+        out["P"].append(P.tolist())
+        out["spectral_radius"].append(rho)
+        out["time_constant_s"].append(-h / math.log(rho) if 0 < rho < 1 else (0.0 if rho == 0 else math.inf))
+    return out
+
+
+def design(vehicle, opts: DesignOptions) -> dict:
+    """The design file dict of the Kalman baseline for ``vehicle`` (a ``synthesis.params.Vehicle``):
+    CONTRACT keys + everything ``to_data_dict`` gives the runtime. Nothing is solved: the filter
+    is the MBDS authors' linear bicycle-model Kalman filter, its covariances tuned offline
+    (``tune``, ``TUNED``); the file's one mode holds them and the model (see the module
+    docstring). ``gamma`` is the worst steady-state error-dynamics spectral radius over the
+    certified speed grid at ``opts.step`` (dimensionless, < 1; not an H-infinity level).
+
+    Raises ``params.VehicleParameterError`` (a ValueError) naming the vehicle and every missing
+    parameter of m, lf, lr, Iz, Cf, Cr, and ``DesignError`` for bad options or when the filter has
+    no stabilising steady state at some speed of the grid."""
+    t0 = time.perf_counter()
+    opts.validate()
+    vals = vehicle.require(VEHICLE_KEYS, f"the Kalman baseline design {opts.name} (bicycle model: "
+                                         f"{', '.join(VEHICLE_KEYS)})")
+    lo, hi = speed_range(vehicle, opts)
+    speeds = np.linspace(lo, hi, int(opts.n_speeds)) if hi > lo else np.array([lo])
+    ss = steady_state(vals, opts.q, opts.r_meas, speeds, opts.step)
+    rho = np.asarray(ss["spectral_radius"])
+    if not np.all(rho < 1.0):
+        k = int(np.argmax(np.where(np.isfinite(rho), rho, np.inf)))
+        raise DesignError(f"design {opts.name}: the Kalman filter has no stabilising steady state at "
+                          f"vx = {speeds[k]:.4g} m/s (error-dynamics spectral radius {rho[k]:.6g} at h = "
+                          f"{opts.step:g} s)")
+    gamma = float(np.max(rho))
+    data = to_data_dict(vals, opts.q, opts.r_meas, opts.p0, opts.vx_min, opts.vx_max)
+    veh = vehicle.as_dict()
+    veh["parameters"] = {k: veh["parameters"][k] for k in VEHICLE_KEYS}      # every parameter used
+    m, lf, lr, Iz, Cf, Cr = (vals[k] for k in VEHICLE_KEYS)
+    seconds = time.perf_counter() - t0
+    data.update({
+        "schema": "latobs.design/1",
+        "name": opts.name,
+        "paper": "002",
+        "kind": "kalman_baseline",
+        "title": "Baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's "
+                 "authors (Leanza, Reina, Blanco-Claraco, 'A Factor-Graph-Based Approach to Vehicle Sideslip "
+                 "Angle Estimation', Sensors 21(16):5409, 2021; repository MBDS/sideslip-angle-vehicle-"
+                 "estimation, estimators/matlab_kf), measurements ay and yaw rate",
+        # the runtime reads the parameters from here (name + the six it uses, with units)
+        "vehicle": veh,
+        "options": {f.name: getattr(opts, f.name) for f in fields(opts)},
+        "model": {
+            "states": ["vy", "r"], "state_units": ["m/s", "rad/s"], "input": "delta",
+            "measurements": ["ay", "yaw_rate"], "scheduling": "vx (measured, clamped to [vx_min, vx_max])",
+            "form": "x' = A(v) x + B delta, y = C(v) x + D delta; A(v) = A_inv_v / v + A_v v, "
+                    "C(v) = C_inv_v / v + C_0 (linear tires, module docstring of kalman_baseline)",
+            "A_inv_v": [[-(Cf + Cr) / m, -(lf * Cf - lr * Cr) / m],
+                        [-(lf * Cf - lr * Cr) / Iz, -(lf**2 * Cf + lr**2 * Cr) / Iz]],
+            "A_v": [[0.0, -1.0], [0.0, 0.0]],
+            "B": [Cf / m, lf * Cf / Iz],
+            "C_inv_v": [[-(Cf + Cr) / m, -(lf * Cf - lr * Cr) / m], [0.0, 0.0]],
+            "C_0": [[0.0, 0.0], [0.0, 1.0]],
+            "D": [Cf / m, 0.0],
+        },
+        "modes": [{
+            "index": 1,
+            "label": "one speed-varying Kalman filter (the model is re-evaluated at the measured vx every step)",
+            "scheduling": {"variable": "vx", "unit": "m/s", "range": [lo, hi],
+                           "certified_speeds": ss["speeds"]},
+            # a Kalman filter's "gains" are its noise covariances and its model (``model`` above):
+            # the gain K_k is computed online from them; the steady-state gains are informative
+            "gains": {"Q": data["noise"]["q"], "R": data["noise"]["r"], "P0": data["initial"]["P0"],
+                      "units": {"Q": "diag((m/s^2)^2 s, (rad/s^2)^2 s)", "R": "diag((m/s^2)^2, (rad/s)^2)",
+                                "P0": "diag((m/s)^2, (rad/s)^2)"}},
+            "steady_state": {"step_s": opts.step, **ss},
+        }],
+        "gamma": gamma,
+        "gamma_meaning": (f"not an H-infinity level: the largest spectral radius of the steady-state error "
+                          f"dynamics Phi (I - K C) over the {len(speeds)} certified speeds in [{lo:g}, {hi:g}] m/s "
+                          f"at h = {opts.step:g} s (< 1: stable; slowest time constant "
+                          f"{max(ss['time_constant_s']):.4g} s)"),
+        "certificate": {"step_s": opts.step, "n_speeds": int(len(speeds))},
+        "solver": {"name": "none (tuned by grid search, kalman_baseline.tune)",
+                   "status": "covariances tuned offline on the MBDS record's t < 425 s (kalman_baseline.TUNED)"
+                             if (tuple(opts.q), tuple(opts.r_meas)) == (TUNED["q"], TUNED["r_meas"])
+                             else "covariances given by the options",
+                   "seconds": round(seconds, 4)},
+        "notes": [
+            "The MBDS dataset authors' estimator with states [vy, r] at the CG (theirs: [beta, r]); "
+            "predicted estimate x_{k|k-1} at each output instant (see kalman_observer.py).",
+            "Covariances tuned on t < 425 s of the MBDS record only; t >= 425 s is held out.",
+            "The certificate checks the frozen-speed steady-state filter on a speed grid; the runtime's "
+            "time-varying filter converges to it at a constant speed.",
+        ],
+    })
+    return data
 
 
 def report(estimate: str = "filtered") -> dict:

@@ -4,17 +4,37 @@ from __future__ import annotations
 import time
 
 
-def solve(prob) -> tuple[str, float]:
-    """Solve a cvxpy problem with Clarabel: (status, seconds); a solver failure is a status."""
+#: Clarabel settings of the fallback solve (ERRATA 002: "If Clarabel stops on a numerical error,
+#: chordal decomposition and equilibration off is a working fallback").
+FALLBACK_SETTINGS = {"equilibrate_enable": False, "chordal_decomposition_enable": False}
+#: Statuses after which the fallback is tried (a numerical failure, not a clean verdict).
+_RETRY = ("solver_error", "infeasible_inaccurate", "unbounded_inaccurate", "user_limit")
+
+
+def _attempt(prob, settings: dict) -> str:
     import cvxpy as cp
 
-    t0 = time.perf_counter()
     try:
-        prob.solve(solver=cp.CLARABEL)
-        status = prob.status
+        prob.solve(solver=cp.CLARABEL, **settings)
+        return str(prob.status)
     except cp.error.SolverError:
-        status = "solver_error"
-    return str(status), time.perf_counter() - t0
+        return "solver_error"
+
+
+def solve(prob, info: dict | None = None) -> tuple[str, float]:
+    """Solve a cvxpy problem with Clarabel: (status, seconds); a solver failure is a status.
+
+    If Clarabel's default settings end in a numerical failure (``_RETRY``), the problem is solved
+    again with :data:`FALLBACK_SETTINGS`; the returned status is that of the fallback.
+    ``info`` (optional dict) receives ``attempts``: [(settings, status), ...].
+    """
+    t0 = time.perf_counter()
+    attempts = [({}, _attempt(prob, {}))]
+    if attempts[-1][1] in _RETRY:
+        attempts.append((dict(FALLBACK_SETTINGS), _attempt(prob, FALLBACK_SETTINGS)))
+    if info is not None:
+        info["attempts"] = attempts
+    return attempts[-1][1], time.perf_counter() - t0
 
 
 def solved(status: str) -> bool:

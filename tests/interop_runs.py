@@ -26,7 +26,8 @@ def signals(k: int) -> dict[str, float]:
     t = k * H
     return {"delta": 0.01 * math.sin(3.0 * t), "vx": 27.0 - 8.0 * t, "bank_angle": 0.02 * (t > 0.3),
             "yaw_rate": 0.08 * math.sin(3.0 * t + 0.2), "roll_angle": 0.01 * math.sin(3.0 * t + 0.4),
-            "roll_rate": 0.03 * math.cos(3.0 * t + 0.4)}
+            "roll_rate": 0.03 * math.cos(3.0 * t + 0.4),
+            "stiffness_scale_f": 1.0 + 0.05 * math.sin(2.0 * t), "stiffness_scale_r": 1.0 - 0.05 * math.sin(2.0 * t)}
 
 
 def run_fmpy(path: Path) -> dict[str, list[float]]:

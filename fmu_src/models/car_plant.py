@@ -1,7 +1,8 @@
 """FMU model file: CarPlant, the nonlinear two-track truth model of every car observer.
 
 Interface per CONTRACT.md; the maths is in ``car_plant.py``; the vehicle parameters come from
-the plant data file baked into the FMU.
+the plant data file baked into the FMU. The inputs stiffness_scale_f/r extend the contract's
+inputs (delta, vx, bank_angle): hosts that do not drive them leave them at their start value 1.0.
 """
 from ..car_plant import CarPlantModel
 from ..spec import ModelSpec, Var
@@ -14,6 +15,15 @@ SPEC = ModelSpec(
         Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
         Var("vx", "m/s", "prescribed longitudinal speed"),
         Var("bank_angle", "rad", "road bank angle (> 0: gravity pulls towards -y)"),
+        # optional inputs (added for paper 002's validation; start 1.0 = the plant without them)
+        Var("stiffness_scale_f", "1", "multiplies the front cornering stiffness on top of the parameter "
+            "scale_f (Magic Formula B; peak force unchanged); sampled and held per communication step; "
+            "clamped to [0.1, 10] with a warning (non-positive values included); a non-finite value "
+            "refuses the step (fmi2Discard, error logged, state held)", start=1.0, min=0.1, max=10.0),
+        Var("stiffness_scale_r", "1", "multiplies the rear cornering stiffness on top of the parameter "
+            "scale_r (Magic Formula B; peak force unchanged); sampled and held per communication step; "
+            "clamped to [0.1, 10] with a warning (non-positive values included); a non-finite value "
+            "refuses the step (fmi2Discard, error logged, state held)", start=1.0, min=0.1, max=10.0),
     ),
     outputs=(
         Var("beta", "rad", "sideslip angle atan(vy/vx) at the roll axis below the CG"),

@@ -5,13 +5,17 @@ Python internals are never imported.
 
 Signal bus
     At each communication point t_k = k*dt (s) the bus holds the scenario's signals (the plant
-    inputs, e.g. delta rad, vx m/s, bank_angle rad) and every output (causality="output") of the
-    plant FMU, keyed by variable name. A plant output with the same name as a scenario signal
-    replaces it on the bus (the plant is the truth).
+    inputs, e.g. delta rad, vx m/s, bank_angle rad, and the scenario's ``parameter_signals``,
+    e.g. CarPlant's stiffness_scale_f/r) and every output (causality="output") of the plant FMU,
+    keyed by variable name. A plant output with the same name as a scenario signal replaces it
+    on the bus (the plant is the truth).
 Wiring
     Plant inputs come from the scenario signals; each observer input is pulled from the bus by
     name. A missing signal is a :class:`WiringError` naming the FMU and the variable, raised
-    before any FMU is instantiated.
+    before any FMU is instantiated. Exception: a plant input listed in the scenario's
+    ``optional_plant_inputs`` (CarPlant's stiffness_scale_f/r) that the scenario does not
+    provide is never set: it keeps the start value of the plant's model description (recorded
+    in ``SimResult.info["plant_inputs_at_start"]``).
 Measurement model
     Observers see the bus through an optional :class:`NoiseSpec` (additive white Gaussian noise
     with a standard deviation and a constant bias per signal, in the signal's SI unit). The noise
@@ -259,16 +263,33 @@ class FmuInstance:
         self.out_groups = _groups(self.outputs)
 
     def set_inputs(self, values: Mapping[str, float]):
+        """Set the prepared inputs from ``values`` {name: value}. A prepared input absent from
+        ``values`` is not set: it keeps its current value (its start value if never set), e.g. an
+        optional plant input such as CarPlant's stiffness_scale_f."""
         s = self.slave
         for typ, (names, vr, buf) in self.in_groups.items():
-            for i, n in enumerate(names):
-                buf[i] = values[n] if typ == "Real" else int(round(values[n]))
+            try:
+                for i, n in enumerate(names):
+                    buf[i] = values[n] if typ == "Real" else int(round(values[n]))
+            except KeyError:
+                names, vr, buf = self._subset(typ, names, vr, values)
+                if not names:
+                    continue
             if typ == "Real":
                 s.fmi2SetReal(s.component, vr, len(names), buf)
             elif typ == "Boolean":
                 s.fmi2SetBoolean(s.component, vr, len(names), buf)
             else:
                 s.fmi2SetInteger(s.component, vr, len(names), buf)
+
+    @staticmethod
+    def _subset(typ, names, vr, values):
+        """(names, value references, filled buffer) of the prepared inputs present in ``values``."""
+        keep = [i for i, n in enumerate(names) if n in values]
+        ctype = {"Real": fmi2Real, "Integer": fmi2Integer, "Boolean": fmi2Boolean}[typ]
+        sub = [names[i] for i in keep]
+        buf = (ctype * len(keep))(*[values[n] if typ == "Real" else int(round(values[n])) for n in sub])
+        return sub, (fmi2ValueReference * len(keep))(*[vr[i] for i in keep]), buf
 
     def get_outputs(self) -> dict[str, float]:
         s = self.slave
@@ -353,7 +374,8 @@ class CoSimulation:
     """A plant FMU plus observer FMUs on a scenario. Use :meth:`run` (or the function :func:`run`).
 
     scenario           a Scenario or a registered scenario name
-    plant_fmu          path of the plant FMU (its inputs must all be scenario signals)
+    plant_fmu          path of the plant FMU (its inputs must all be scenario signals, except
+                       the scenario's optional_plant_inputs, left at their start values)
     observer_fmus      {label: path}; each observer's inputs are pulled from the bus by name
     dt                 communication step, s (default 5 ms)
     noise              NoiseSpec (or {signal: (std, bias)}) applied to what observers receive
@@ -418,6 +440,12 @@ class CoSimulation:
         t = sc.time_grid(dt)
         n = len(t)
         scen = {k: np.asarray(v, dtype=float) for k, v in sc.signals(t, self.vehicle).items()}
+        extra = {k: np.asarray(v, dtype=float) for k, v in sc.parameter_signals(t, self.vehicle).items()}
+        clash = sorted(set(extra) & set(scen))
+        if clash:
+            raise ValueError(f"scenario {sc.name!r}: signal(s) {', '.join(clash)} given by both signals() and "
+                             "parameter_signals()")
+        scen.update(extra)
         for k, v in scen.items():
             if v.shape != t.shape:
                 raise ValueError(f"scenario {sc.name!r}: signal {k!r} has shape {v.shape}, expected {t.shape}")
@@ -425,12 +453,23 @@ class CoSimulation:
                 raise ValueError(f"scenario {sc.name!r}: signal {k!r} is not finite everywhere")
 
         # ---- wiring, checked before anything is instantiated
-        plant_in = [v.name for v in plant.inputs]
-        missing = [x for x in plant_in if x not in scen]
+        optional = set(getattr(sc, "optional_plant_inputs", ()))
+        missing = [v.name for v in plant.inputs if v.name not in scen and v.name not in optional]
         if missing:
             raise WiringError(
                 f"plant {plant.describe()}: input(s) {', '.join(repr(m) for m in missing)} not provided by "
                 f"scenario {sc.name!r} (it provides {', '.join(sorted(scen))})")
+        held: dict[str, float] = {}   # optional plant inputs left at their declared start value
+        for v in plant.inputs:
+            if v.name not in scen:
+                try:
+                    held[v.name] = float(v.start)
+                except (TypeError, ValueError):
+                    held[v.name] = float("nan")
+                if not np.isfinite(held[v.name]):
+                    raise WiringError(f"plant {plant.describe()}: optional input {v.name!r} is not provided by "
+                                      f"scenario {sc.name!r} and declares no finite start value")
+        plant_in = [v.name for v in plant.inputs if v.name in scen]
         plant_out = [v.name for v in plant.outputs]
         bus_names = list(dict.fromkeys([*scen, *plant_out]))
         obs_in: dict[str, list[str]] = {}
@@ -494,6 +533,8 @@ class CoSimulation:
         t0, stop = float(t[0]), float(t[-1])
         u0 = {x: scen[x][0] for x in plant_in}
         fill_bus(0, call(plant, "initialisation", 0, plant.start, u0, self.plant_parameters, t0, stop))
+        if held:
+            plant.prepare_io(plant_in)   # only the driven inputs are set from now on
         for lab, f in observers.items():
             y0 = call(f, "initialisation", 0, f.start, meas(0, obs_in[lab]), self.observer_parameters.get(lab, {}),
                       t0, stop)
@@ -534,6 +575,7 @@ class CoSimulation:
             "observer_models": {lab: f.model_name for lab, f in observers.items()},
             "plant_parameters": {k: (v if isinstance(v, (int, float, str, bool)) else str(v))
                                  for k, v in self.plant_parameters.items()},
+            "plant_inputs_at_start": held,
             "noise": self.noise.as_dict() if self.noise is not None else None,
             "seed": self.seed,
         }

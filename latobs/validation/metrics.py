@@ -55,6 +55,10 @@ ENCLOSURE_TOL = 1e-9  # absolute tolerance of the enclosure test, in the signal'
 #: ``beta`` are at the roll-axis point below the centre of gravity, ``vy_cg``/``beta_cg`` at it.
 REFERENCE_SIGNALS: dict[str, dict[str, str]] = {
     "LateralIntervalObserver": {"vy": "vy_cg", "beta": "beta_cg"},   # paper 001: CG states
+    # paper 002's estimators and its Kalman baseline: the bicycle model's CG sideslip / velocity
+    "SideslipFixedOrderEstimator": {"beta": "beta_cg"},
+    "SideslipFixedOrderEstimatorScheduled": {"beta": "beta_cg"},
+    "SideslipKalmanFilter": {"vy": "vy_cg", "beta": "beta_cg"},
 }
 
 

@@ -8,6 +8,13 @@ FMU variable name. For the car plant (``CarPlant``) these are
 * ``bank_angle`` road bank angle, rad (sign convention of ERRATA.md: it enters the sideslip
   equation as -g/Vx * bank_angle).
 
+and, from :meth:`Scenario.parameter_signals`, time-varying plant parameters that the plant takes
+as OPTIONAL inputs (:attr:`Scenario.optional_plant_inputs`; a scenario that does not provide one
+leaves it at the FMU's start value):
+
+* ``stiffness_scale_f``, ``stiffness_scale_r`` (1): CarPlant's front / rear cornering stiffness
+  multipliers (start 1.0), used by the ``*-varying-stiffness`` scenarios of paper 002.
+
 Angles are in rad and speeds in m/s everywhere; degrees and km/h appear only in names that say
 so (``*_deg``, ``*_kmh``). Amplitudes that depend on the vehicle use the linear bicycle model of
 the vehicle's parameters (m, lf, lr, Cf, Cr) as the standards do with a slowly increasing steer:
@@ -24,11 +31,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from latobs.synthesis.params import G, Vehicle, load_vehicle
+from latobs.synthesis.params import G, Vehicle, VehicleParameterError, load_vehicle
 
 KMH = 1.0 / 3.6  # m/s per km/h
 MPH = 0.44704  # m/s per mph
@@ -117,9 +124,20 @@ class Scenario:
     #: names of the signals :meth:`signals` returns (plant input names)
     signal_names: tuple[str, ...] = field(default=("delta", "vx", "bank_angle"), repr=False)
 
+    #: plant inputs that may stay at the plant FMU's declared start value when the scenario does
+    #: not provide them (the harness leaves them untouched); every other plant input must be a
+    #: scenario signal. CarPlant's stiffness multipliers (start 1.0 = the nominal plant).
+    optional_plant_inputs: ClassVar[tuple[str, ...]] = ("stiffness_scale_f", "stiffness_scale_r")
+
     def signals(self, t: np.ndarray, vehicle: Vehicle | str = "sedan") -> dict[str, np.ndarray]:
         """Plant input signals on the time grid t (s): {FMU variable name: array}, SI units."""
         raise NotImplementedError
+
+    def parameter_signals(self, t: np.ndarray, vehicle: Vehicle | str = "sedan") -> dict[str, np.ndarray]:
+        """Time-varying plant parameters driven through optional plant inputs (e.g. CarPlant's
+        ``stiffness_scale_f``/``_r``), on the time grid t (s): {FMU variable name: array}. The
+        harness puts them on the bus beside :meth:`signals`. Default: none."""
+        return {}
 
     def time_grid(self, dt: float) -> np.ndarray:
         """Communication points 0, dt, ..., duration (s); duration is rounded to whole steps."""
@@ -444,6 +462,227 @@ class RandomManoeuvre(Scenario):
 
 
 # --------------------------------------------------------------------------------------------
+# paper 002 (Delibasi 2014): band-limited random steering and a swept stiffness box
+# --------------------------------------------------------------------------------------------
+#: Paper 002's steering weight W1(s) = 39.4784 / (s^2 + 8.8858 s + 39.4784) (vehicles.md,
+#: section delibasi): a 2nd-order Butterworth low-pass, wn = 2 pi rad/s (1 Hz), zeta = 0.7071.
+#: Numerator and denominator in DESCENDING powers of s (scipy's convention).
+W1_NUM = (39.4784,)
+W1_DEN = (1.0, 8.8858, 39.4784)
+
+
+def w1_gain_squared(f_hz) -> np.ndarray:
+    """|W1(j 2 pi f)|^2 at the frequencies f (Hz): the power gain of paper 002's steering weight."""
+    s = 2j * np.pi * np.asarray(f_hz, dtype=float)
+    return np.abs(np.polyval(W1_NUM, s) / np.polyval(W1_DEN, s)) ** 2
+
+
+def _zoh_filter(num, den, h: float, u: np.ndarray) -> np.ndarray:
+    """Exact zero-order-hold discretisation (step h, s) of the strictly proper num/den (descending
+    powers of s) driven by ``u`` held over each step: y_k at t_k = k h from zero state (y_0 = 0).
+    (scipy's ``cont2discrete`` 'zoh': the state-space matrix exponential, then ``lfilter``.)"""
+    from scipy.signal import cont2discrete, lfilter
+
+    numd, dend, _ = cont2discrete((np.asarray(num, float), np.asarray(den, float)), h, method="zoh")
+    numd = np.atleast_2d(numd)[0]
+    if abs(numd[0]) > 1e-12 * np.max(np.abs(numd)):
+        raise ValueError("_zoh_filter needs a strictly proper transfer function")
+    return lfilter(numd, dend, np.asarray(u, dtype=float))
+
+
+@dataclass(frozen=True)
+class W1Steer(Scenario):
+    """Paper 002: band-limited random road-wheel steering, the spectrum of its steering weight W1.
+
+    delta(t) = scale * (W1 * e)(t): seeded white noise e (``numpy.random.default_rng(seed)``,
+    N(0, 1) samples held over steps of ``noise_dt`` s on an internal grid 0, noise_dt, ...)
+    filtered by W1(s) = 39.4784 / (s^2 + 8.8858 s + 39.4784) (W1_NUM/W1_DEN) with the EXACT
+    zero-order-hold discretisation of W1 on that grid (from zero state, so delta(0) = 0 and the
+    run starts from straight driving), then scaled so that the RMS of delta over [0, duration]
+    is exactly
+
+        delta_rms = ay_rms / G_ss(vx)   rad,
+
+    with G_ss the steady-state lateral acceleration gain of the linear bicycle model (module
+    docstring). ay_rms = 1 m/s^2: for a Gaussian signal of this bandwidth the peaks over 30 s are
+    about 3x the RMS, i.e. |ay| peaks near 3 m/s^2, inside the linear tire range. For delibasi
+    at 30 km/h: G_ss = 21.4 (m/s^2)/rad, delta_rms = 0.0468 rad (2.7 deg road wheel); with the
+    default seed the steady-state |ay| peak G_ss*max|delta| is 2.89 m/s^2 (``info``), and
+    CarPlant (delibasi, Magic Formula tires) gives a peak |ay| of 3.27 m/s^2, 1.3 % below the
+    same run with linear tires (sideslip within 0.05 deg of it): the linear range.
+    The signal on the scenario's time grid is the internal one interpolated linearly (exact at
+    multiples of noise_dt), so it is the same for every communication step that divides noise_dt
+    (reproducible from seed and noise_dt alone). White noise held over 5 ms is flat within 0.2 %
+    (sinc^2) up to 5 Hz, where |W1|^2 is already below 1/600: the spectrum is |W1|^2 up to
+    a constant. Constant speed 30 km/h, the middle of paper 002's 20-40 km/h box; no bank.
+    Open loop (no driver model): the heading wanders.
+    """
+
+    name: str = "w1-steer"
+    description: str = (
+        "Paper 002: band-limited random road-wheel steering at 30 km/h, seeded white noise filtered by the "
+        "steering weight W1(s) = 39.4784/(s^2 + 8.8858 s + 39.4784) (1 Hz Butterworth), RMS for 1 m/s^2 "
+        "steady-state lateral acceleration on the linear bicycle model (peaks ~3 m/s^2). Open loop."
+    )
+    duration: float = 30.0
+    settle_time: float = 3.0
+    speed: float = 30.0 * KMH  # m/s, inside paper 002's 20-40 km/h box
+    seed: int = 0
+    ay_rms: float = 1.0  # m/s^2, steady-state lateral acceleration RMS on the linear bicycle model
+    noise_dt: float = 0.005  # s, hold time of the white-noise samples (internal grid)
+
+    def __post_init__(self):
+        if not (self.ay_rms > 0 and self.noise_dt > 0 and self.speed > 0 and self.duration > 0):
+            raise ValueError("w1-steer needs ay_rms > 0, noise_dt > 0, speed > 0 and duration > 0")
+
+    def steer_rms(self, vehicle) -> float:
+        """RMS road-wheel angle over [0, duration], rad."""
+        return steer_for_ay(vehicle, self.speed, self.ay_rms)
+
+    def _internal(self, vehicle) -> tuple[np.ndarray, np.ndarray]:
+        """(internal time grid s, delta rad on it); the grid covers [0, duration + noise_dt]."""
+        n = int(math.ceil(self.duration / self.noise_dt - 1e-9)) + 1
+        tg = np.arange(n + 1) * self.noise_dt
+        e = np.random.default_rng(self.seed).standard_normal(n + 1)
+        y = _zoh_filter(W1_NUM, W1_DEN, self.noise_dt, e)
+        inside = tg <= self.duration + 1e-9 * self.noise_dt
+        rms = float(np.sqrt(np.mean(y[inside] ** 2)))
+        return tg, y * (self.steer_rms(vehicle) / rms)
+
+    def signals(self, t, vehicle="sedan"):
+        t = np.asarray(t, dtype=float)
+        tg, d = self._internal(vehicle)
+        return {"delta": np.interp(t, tg, d), "vx": np.full_like(t, self.speed), "bank_angle": np.zeros_like(t)}
+
+    def _derived(self, vehicle):
+        tg, d = self._internal(vehicle)
+        peak = float(np.max(np.abs(d[tg <= self.duration + 1e-9 * self.noise_dt])))
+        return {"speed_mps": self.speed, "seed": self.seed, "noise_dt_s": self.noise_dt,
+                "w1_num": list(W1_NUM), "w1_den": list(W1_DEN), "ay_rms_mps2": self.ay_rms,
+                "steer_rms_rad": self.steer_rms(vehicle), "steer_peak_rad": peak,
+                "ay_ss_peak_mps2": peak * steady_state_ay_gain(vehicle, self.speed), "open_loop": True}
+
+
+@dataclass(frozen=True)
+class StiffnessSweep:
+    """Mix-in (put it BEFORE the manoeuvre's class; it adds fields and no Scenario defaults, so
+    the manoeuvre's own defaults stay): CarPlant's ``stiffness_scale_f``/``_r`` swept smoothly through a stiffness box.
+
+    rear   s_r(t) = r_lo + (r_hi - r_lo) (1 - cos(2 pi c t / T)) / 2   (from r_lo up to r_hi, back)
+    front  s_f(t) = f_hi - (f_hi - f_lo) (1 - cos(2 pi c t / T)) / 2   (antiphase: from f_hi down)
+
+    with T = duration (s) and c = ``stiffness_cycles``: with c = 1 each scale starts at one end
+    of its range, reaches the other at T/2 and returns. The ranges (1, multipliers of the
+    vehicle's Cf, Cr) are ``scale_f_range``/``scale_r_range`` if given, else the vehicle's
+    stiffness box divided by its Cf, Cr: the "physical" box of paper 002 for delibasi (per axle
+    2 x 590..610 N/deg x 180/pi = 67.6..69.9 kN/rad front, 2 x 550..650 N/deg = 63.0..74.5
+    kN/rad rear; with Cf = Cr = 68.755 kN/rad the ranges 0.98333..1.01667 front and
+    0.91667..1.08333 rear), a vehicle's [ranges] Cf, Cr otherwise
+    (``latobs.synthesis.fixed_order_002.vehicle_box``). A vehicle with neither is an error
+    (VehicleParameterError, e.g. the default plant vehicle sedan: run with delibasi).
+    """
+
+    scale_f_range: tuple[float, float] | None = None  # 1, (min, max) of stiffness_scale_f
+    scale_r_range: tuple[float, float] | None = None  # 1, (min, max) of stiffness_scale_r
+    stiffness_cycles: float = 1.0  # full cosine cycles over the duration
+
+    def stiffness_ranges(self, vehicle) -> tuple[tuple[float, float], tuple[float, float]]:
+        """((front min, max), (rear min, max)) of the stiffness multipliers, 1."""
+        if self.scale_f_range is not None and self.scale_r_range is not None:
+            rf, rr = tuple(map(float, self.scale_f_range)), tuple(map(float, self.scale_r_range))
+        else:
+            from latobs.synthesis.fixed_order_002 import vehicle_box
+
+            v = _vehicle(vehicle)
+            p = v.require(["Cf", "Cr"], f"scenario {self.name!r} (stiffness multipliers of Cf, Cr)")
+            try:
+                box = vehicle_box(v, "physical")
+            except (ValueError, KeyError) as exc:   # a user error (VehicleParameterError), not a bug
+                raise VehicleParameterError(f"scenario {self.name!r}: vehicle {v.name!r} has no cornering stiffness box "
+                                 f"({exc}); use vehicle 'delibasi' (latobs validate --plant-vehicle delibasi) or "
+                                 f"give scale_f_range and scale_r_range") from None
+            rf = (box.cf[0] / p["Cf"], box.cf[1] / p["Cf"])
+            rr = (box.cr[0] / p["Cr"], box.cr[1] / p["Cr"])
+            rf = tuple(self.scale_f_range) if self.scale_f_range is not None else rf
+            rr = tuple(self.scale_r_range) if self.scale_r_range is not None else rr
+        for label, (lo, hi) in (("front", rf), ("rear", rr)):
+            if not (0 < lo <= hi and math.isfinite(hi)):
+                raise ValueError(f"scenario {self.name!r}: {label} stiffness range must satisfy 0 < min <= max, "
+                                 f"got {(lo, hi)}")
+        return rf, rr
+
+    def parameter_signals(self, t, vehicle="sedan"):
+        t = np.asarray(t, dtype=float)
+        (f_lo, f_hi), (r_lo, r_hi) = self.stiffness_ranges(vehicle)
+        w = 0.5 * (1.0 - np.cos(2 * np.pi * self.stiffness_cycles * t / self.duration))
+        return {"stiffness_scale_f": f_hi - (f_hi - f_lo) * w, "stiffness_scale_r": r_lo + (r_hi - r_lo) * w}
+
+    def _derived(self, vehicle):
+        d = super()._derived(vehicle)
+        (f_lo, f_hi), (r_lo, r_hi) = self.stiffness_ranges(vehicle)
+        v = _vehicle(vehicle)
+        d.update({"stiffness_scale_f_range": [f_lo, f_hi], "stiffness_scale_r_range": [r_lo, r_hi],
+                  "Cf_range_Nprad": [f_lo * v.Cf, f_hi * v.Cf], "Cr_range_Nprad": [r_lo * v.Cr, r_hi * v.Cr],
+                  "stiffness_cycles": self.stiffness_cycles})
+        return d
+
+
+@dataclass(frozen=True)
+class SineWithDwellVaryingStiffness(StiffnessSweep, SineWithDwell):
+    """The sine with dwell (:class:`SineWithDwell`) at 35 km/h while the axle cornering stiffnesses
+    sweep paper 002's box (:class:`StiffnessSweep`: rear up 63.0 -> 74.5 kN/rad and back, front
+    in antiphase 69.9 -> 67.6 kN/rad and back, one cosine cycle over the 6 s run).
+
+    Departures from FMVSS 126 (stated): speed 35 km/h instead of 80 km/h, because paper 002's
+    estimator is designed for 20-40 km/h only (the standard's speed is outside its box); the
+    0.3 g reference angle is characterised at that same speed (as the standard does at its test
+    speed), from the NOMINAL Cf, Cr (box centre); amplitude factor 2.5 (inside the standard's
+    1.5 ... 6.5): on CarPlant (delibasi, dry road, this stiffness sweep) the peak |ay| is
+    7.5 m/s^2, 12 % below the same run with linear tires (front slip up to 7.9 deg, past the
+    linear range), while the rear slip stays at 4.9 deg (no spin; the understeering car
+    saturates at the front). Larger factors hardly raise |ay| (8.3 m/s^2 at 4, nominal
+    stiffness) and need road-wheel angles over 20 deg.
+    """
+
+    name: str = "sine-with-dwell-varying-stiffness"
+    description: str = (
+        "Paper 002: the sine with dwell at 35 km/h (inside the estimator's 20-40 km/h box; FMVSS 126's "
+        "80 km/h is outside it), 2.5 x the 0.3 g angle at 35 km/h (nonlinear, no spin), while CarPlant's "
+        "cornering stiffnesses sweep the delibasi box: rear 63.0 -> 74.5 -> 63.0 kN/rad, front "
+        "69.9 -> 67.6 -> 69.9 kN/rad (one cosine over the run). Open loop."
+    )
+    speed: float = 35.0 * KMH  # m/s
+    amplitude_factor: float = 2.5  # 1, x the 0.3 g angle at 35 km/h
+
+
+@dataclass(frozen=True)
+class FishhookVaryingStiffness(StiffnessSweep, Fishhook):
+    """The NHTSA fishhook (:class:`Fishhook`) at 35 km/h while the axle cornering stiffnesses sweep
+    paper 002's box (:class:`StiffnessSweep`: rear up 63.0 -> 74.5 kN/rad and back, front in
+    antiphase 69.9 -> 67.6 kN/rad and back, one cosine cycle over the 8 s run).
+
+    Departures from the NHTSA fishhook (stated): speed 35 km/h instead of 35-50 mph (56-80 km/h),
+    because paper 002's estimator is designed for 20-40 km/h only; the 0.3 g reference angle is
+    characterised at 35 km/h (``reference_speed``, the manoeuvre's own speed, instead of 80 km/h)
+    from the NOMINAL Cf, Cr; amplitude factor 2.5 instead of 6.5: on CarPlant (delibasi, dry
+    road, this stiffness sweep) the peak |ay| is 7.4 m/s^2, 11 % below the linear-tire run
+    (front slip up to 8.7 deg), rear slip 5.0 deg (no spin); 6.5 x would need a 38 deg
+    road-wheel angle.
+    """
+
+    name: str = "fishhook-varying-stiffness"
+    description: str = (
+        "Paper 002: the fishhook at 35 km/h (inside the estimator's 20-40 km/h box; NHTSA's 35-50 mph is "
+        "outside it), 2.5 x the 0.3 g angle at 35 km/h (nonlinear, no spin), while CarPlant's cornering "
+        "stiffnesses sweep the delibasi box: rear 63.0 -> 74.5 -> 63.0 kN/rad, front "
+        "69.9 -> 67.6 -> 69.9 kN/rad (one cosine over the run). Open loop."
+    )
+    speed: float = 35.0 * KMH  # m/s
+    reference_speed: float = 35.0 * KMH  # m/s, the 0.3 g angle is characterised at the test speed
+    amplitude_factor: float = 2.5  # 1
+
+
+# --------------------------------------------------------------------------------------------
 # registry
 # --------------------------------------------------------------------------------------------
 class UnknownScenarioError(KeyError):
@@ -462,6 +701,8 @@ SCENARIOS: dict[str, Scenario] = {
                                      "road-wheel steering for a 4 m/s^2 steady-state lateral acceleration.",
                          speed=15.0),
         RandomManoeuvre(),
+        # paper 002 (Delibasi 2014), vehicle delibasi: W1-filtered steering, swept stiffness box
+        W1Steer(), SineWithDwellVaryingStiffness(), FishhookVaryingStiffness(),
     )
 }
 

@@ -1,0 +1,28 @@
+"""FMU model file: SideslipFixedOrderEstimatorScheduled (paper 002, speed-scheduled extension).
+
+One paper-002 estimator per speed band, switched on vx (the state is kept across a switch). The
+maths is in ``tf_estimator.py``; the estimators come from the design file baked into the FMU.
+"""
+from ..spec import ModelSpec, Var
+from ..tf_estimator import TfEstimator
+from .sideslip_fixed_order_estimator import describe_estimator
+
+SPEC = ModelSpec(
+    description="Speed-scheduled fixed-order robust H-inf sideslip estimator: one Delibasi (2014) estimator "
+                "beta^ = (y(s)/x(s)) r per speed band, switched on the speed",
+    describe=describe_estimator,
+    runtime=TfEstimator,
+    inputs=(
+        Var("yaw_rate", "rad/s", "measured yaw rate"),
+        Var("vx", "m/s", "longitudinal speed (selects the band; outside the grid the nearest band, with a "
+                         "warning)"),
+    ),
+    outputs=(
+        Var("beta_hat", "rad", "estimated sideslip angle at the CG"),
+    ),
+    integer_outputs=(
+        Var("mode", "1", "active speed band, 1-based", start=1, min=1),
+    ),
+    bounds=lambda data: {"mode": (1, len(data.get("estimators", [1])))},
+    stop_time=20.0,
+)

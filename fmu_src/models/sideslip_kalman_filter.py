@@ -1,0 +1,53 @@
+"""FMU model file: SideslipKalmanFilter (paper 002's baseline peer).
+
+The linear bicycle-model Kalman filter of the MBDS dataset's authors (Leanza, Reina,
+Blanco-Claraco, Sensors 2021), measuring ay and the yaw rate. Interface as the CarPlant outputs
+and the MBDS record's columns (wiring by name); the maths is in ``kalman_observer.py``; the
+vehicle, the noise covariances and the speed clamp come from the design file baked into the FMU
+(``kalman_baseline.design``). The runtime has no tunable parameter: the covariances are part of
+the certified design.
+"""
+from ..kalman_observer import KalmanObserver
+from ..spec import ModelSpec, Var
+
+
+def _diag(M) -> str:
+    return ", ".join(f"{float(M[i][i]):.3g}" for i in range(len(M)))
+
+
+def _variant(data: dict) -> str:
+    """The vehicle, the covariances and the certified speed range the design file makes."""
+    parts = []
+    veh = data.get("vehicle", {})
+    if veh.get("name"):
+        parts.append(f"vehicle {veh['name']}")
+    noise = data.get("noise", {})
+    if noise.get("q") and noise.get("r"):
+        parts.append(f"Q = diag({_diag(noise['q'])}) on [vy', r'] per s, R = diag({_diag(noise['r'])}) on [ay, r]")
+    modes = data.get("modes", [])
+    rng = modes[0].get("scheduling", {}).get("range") if modes else None
+    if rng:
+        parts.append(f"certified (frozen-speed steady state) for vx in [{rng[0]:g}, {rng[1]:g}] m/s")
+    return "; ".join(parts) or "linear bicycle model"
+
+
+SPEC = ModelSpec(
+    description="Baseline peer of paper 002: linear bicycle-model Kalman filter of sideslip, lateral velocity and "
+                "yaw rate from the lateral acceleration and the yaw rate, the estimator of the MBDS dataset's "
+                "authors (Leanza, Reina, Blanco-Claraco, Sensors 2021); outputs the one-step prediction",
+    describe=_variant,
+    runtime=KalmanObserver,
+    inputs=(
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
+        Var("vx", "m/s", "longitudinal speed (the model is evaluated at vx clamped to [vx_min, vx_max])",
+            start=20.0),
+        Var("yaw_rate", "rad/s", "measured yaw rate"),
+        Var("ay", "m/s2", "measured lateral acceleration at the centre of gravity"),
+    ),
+    outputs=(
+        Var("beta_hat", "rad", "estimated sideslip angle atan(vy_hat/vx) at the centre of gravity"),
+        Var("vy_hat", "m/s", "estimated lateral velocity at the centre of gravity"),
+        Var("yaw_rate_hat", "rad/s", "estimated yaw rate"),
+    ),
+    stop_time=20.0,
+)
