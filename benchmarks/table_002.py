@@ -65,8 +65,9 @@ def _cert_json(c):
     return out
 
 
-def _row(name, lmi_gamma, lmi_label, y, x, cert, seconds, note=""):
-    return {"name": name, "lmi_gamma": lmi_gamma, "lmi_label": lmi_label,
+def _row(name, lmi_gamma, lmi_label, y, x, cert, seconds, note="", box=None):
+    bb = f.broadband_worst(box, y, x, cert["grid"]) if (box is not None and cert and cert["stable"]) else None
+    return {"name": name, "broadband_grid": bb, "lmi_gamma": lmi_gamma, "lmi_label": lmi_label,
             "y": [float(t) for t in np.atleast_1d(y)], "x": [float(t) for t in np.atleast_1d(x)],
             "order": len(np.atleast_1d(x)) - 1, "vertex_gamma": cert["vertex_gamma"] if cert else None,
             "grid_gamma": cert["grid_gamma"] if cert else None,
@@ -85,10 +86,10 @@ def paper_section(grid):
     d = f.design(box, order=1, recentre=RECENTRE)
     sec = time.perf_counter() - t0
     c = f.certify_002(d.y, d.x, box, grid)
-    rows.append(_row("order 1, Lemma 5 (recentre=2)", d.gamma_lmi, "LMI", d.y, d.x, c, sec))
+    rows.append(_row("order 1, Lemma 5 (recentre=2)", d.gamma_lmi, "LMI", d.y, d.x, c, sec, box=box))
     for name, (y, x) in (("printed (32)", f.EST32), ("printed (33)", f.EST33)):
         c = f.certify_002(y, x, box, grid)
-        rows.append(_row(name, None, "", y, x, c, None))
+        rows.append(_row(name, None, "", y, x, c, None, box=box))
     vfloor, vk = f.dc_floor(f.polytope(box))
     gfloor, gk = f.grid_dc_floor(box, grid)
     return {"box": box.name, "rows": rows, "vertex_dc_floor": vfloor, "vertex_dc_floor_k": vk,
@@ -110,7 +111,7 @@ def physical_section(grid, polish2=True):
         sec = time.perf_counter() - t0
         c = f.certify_002(d.y, d.x, box, grid)
         name = f"order {order}, Lemma 5" + (" (design_order2)" if order == 2 else "")
-        rows.append(_row(name, d.gamma_lmi, "LMI", d.y, d.x, c, sec))
+        rows.append(_row(name, d.gamma_lmi, "LMI", d.y, d.x, c, sec, box=box))
         return d
 
     def polish_row(order, d):
@@ -118,7 +119,12 @@ def physical_section(grid, polish2=True):
         yp, xp, cp = f.polish(box, d.y, d.x, grid)
         sec = time.perf_counter() - t0
         rows.append(_row(f"order {order}, polished", None, "", yp, xp, cp, sec,
-                         note="polish only (start: the Lemma 5 row above)"))
+                         note="polish only (start: the Lemma 5 row above)", box=box))
+        t0 = time.perf_counter()
+        yt, xt, ct = f.polish(box, d.y, d.x, grid, tie_break=1e-3)
+        sec = time.perf_counter() - t0
+        rows.append(_row(f"order {order}, polished + broadband tie-break (catalogue)", None, "", yt, xt, ct, sec,
+                         note="polish + tie-break (start: the Lemma 5 row above)", box=box))
 
     # order 0: Lemma 5 with order=0 (x = 1, y = static gain) works directly
     try:
@@ -127,7 +133,7 @@ def physical_section(grid, polish2=True):
         notes.append(f"design(order=0) failed ({e}); static gain = dc_floor k instead")
         vf, k = f.dc_floor(f.polytope(box))
         c = f.certify_002([k], [1.0], box, grid)
-        rows.append(_row("order 0, dc_floor gain", None, "", [k], [1.0], c, 0.0))
+        rows.append(_row("order 0, dc_floor gain", None, "", [k], [1.0], c, 0.0, box=box))
     d1 = lmi_row(1)
     polish_row(1, d1)
     d2 = lmi_row(2)
@@ -147,9 +153,9 @@ def physical_section(grid, polish2=True):
         sec = time.perf_counter() - t0
         c = f.certify_002(y, x, box, grid)
         rows.append(_row(f"full order ({len(x) - 1}), hinfsyn at box centre", g, "hinfsyn nominal",
-                         y, x, c, sec, note=f"hinfsyn call alone {t_syn:.2f} s"))
+                         y, x, c, sec, note=f"hinfsyn call alone {t_syn:.2f} s", box=box))
     else:
-        rows.append({"name": "full order, hinfsyn at box centre", "lmi_gamma": None, "lmi_label": "",
+        rows.append({"name": "full order, hinfsyn at box centre", "broadband_grid": None, "lmi_gamma": None, "lmi_label": "",
                      "y": None, "x": None, "order": None, "vertex_gamma": None, "grid_gamma": None,
                      "stable": None, "seconds": None, "note": "n/a (needs python-control + slycot)",
                      "cert": None})
@@ -182,20 +188,21 @@ def _g(v, prec=4):
 
 def markdown(sec, extra_cols=()):
     head = ("| estimator | LMI gamma (claim) | certified vertex worst | certified grid worst "
-            "| y (ascending) | x (ascending) | time s |")
-    lines = [head, "|" + "---|" * 7]
+            "| grid worst without W2 | y (ascending) | x (ascending) | time s |")
+    lines = [head, "|" + "---|" * 8]
     for r in sec["rows"]:
         if r["y"] is None:
-            lines.append(f"| {r['name']} | {r['note']} | n/a | n/a | - | - | - |")
+            lines.append(f"| {r['name']} | {r['note']} | n/a | n/a | n/a | - | - | - |")
             continue
         lg = "-" if r["lmi_gamma"] is None else (f"{r['lmi_gamma']:.4g} ({r['lmi_label']})"
                                                  if r["lmi_label"] != "LMI" else f"{r['lmi_gamma']:.4f}")
         t = "-" if r["seconds"] is None else f"{r['seconds']:.1f}" + (" (polish)" if "polish" in r["note"] else "")
         st = "" if r["stable"] else " (UNSTABLE)"
-        lines.append(f"| {r['name']}{st} | {lg} | {_g(r['vertex_gamma'])} | {_g(r['grid_gamma'])} "
+        bb = "-" if r.get("broadband_grid") is None else _g(r["broadband_grid"])
+        lines.append(f"| {r['name']}{st} | {lg} | {_g(r['vertex_gamma'])} | {_g(r['grid_gamma'])} | {bb} "
                      f"| {_fmt_poly(r['y'])} | {_fmt_poly(r['x'])} | {t} |")
     lines.append(f"| lower bound: DC floor (every order) | - | {sec['vertex_dc_floor']:.4f} "
-                 f"| {sec['grid_dc_floor']:.4f} | k = {sec['vertex_dc_floor_k']:.4g} (vertex), "
+                 f"| {sec['grid_dc_floor']:.4f} | - | k = {sec['vertex_dc_floor_k']:.4g} (vertex), "
                  f"{sec['grid_dc_floor_k']:.4g} (grid) | - | - |")
     return "\n".join(lines)
 
