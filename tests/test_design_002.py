@@ -273,3 +273,26 @@ def test_full_order_hinfsyn_is_certified_above_the_grid_floor():
     assert c["stable"] and c["grid_gamma"] >= floor * (1 - 1e-9)
     assert c["grid_gamma"] <= c["vertex_gamma"]           # the polytope contains the grid plants
     assert gam < 0.01 < c["grid_gamma"]                   # nominal gamma says nothing about the box
+
+
+def test_clarabel_fallback_settings_solve_after_a_numerical_failure(monkeypatch):
+    """ERRATA 002: when Clarabel stops on a numerical error, the solve is retried with
+    equilibration and chordal decomposition off, and that solve's answer is used."""
+    from latobs.synthesis import lmi
+    calls = []
+    real = lmi._attempt
+
+    def flaky(prob, settings):
+        calls.append(dict(settings))
+        return "solver_error" if not settings else real(prob, settings)
+    monkeypatch.setattr(lmi, "_attempt", flaky)
+    box = f.boxes()["paper"]
+    info = {}
+    y, x, g, status, _ = f.lemma5(f.polytope(box), f.nominal_central(box, 1), 1)
+    assert calls == [{}, lmi.FALLBACK_SETTINGS] and lmi.solved(status)      # (optimal_inaccurate here)
+    ev = f.evaluate(f.polytope(box), y, x)
+    assert ev["stable"] and ev["gamma"] == pytest.approx(f.PAPER_GAMMA, rel=5e-3)
+    import cvxpy as cp
+    v = cp.Variable()
+    lmi.solve(cp.Problem(cp.Minimize(v), [v >= 1]), info)
+    assert info["attempts"][0][1] == "solver_error" and info["attempts"][-1][1] == "optimal"
