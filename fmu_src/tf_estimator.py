@@ -55,52 +55,19 @@ from __future__ import annotations
 import math
 import threading
 
+from .linalg import zoh_map
+
 OUTPUT_NAMES = ("beta_hat", "mode")
 
 _LOCK = threading.Lock()
 _MAPS: dict = {}        # (A, B, h) -> (Phi, Gam), oldest first
 
 
-# -- small dense matrices as lists of rows -------------------------------------------------
-def _matmul(A, B):
-    cols = list(zip(*B))
-    return [[math.fsum(a * b for a, b in zip(row, col)) for col in cols] for row in A]
-
-
-def _norm_inf(A) -> float:
-    return max(sum(abs(a) for a in row) for row in A) if A else 0.0
-
-
-def expm(M) -> list[list[float]]:
-    """exp(M) of a square matrix (list of rows) by scaling and squaring with a Taylor series.
-
-    s = the least integer >= 0 with ||M||_inf 2^-s <= 1/2; E = sum_k (M 2^-s)^k / k!, summed
-    until ||term||_inf <= 1e-18 ||E||_inf (at most 60 terms); exp(M) = E^(2^s)."""
-    n = len(M)
-    norm = _norm_inf(M)
-    s = 0
-    if norm > 0.5:
-        s = max(0, math.ceil(math.log2(norm / 0.5)))
-    scale = 2.0 ** -s
-    X = [[x * scale for x in row] for row in M]
-    E = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
-    term = [row[:] for row in E]
-    for k in range(1, 60):
-        term = [[x / k for x in row] for row in _matmul(term, X)]
-        E = [[e + t for e, t in zip(re, rt)] for re, rt in zip(E, term)]
-        if _norm_inf(term) <= 1e-18 * _norm_inf(E):
-            break
-    for _ in range(s):
-        E = _matmul(E, E)
-    return E
-
-
 def zoh(A, B, h: float):
     """(Phi, Gam): exact zero-order-hold discretisation of z' = A z + B u (B a column list) over h."""
     n = len(A)
-    M = [[h * a for a in row] + [h * b] for row, b in zip(A, B)] + [[0.0] * (n + 1)]
-    E = expm(M)
-    return [row[:n] for row in E[:n]], [row[n] for row in E[:n]]
+    E = zoh_map(A, [[b] for b in B], h)
+    return [row[:n] for row in E], [row[n] for row in E]
 
 
 def _vector(v, what: str) -> list[float]:

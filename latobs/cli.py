@@ -160,6 +160,7 @@ USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.packaging", "PackagingError"), ("latobs.synthesis.designs", "CertificateError"),
                ("latobs.synthesis.pi_hinf_000", "DesignError"), ("latobs.synthesis.interval_001", "DesignError"),
                ("latobs.synthesis.fixed_order_002", "DesignError"), ("latobs.synthesis.kalman_baseline", "DesignError"),
+               ("latobs.synthesis.pi_switched_003", "DesignError"),
                ("latobs.synthesis.params", "VehicleParameterError"),
                ("latobs.validation.replay", "ReplayError"))
 

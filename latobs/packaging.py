@@ -58,7 +58,9 @@ class FmuKind:
     default_vehicle: str
 
 
-PLANTS = {"CarPlant": FmuKind("CarPlant", "car_plant", "plant", "sedan")}
+PLANTS = {"CarPlant": FmuKind("CarPlant", "car_plant", "plant", "sedan"),
+          # paper 003: Sharp's motorcycle (derived by synthesis/motorcycle_model.py)
+          "MotorcyclePlant": FmuKind("MotorcyclePlant", "motorcycle_plant", "plant", "sharp_motorcycle")}
 OBSERVERS = {
     "SideslipBankObserver": FmuKind("SideslipBankObserver", "sideslip_bank_observer", "design", "sedan"),
     "SideslipBankObserverTire": FmuKind("SideslipBankObserverTire", "sideslip_bank_observer", "design", "sedan"),
@@ -69,6 +71,8 @@ OBSERVERS = {
                                                     "sideslip_fixed_order_estimator_scheduled", "design",
                                                     "mbds_250lm"),
     "SideslipKalmanFilter": FmuKind("SideslipKalmanFilter", "sideslip_kalman_filter", "design", "mbds_250lm"),
+    "MotorcycleFaultObserver": FmuKind("MotorcycleFaultObserver", "motorcycle_fault_observer", "design",
+                                       "sharp_motorcycle"),
 }
 
 
@@ -80,8 +84,21 @@ def runtime_sources() -> list[Path]:
 
 
 def plant_data(vehicle: str) -> dict:
-    """The data file of a plant FMU: the validated vehicle parameter set."""
-    return {"schema": "latobs.plant/1", "vehicle": load_vehicle(vehicle).as_dict()}
+    """The data file of a plant FMU: the validated vehicle parameter set (and, for a motorcycle,
+    the equations derived from it: ``structure``, see ``motorcycle_data``)."""
+    veh = load_vehicle(vehicle)
+    data = {"schema": "latobs.plant/1", "vehicle": veh.as_dict()}
+    if veh.kind == "motorcycle":
+        data.update(motorcycle_data(veh))
+    return data
+
+
+def motorcycle_data(veh) -> dict:
+    """MotorcyclePlant's extra data: the equations of Sharp's motorcycle derived (sympy, at build
+    time) for this vehicle, as numbers for the stdlib runtime (fmu_src/motorcycle_plant.py)."""
+    from .synthesis.motorcycle_model import plant_structure
+
+    return {"structure": plant_structure(veh)}
 
 
 def pythonfmu_binaries() -> dict[str, bytes]:

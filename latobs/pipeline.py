@@ -14,6 +14,18 @@ DEFAULT_NOISE = {
     "delta": (0.0005, 0.0),          # rad (road wheel)
     "vx": (0.05, 0.0),               # m/s
 }
+#: ``--noise`` per plant (std, bias) in SI units: the sensors its observers read. The motorcycle's
+#: (paper 003, figure 3: noisy steer angle, yaw rate and roll rate) are zero-mean: an IMU and a
+#: steering encoder, after the usual bias calibration.
+PLANT_NOISE = {
+    "CarPlant": DEFAULT_NOISE,
+    "MotorcyclePlant": {
+        "steer_angle": (0.001, 0.0),   # rad (encoder)
+        "yaw_rate": (0.005, 0.0),      # rad/s
+        "roll_rate": (0.005, 0.0),     # rad/s
+        "vx": (0.05, 0.0),             # m/s
+    },
+}
 
 
 class PipelineError(RuntimeError):
@@ -94,7 +106,9 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     from .validation.report import text_table
 
     sc = get_scenario(scenario)
-    observers = observers or [n for n, e in designs.DESIGNS.items() if e.paper in ("000",)]
+    # default: paper 000's observers beside CarPlant, every observer of the plant otherwise
+    observers = observers or [n for n, e in designs.DESIGNS.items()
+                              if (e.paper == "000" if sc.plant == "CarPlant" else e.plant == sc.plant)]
     fmus = ensure_fmus(observers, fmu_dir)
     kind = packaging.PLANTS[sc.plant]
     plant_vehicle = plant_vehicle or kind.default_vehicle
@@ -106,7 +120,7 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     out_dir = out / (f"{scenario}_{tag}" if tag else scenario)
     _, metrics, paths = validate(sc, plant, {n: fmus[n] for n in observers}, out_dir, vehicle=plant_vehicle,
                                  plant_parameters=plant_parameters or {},
-                                 noise=NoiseSpec(signals=DEFAULT_NOISE) if noise else None, seed=seed,
+                                 noise=NoiseSpec(signals=PLANT_NOISE[sc.plant]) if noise else None, seed=seed,
                                  plots=plots)
     if not quiet:
         print(f"{scenario}{' [' + tag + ']' if tag else ''}: plant parameters {plant_parameters or 'nominal'}, "

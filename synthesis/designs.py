@@ -26,6 +26,7 @@ class DesignEntry:
     description: str
     options: Callable[[str], object]       # artefact name -> options of the paper's design
     solve: Callable[[Vehicle, object], dict]
+    plant: str = "CarPlant"                # the plant FMU it is validated beside
 
 
 def _solve_000(vehicle: Vehicle, opts) -> dict:
@@ -72,6 +73,18 @@ def _options_kalman(name: str):
     return kalman_baseline.DesignOptions(name=name)
 
 
+def _solve_003(vehicle: Vehicle, opts) -> dict:
+    from . import pi_switched_003
+
+    return pi_switched_003.to_design_dict(pi_switched_003.design(vehicle, opts))
+
+
+def _options_003(name: str):
+    from . import pi_switched_003
+
+    return pi_switched_003.DesignOptions(name=name)
+
+
 def _options_000(switching: str):
     def options(name: str):
         from . import pi_hinf_000
@@ -109,6 +122,11 @@ DESIGNS: dict[str, DesignEntry] = {
         "baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's authors "
         "(measurements ay and yaw rate), noise tuned on the record's t < 425 s",
         _options_kalman, _solve_kalman),
+    "MotorcycleFaultObserver": DesignEntry(
+        "MotorcycleFaultObserver", "003", "sharp_motorcycle",
+        "switched H-inf PI observer of a motorcycle's roll angle and rider torque (unknown inputs), one "
+        "Lyapunov matrix per speed mode 10..30 m/s, LMIs (20)-(23) with ERRATA's corrections",
+        _options_003, _solve_003, plant="MotorcyclePlant"),
 }
 
 

@@ -312,7 +312,10 @@ def test_metrics_hand_computed_constant(fmus, tmp_path):
     # mode 1 while t < 0.505 (samples 0..50), zero-order hold over [t_k, t_k+1)
     assert o["mode_occupancy"] == pytest.approx({"1": 0.51, "2": 0.49})
     assert o["mode_switches"] == 1
-    assert o["unscored_outputs"] == ["residual_norm"]
+    assert o["unscored_outputs"] == []
+    rn = np.asarray(r.observers["obs"]["residual_norm"], dtype=float)
+    assert o["residual_norm"]["rms"] == pytest.approx(float(np.sqrt(np.mean(rn ** 2))), rel=1e-12)
+    assert o["residual_norm"]["max"] == pytest.approx(float(np.max(np.abs(rn))), rel=1e-12)
     # metrics.json: strict JSON, written atomically
     path = metrics.write(m, tmp_path / "scen")
     assert path.name == "metrics.json"
@@ -410,10 +413,12 @@ def test_registry_and_errors():
         assert name in msg
     with pytest.raises(TypeError, match="no field"):
         get_scenario("fishhook", bogus=1)
+    inputs = {"CarPlant": ({"delta", "vx", "bank_angle"}, "sedan"),
+              "MotorcyclePlant": ({"rider_torque", "vx"}, "sharp_motorcycle")}
     for s in SCENARIOS.values():
-        assert s.plant == "CarPlant"
-        sig = s.signals(s.time_grid(0.01), "sedan")
-        assert set(sig) == {"delta", "vx", "bank_angle"}
+        names, vehicle = inputs[s.plant]            # the plant's required inputs, nothing else
+        sig = s.signals(s.time_grid(0.01), vehicle)
+        assert set(sig) == names == set(s.signal_names)
         assert all(np.all(np.isfinite(v)) for v in sig.values())
 
 

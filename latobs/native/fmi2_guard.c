@@ -113,6 +113,35 @@ static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static void *real_handle;  /* guarded by lock */
 static size_t n_instances; /* guarded by lock */
 
+/* pythonfmu 0.7.0's exit-time use-after-free. Its library keeps the Python state in a
+ * namespace-scope std::shared_ptr and resets it from an __attribute__((destructor))
+ * (finalizePythonInterpreter). The library has STB_GNU_UNIQUE symbols, so dlclose never
+ * unloads it: it stays until the process exits, where its static destructors (atexit) run
+ * BEFORE its ELF destructors, so finalizePythonInterpreter assigns to an already destroyed
+ * shared_ptr and releases its freed control block again (valgrind: "Invalid read ... in
+ * finalizePythonInterpreter"; at random, glibc aborts the host at exit with "corrupted
+ * double-linked list"). The guard releases that state itself while it is alive: when the
+ * last instance is freed, and from an exit handler registered after the real library's own
+ * (handlers run last in, first out). The shared_ptr is then empty and the late reset harmless. */
+typedef void guard_finalize_fn(void);
+static guard_finalize_fn *real_finalize; /* guarded by lock; NULL if not exported */
+static int exit_hook_registered;         /* guarded by lock */
+extern void *__dso_handle;
+extern int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
+
+static void release_python_state_locked(void)
+{
+    if (real_finalize != NULL) real_finalize();
+}
+
+static void guard_at_exit(void *unused)
+{
+    (void)unused;
+    pthread_mutex_lock(&lock);
+    release_python_state_locked();
+    pthread_mutex_unlock(&lock);
+}
+
 typedef struct {
     fmi2Component real;
     fmi2CallbackFunctions functions; /* a copy: the host's struct may not outlive the call */
@@ -149,8 +178,12 @@ static void guard_log(const fmi2CallbackFunctions *f, fmi2String instance, fmi2S
 
 static void unload_real_locked(void)
 {
-    if (real_handle != NULL) dlclose(real_handle);
+    if (real_handle != NULL) {
+        release_python_state_locked(); /* before the library can run its own destructors */
+        dlclose(real_handle);
+    }
     real_handle = NULL;
+    real_finalize = NULL;
     memset(&api, 0, sizeof api);
 }
 
@@ -186,6 +219,11 @@ static const char *load_real_locked(void)
     free(path);
 #define GUARD_DLSYM(name) *(void **)(&api.name) = dlsym(real_handle, "fmi2" #name);
     GUARD_FORWARDED(GUARD_DLSYM)
+    *(void **)(&real_finalize) = dlsym(real_handle, "finalizePythonInterpreter");
+    if (!exit_hook_registered) { /* after the real library's static objects: runs before them */
+        __cxa_atexit(guard_at_exit, NULL, &__dso_handle);
+        exit_hook_registered = 1;
+    }
     if (api.Instantiate == NULL || api.FreeInstance == NULL) {
         unload_real_locked();
         return "the real library " GUARD_REAL_LIBRARY " does not export fmi2Instantiate/fmi2FreeInstance";

@@ -10,6 +10,7 @@ the entry when a modelDescription declares it). Structure returned by :func:`com
         label: {
           "estimates": {"X_hat": {"truth": "X", "unit": str|None, "rms": e, "max_abs": e,
                                    "rms_after_settle": e, "max_abs_after_settle": e,
+                                   "mean_error_after_settle": e (bias), "truth_rms_after_settle": x,
                                    "nonfinite_samples": int}},
           "intervals": {"X": {"truth": "X", "lower": "X_lower", "upper": "X_upper",
                               "enclosure_violations": int, "enclosure_violations_after_settle": int,
@@ -18,6 +19,9 @@ the entry when a modelDescription declares it). Structure returned by :func:`com
           "beta_error_to_bank_l2_ratio": r | None,              # paper 000 eq. (26)
           "beta_error_to_bank_l2_ratio_after_settle": r | None,
           "mode_occupancy": {"1": fraction, ...}, "mode_switches": int,   # if a `mode` output exists
+          "residual_norm": {"rms", "max", "rms_after_settle", "max_after_settle"},  # if such an output
+          "saturation_zone": {"Ff"|"Fr": {"samples", "fraction", "rms", "max_abs", "rms_outside",
+                              "peak_gamma_over_force"}},   # X_hat vs X where |Gamma_x| > 5 % |X|
           "unscored_outputs": [names without a truth on the bus],
           "log_messages": int
         }
@@ -48,6 +52,9 @@ import numpy as np
 from .harness import SimResult
 
 ENCLOSURE_TOL = 1e-9  # absolute tolerance of the enclosure test, in the signal's unit
+#: A sample is in a tire's saturation zone when the nonlinear part of its force (the plant's
+#: Gamma_f / Gamma_r output, paper 003 eq. 5-6) exceeds this fraction of the force.
+SATURATION_FRACTION = 0.05
 
 #: Truth signal of an estimated quantity, per observer FMU model (the model name, or its prefix
 #: before ``_<vehicle>`` for a build of another vehicle): {model: {quantity X: bus signal}}. Used
@@ -182,6 +189,8 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
                     "max_abs": _maxabs(e),
                     "rms_after_settle": _rms(e[after]),
                     "max_abs_after_settle": _maxabs(e[after]),
+                    "mean_error_after_settle": _f(np.mean(e[after])) if np.any(after) else None,   # bias
+                    "truth_rms_after_settle": _rms(bus[truth][after]) if np.any(after) else None,
                     "nonfinite_samples": int(np.sum(~finite)),
                 }
                 scored.add(name)
@@ -219,6 +228,26 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
                              ("beta_error_to_bank_l2_ratio_after_settle", after)):
                 den = l2_norm(phi[sel], dt)
                 o[key] = _f(l2_norm(e[sel], dt) / den) if den > 0 else None
+        sat = {ax: g for ax, g in (("Ff", "Gamma_f"), ("Fr", "Gamma_r"))
+               if f"{ax}_hat" in outs and ax in bus and g in bus}
+        if sat:                              # paper 003: force estimates inside the saturation zone
+            o["saturation_zone"] = {}
+            for ax, g in sat.items():
+                F, G = bus[ax], bus[g]
+                zone = np.abs(G) > SATURATION_FRACTION * np.maximum(np.abs(F), 1e-9)
+                e = np.asarray(outs[f"{ax}_hat"], dtype=float) - F
+                o["saturation_zone"][ax] = {
+                    "samples": int(np.sum(zone)), "fraction": _f(np.mean(zone)),
+                    "rms": _rms(e[zone]) if np.any(zone) else None,
+                    "max_abs": _maxabs(e[zone]) if np.any(zone) else None,
+                    "rms_outside": _rms(e[~zone]) if np.any(~zone) else None,
+                    "peak_gamma_over_force": _f(np.max(np.abs(G) / np.maximum(np.abs(F), 1e-9))) if F.size else None}
+        if "residual_norm" in outs:          # paper 003: |y - y^|, no truth to compare with
+            rn = np.asarray(outs["residual_norm"], dtype=float)
+            o["residual_norm"] = {"rms": _rms(rn), "max": _maxabs(rn),
+                                  "rms_after_settle": _rms(rn[after]) if np.any(after) else None,
+                                  "max_after_settle": _maxabs(rn[after]) if np.any(after) else None}
+            scored.add("residual_norm")
         if "mode" in outs:
             m = np.asarray(outs["mode"])
             o["mode_occupancy"] = mode_occupancy(t, m)

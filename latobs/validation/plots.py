@@ -6,6 +6,7 @@ their SI unit. Files written by :func:`plot_all` into ``out_dir``:
     estimates.png   truth vs every observer's estimate (and interval band) per estimated signal;
                     the truth of an observer is the one its metrics use (metrics.REFERENCE_SIGNALS)
     modes.png       active mode of each observer over time (observers with a `mode` output)
+    residual.png    each observer's `residual_norm` output (paper 003)
     bank_angle.png  road bank angle: truth vs each observer's bank_angle_hat
     inputs.png      the scenario's plant inputs (delta, vx, bank_angle)
 """
@@ -161,6 +162,25 @@ def plot_modes(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
     return _save(fig, Path(out_dir) / "modes.png")
 
 
+def plot_residual(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
+    """residual.png: each observer's ``residual_norm`` output (paper 003's figure 6)."""
+    labs = [lab for lab, outs in result.observers.items() if "residual_norm" in outs]
+    if not labs:
+        return None
+    fig = Figure(figsize=(10, 1.8 * len(labs) + 1.0))
+    axes = fig.subplots(len(labs), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, lab in zip(axes, labs):
+        y = np.asarray(result.observers[lab]["residual_norm"], dtype=float)
+        _plot(ax, result.time, y, lw=1.0)
+        unit = result.units.get("residual_norm")
+        ax.set_ylabel(f"{lab}\n|y - y^|" + (f" [{unit}]" if unit else ""), fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{result.scenario}: residual norm")
+    fig.tight_layout()
+    return _save(fig, Path(out_dir) / "residual.png")
+
+
 def plot_bank(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
     if "bank_angle" not in result.bus:
         return None
@@ -204,6 +224,6 @@ def plot_inputs(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
 
 def plot_all(result: SimResult, out_dir: str | os.PathLike) -> list[Path]:
     """Write every applicable figure into ``out_dir``; returns the paths written."""
-    paths = [plot_estimates(result, out_dir), plot_modes(result, out_dir), plot_bank(result, out_dir),
-             plot_inputs(result, out_dir)]
+    paths = [plot_estimates(result, out_dir), plot_modes(result, out_dir), plot_residual(result, out_dir),
+             plot_bank(result, out_dir), plot_inputs(result, out_dir)]
     return [p for p in paths if p is not None]

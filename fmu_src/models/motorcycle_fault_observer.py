@@ -1,0 +1,45 @@
+"""FMU model file: MotorcycleFaultObserver (paper 003).
+
+Interface per CONTRACT.md; the maths is in ``motorcycle_observer.py``; the gains come from the
+design file baked into the FMU. Signs are those of the design model (``synthesis/motorcycle_model.py``,
+Sharp's SAE axes: y to the right, z down): roll, steer, yaw rate, vy, forces and torque > 0 to the right.
+"""
+from ..motorcycle_observer import MotorcycleFaultObserver
+from ..spec import ModelSpec, Var
+
+
+def _variant(data: dict) -> str:
+    speeds = "/".join(f"{m['vx']:g}" for m in data.get("modes", []))
+    return (f"speed modes: one PI gain pair per grid speed {speeds} m/s, switched on vx "
+            f"(nearest grid speed, hysteresis {data.get('switching', {}).get('hysteresis', 0):g} m/s)")
+
+
+SPEC = ModelSpec(
+    description="Switched H-infinity PI observer of a motorcycle's roll angle and rider steering torque "
+                "(paper 003, eq. (13)) on the reduced Sharp 1971 lateral model",
+    describe=_variant,
+    runtime=MotorcycleFaultObserver,
+    inputs=(
+        Var("vx", "m/s", "longitudinal speed (schedules the mode)"),
+        Var("steer_angle", "rad", "measured steering (handlebar) angle, > 0 steers right"),
+        Var("yaw_rate", "rad/s", "measured yaw rate, > 0 turning right"),
+        Var("roll_rate", "rad/s", "measured roll rate, > 0 leaning further right"),
+    ),
+    outputs=(
+        Var("roll_angle_hat", "rad", "estimated roll angle (unknown input f1), > 0 leaning right"),
+        Var("rider_torque_hat", "N.m", "estimated rider steering torque (unknown input f2), > 0 turning the handlebar right"),
+        Var("vy_hat", "m/s", "estimated lateral velocity"),
+        Var("steer_rate_hat", "rad/s", "estimated steering rate"),
+        Var("Ff_hat", "N", "estimated front tyre lateral force, linear part H_x x^ + H_phi phi^ (no Gamma)"),
+        Var("Fr_hat", "N", "estimated rear tyre lateral force, linear part H_x x^ + H_phi phi^ (no Gamma)"),
+        Var("residual_norm", "1", "|y - C x^| (eq. 14), Euclidean norm of [rad, rad/s, rad/s] numbers in SI "
+                                  "(mixed units)"),
+    ),
+    integer_outputs=(Var("mode", "1", "active switched mode, 1-based", start=1, min=1),),
+    bounds=lambda data: {"mode": (1, len(data["modes"]))},
+    parameters=(
+        Var("vx_hold", "m/s", "below this |vx| the observer is frozen and its estimates held",
+            start=1.0, min=0.01, max=10.0),
+    ),
+    stop_time=16.0,
+)
