@@ -169,6 +169,8 @@ from __future__ import annotations
 
 import math
 
+from .spec import runtime_parameters
+
 G = 9.81  # m/s^2; must equal latobs.synthesis.params.G (checked by the tests)
 
 _atan = math.atan
@@ -289,19 +291,7 @@ class CarPlantModel:
 
     def __init__(self, data: dict, params: dict | None = None):
         v = self._vehicle_values(data)
-        params = dict(params or {})
-        unknown = sorted(set(params) - set(self.PARAMETERS))
-        if unknown:
-            raise ValueError(f"CarPlant: unknown parameter(s) {', '.join(unknown)}; "
-                             f"known: {', '.join(self.PARAMETERS)}")
-        defaults = self._defaults(v)
-        p = {}
-        for k, d in defaults.items():
-            val = params.get(k)
-            val = d if val is None else val
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-                raise ValueError(f"CarPlant: parameter {k!r} must be a finite number, got {val!r}")
-            p[k] = float(val)
+        p = runtime_parameters("CarPlant", self.PARAMETERS, self._defaults(v), params)
         for k in ("mu", "scale_f", "scale_r"):
             if not p[k] > 0:
                 raise ValueError(f"CarPlant: parameter {k!r} must be > 0, got {p[k]}")

@@ -95,6 +95,47 @@ def variable_table(spec: ModelSpec) -> list[tuple[int, str, str, object]]:
     return [(vr, typ, caus, v) for vr, (v, typ, caus) in enumerate(rows)]
 
 
+_EXIT_HOOKS: dict = {}          # library path -> finalizePythonInterpreter, see _defuse_pythonfmu_exit
+
+
+def _defuse_pythonfmu_exit(resources: str) -> None:
+    """pythonfmu 0.7.0's exit-time use-after-free, for FMUs without the native guard.
+
+    Its library cannot be unloaded (STB_GNU_UNIQUE symbols); at process exit its static
+    destructors run before its ELF destructor ``finalizePythonInterpreter``, which then releases a
+    destroyed shared_ptr again (heap corruption; glibc may abort the host at exit). The native
+    guard calls that function itself while the library is alive (fmi2_guard.c): nothing to do
+    for a guarded FMU (its pythonfmu library is ``<id>_pythonfmu.so``). Without the guard (an FMU
+    built without a C compiler, binaries/<platform>/<id>.so is pythonfmu's) and in a PYTHON host
+    process (in a C host pythonfmu created the interpreter and finalizes it from that very
+    shared_ptr's destructor, where this must not run), a Python ``atexit`` handler calls
+    ``finalizePythonInterpreter``; Python's atexit handlers run before the C exit handlers.
+    Only a library the host has already loaded is touched (RTLD_NOLOAD). Never raises."""
+    try:
+        exe = os.path.realpath("/proc/self/exe") if os.path.exists("/proc/self/exe") else sys.executable
+        if not os.path.basename(exe or "").startswith("python"):
+            return                                   # not a Python host
+        folder = os.path.join(os.path.dirname(os.path.abspath(resources)), "binaries")
+        libs = [os.path.join(r, f) for r, _d, fs in os.walk(folder) for f in fs if f.endswith(".so")]
+        if not libs or any(p.endswith("_pythonfmu.so") for p in libs):
+            return                                   # guarded: the guard does it
+        import atexit
+        import ctypes
+        for path in libs:
+            if path in _EXIT_HOOKS:
+                continue
+            try:
+                lib = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+                fn = lib.finalizePythonInterpreter
+            except (OSError, AttributeError):
+                continue
+            fn.restype, fn.argtypes = None, []
+            _EXIT_HOOKS[path] = (lib, fn)            # the library is never unloaded anyway
+            atexit.register(fn)
+    except Exception:                                # best effort, never into the host
+        pass
+
+
 class Fmi2Slave:
     """The slave of every latobs FMU. pythonfmu 0.7.0's native ``findClass`` picks, in the entry
     module, the class whose MRO holds a class named ``Fmi2Slave``: hence this class's name."""
@@ -114,6 +155,7 @@ class Fmi2Slave:
         # module; everything is imported by now: keep the host's sys.path as it was
         if resources:
             sys.path[:] = [p for p in sys.path if p != resources]
+            _defuse_pythonfmu_exit(resources)
         spec = self.spec
         self._phase = "instantiated"
         self._fault = ""

@@ -113,6 +113,8 @@ import math
 import threading
 from bisect import bisect_right
 
+from .linalg import matrix as _matrix
+
 OUTPUT_NAMES = ("vy_lower", "vy_upper", "beta_lower", "beta_upper", "yaw_rate_lower", "yaw_rate_upper",
                 "Fyf_lower", "Fyf_upper", "Fyr_lower", "Fyr_upper")
 INTEGER_OUTPUTS = ("mode", "consistent")
@@ -793,18 +795,6 @@ class _Core:
 
 
 # -- validation of the design file ----------------------------------------------------------------
-def _matrix(x, rows: int, cols: int, what: str):
-    try:
-        M = [[float(v) for v in row] for row in x]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"design file: {what} must be a {rows}x{cols} matrix of numbers ({exc})") from exc
-    if len(M) != rows or any(len(r) != cols for r in M):
-        raise ValueError(f"design file: {what} must be {rows}x{cols}, got {len(M)}x{len(M[0]) if M else 0}")
-    if not all(math.isfinite(v) for r in M for v in r):
-        raise ValueError(f"design file: {what} has a non-finite entry")
-    return M
-
-
 def _vector(x, n: int, what: str):
     try:
         v = [float(a) for a in x]

@@ -52,3 +52,17 @@ def zoh_map(A, B, h: float):
     n, m = len(A), len(B[0]) if B else 0
     big = [[h * a for a in A[i]] + [h * b for b in B[i]] for i in range(n)] + [[0.0] * (n + m) for _ in range(m)]
     return expm(big)[:n]
+
+
+def matrix(x, rows: int, cols: int, what: str):
+    """A rows x cols matrix of finite floats from a design file's nested lists, or a ValueError
+    naming ``what``."""
+    try:
+        M = [[float(v) for v in row] for row in x]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"design file: {what} must be a {rows}x{cols} matrix of numbers ({exc})") from exc
+    if len(M) != rows or any(len(r) != cols for r in M):
+        raise ValueError(f"design file: {what} must be {rows}x{cols}, got {len(M)}x{len(M[0]) if M else 0}")
+    if not all(math.isfinite(v) for r in M for v in r):
+        raise ValueError(f"design file: {what} has a non-finite entry")
+    return M

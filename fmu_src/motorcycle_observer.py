@@ -45,6 +45,7 @@ from operator import mul
 
 from .linalg import matmul as _matmul
 from .linalg import zoh_map
+from .linalg import matrix as _matrix
 
 OUTPUT_NAMES = ("roll_angle_hat", "rider_torque_hat", "vy_hat", "steer_rate_hat", "Ff_hat", "Fr_hat",
                 "residual_norm", "mode")
@@ -55,18 +56,6 @@ STATES = ("vy", "yaw_rate", "roll_rate", "steer_angle", "steer_rate")
 def step_map(M, G, h: float):
     """[Phi | Gam] (rows of length n + m): the exact map of s' = M s + G y over h with y held."""
     return tuple(tuple(row) for row in zoh_map(M, G, h))
-
-
-def _matrix(x, rows: int, cols: int, what: str):
-    try:
-        M = [[float(a) for a in row] for row in x]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"design file: {what} must be a {rows}x{cols} matrix of numbers ({exc})") from exc
-    if len(M) != rows or any(len(r) != cols for r in M):
-        raise ValueError(f"design file: {what} must be {rows}x{cols}")
-    if not all(math.isfinite(a) for r in M for a in r):
-        raise ValueError(f"design file: {what} has a non-finite entry")
-    return M
 
 
 _LOCK = threading.Lock()

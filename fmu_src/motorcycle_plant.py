@@ -83,6 +83,8 @@ from __future__ import annotations
 
 import math
 
+from .spec import runtime_parameters
+
 _atan = math.atan
 _sin = math.sin
 
@@ -206,19 +208,7 @@ class MotorcyclePlantModel:
         if abs(float(s.get("g", G)) - G) > 1e-12:
             raise ValueError(f"MotorcyclePlant: structure g = {s.get('g')} differs from the runtime's {G}")
 
-        params = dict(params or {})
-        unknown = sorted(set(params) - set(self.PARAMETERS))
-        if unknown:
-            raise ValueError(f"MotorcyclePlant: unknown parameter(s) {', '.join(unknown)}; "
-                             f"known: {', '.join(self.PARAMETERS)}")
-        defaults = self.parameter_defaults(data)
-        p = {}
-        for k, d in defaults.items():
-            val = params.get(k)
-            val = d if val is None else val
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-                raise ValueError(f"MotorcyclePlant: parameter {k!r} must be a finite number, got {val!r}")
-            p[k] = float(val)
+        p = runtime_parameters("MotorcyclePlant", self.PARAMETERS, self.parameter_defaults(data), params)
         if not p["mu"] > 0:
             raise ValueError(f"MotorcyclePlant: parameter 'mu' must be > 0, got {p['mu']}")
         if not (p["sigma"] == 0.0 or p["sigma"] >= self.SIGMA_MIN):

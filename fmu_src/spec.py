@@ -20,6 +20,8 @@ output depends directly on an input (no direct feedthrough), and the tests check
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -58,3 +60,21 @@ class ModelSpec:
     describe: Optional[Callable[[dict], str]] = None
     bounds: Optional[Callable[[dict], dict]] = None
     stop_time: float = 10.0
+
+
+def runtime_parameters(model: str, known, defaults: dict, params: dict | None) -> dict[str, float]:
+    """The runtime's parameter values: ``defaults`` overridden by ``params`` (None = default).
+    Unknown names and values that are not finite numbers raise a ValueError naming the model and
+    the parameter (the framework has already checked each declared [min, max])."""
+    params = dict(params or {})
+    unknown = sorted(set(params) - set(known))
+    if unknown:
+        raise ValueError(f"{model}: unknown parameter(s) {', '.join(unknown)}; known: {', '.join(known)}")
+    out = {}
+    for k, d in defaults.items():
+        val = params.get(k)
+        val = d if val is None else val
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+            raise ValueError(f"{model}: parameter {k!r} must be a finite number, got {val!r}")
+        out[k] = float(val)
+    return out

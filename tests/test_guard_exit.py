@@ -21,7 +21,17 @@ import pytest
 pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind")
 
 
-def test_no_use_after_free_in_pythonfmu_at_host_exit(fmu_dir, tmp_path):
+@pytest.mark.parametrize("guarded", [True, False], ids=["native-guard", "python-only"])
+def test_no_use_after_free_in_pythonfmu_at_host_exit(fmu_dir, design_speed, tmp_path, guarded, monkeypatch):
+    """With the guard (fmi2_guard.c) and without it (framework.py's Python exit handler)."""
+    if guarded:
+        fmu = fmu_dir / "SideslipBankObserver.fmu"
+    else:
+        from latobs import native_guard, packaging
+        from latobs.synthesis import design_file
+        monkeypatch.setattr(native_guard, "find_compiler", lambda: None)
+        with pytest.warns(UserWarning, match="no native guard"):
+            fmu = packaging.package_design(design_file.write(design_speed, tmp_path), tmp_path)
     script = tmp_path / "host.py"
     script.write_text(textwrap.dedent("""
         import sys
@@ -31,7 +41,7 @@ def test_no_use_after_free_in_pythonfmu_at_host_exit(fmu_dir, tmp_path):
     """))
     env = dict(os.environ, PYTHONMALLOC="malloc")     # every allocation visible to valgrind
     proc = subprocess.run(["valgrind", "--error-limit=no", sys.executable, str(script),
-                           str(fmu_dir / "SideslipBankObserver.fmu")],
+                           str(fmu)],
                           capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = proc.stderr
