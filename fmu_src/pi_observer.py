@@ -45,8 +45,10 @@ How a step is computed (exactly that discretisation, without per-step matrix wor
     history, so results are bitwise reproducible whatever else ran in the process.
 
 Documented clamps (never an exception for finite inputs):
-  * |vx| < vx_hold (default 1 m/s, parameter): integration frozen, estimates held, one warning
-    per entry (the model has 1/Vx terms; at standstill sideslip is undefined);
+  * vx < vx_hold (default 1 m/s, parameter, > 0), standstill AND reversing: integration frozen
+    and every output held at its last value (the measurements are not even read), one warning
+    per entry (the model has 1/Vx terms; at standstill sideslip is undefined; driving backwards
+    the forward model is wrong);
   * vx outside the design grid: speed modes use the nearest mode; tire modes evaluate the model
     at the nearest grid edge; one warning per excursion;
   * ``initialize`` (at exitInitializationMode, or else the first step) sets x^ = [0, y] (beta^ = 0,
@@ -383,8 +385,8 @@ class SwitchedPIObserver:
         except (KeyError, TypeError) as exc:
             raise ValueError(f"design file lacks {exc} needed by the paper-000 observer runtime") from exc
         self.vx_hold = float(params.get("vx_hold", vx_hold))
-        if not (math.isfinite(self.vx_hold) and self.vx_hold >= 0):
-            raise ValueError(f"parameter vx_hold must be finite and >= 0 m/s, got {self.vx_hold}")
+        if not (math.isfinite(self.vx_hold) and self.vx_hold > 0):       # 0 would reach 1/vx at vx = 0
+            raise ValueError(f"parameter vx_hold must be finite and > 0 m/s, got {self.vx_hold}")
         if not (0 < self.max_step <= 0.01):
             raise ValueError(f"design runtime.max_step must be in (0, 0.01] s, got {self.max_step}")
         self.n = len(self.T)
@@ -536,7 +538,7 @@ class SwitchedPIObserver:
         Ny = _matvec(self.N, y_meas)
         self.s = tuple(a - b for a, b in zip(x0, Ny)) + tuple(self.s[self.n:])
         self._started = True
-        if self._speed_bands and abs(u["vx"]) >= self.vx_hold:
+        if self._speed_bands and u["vx"] >= self.vx_hold:
             self.mode = self._band(u["vx"])
         self._publish(y_meas)
 
@@ -545,12 +547,11 @@ class SwitchedPIObserver:
         if not self._started:
             self.initialize(u)
         hold = self.vx_hold
-        if -hold < vx < hold:
+        if vx < hold:                  # standstill or reversing: frozen, every output held as it is
             if not self._holding:
-                self.events.append(("warning", f"|vx| = {abs(vx):.3g} m/s < vx_hold = {hold:g} m/s: "
-                                               "observer frozen, estimates held"))
+                self.events.append(("warning", f"vx = {vx:.3g} m/s < vx_hold = {hold:g} m/s (standstill or "
+                                               "reversing): observer frozen, every estimate held"))
             self._holding = True
-            self._publish([u["yaw_rate"], u["roll_angle"], u["roll_rate"]])
             return
         if self._holding:
             self.events.append(("warning", f"vx = {vx:.3g} m/s: observer resumes"))

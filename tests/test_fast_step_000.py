@@ -54,10 +54,10 @@ class ReferenceObserver:
         if not self.started:           # initialize: x^ = [0, y], mode of the initial speed
             self.z = np.concatenate([[0.0], y]) - self.N @ y
             self.started = True
-            if self.sw["kind"] == "speed_bands" and abs(vx) >= self.vx_hold:
+            if self.sw["kind"] == "speed_bands" and vx >= self.vx_hold:
                 self.mode = self.band(vx)
-        if abs(vx) < self.vx_hold:     # frozen
             self.publish(y)
+        if vx < self.vx_hold:          # frozen (standstill or reversing): every output held
             return
         if self.sw["kind"] == "speed_bands":
             self.mode = self.band(vx)

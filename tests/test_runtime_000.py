@@ -143,9 +143,28 @@ def test_speed_outside_grid_is_clamped_with_a_warning(design_speed, design_tire,
         for _ in range(400):
             obs.step(H, {"delta": 0.01, "vx": vx, "yaw_rate": 0.02, "roll_angle": 0.01, "roll_rate": 0.0})
         assert all(math.isfinite(obs.y[k]) for k in obs.y)
-        if abs(vx) < obs.vx_hold:
+        if vx < obs.vx_hold:           # standstill and reversing
             assert obs.y["beta_hat"] == 0.0 and obs.y["bank_angle_hat"] == 0.0   # frozen from the start
             assert any("frozen" in m for _, m in obs.events)
         else:
             assert any("outside the design grid" in m for _, m in obs.events)
         assert len(obs.events) == 1    # one warning per excursion, not one per step
+
+
+def test_frozen_means_every_estimate_held_and_vx_hold_positive(design_speed, design_tire):
+    """Issue 9.5: below +vx_hold (reversing included) nothing moves, whatever the measurements do;
+    vx_hold = 0 is refused (it would reach the 1/vx terms at standstill)."""
+    for design in (design_speed, design_tire):
+        with pytest.raises(ValueError, match="vx_hold must be finite and > 0"):
+            SwitchedPIObserver(design, {"vx_hold": 0.0})
+        obs = SwitchedPIObserver(design, {})
+        u = {"delta": 0.01, "vx": 20.0, "yaw_rate": 0.05, "roll_angle": 0.01, "roll_rate": 0.0}
+        for _ in range(200):
+            obs.step(H, u)
+        held = dict(obs.y)
+        for k, vx in enumerate((0.5, 0.0, -5.0, -30.0)):     # standstill, then reversing fast
+            obs.step(H, dict(u, vx=vx, yaw_rate=0.3 * (k + 1), roll_angle=-0.1, roll_rate=0.2))
+            assert obs.y == held
+        assert sum("frozen" in m for _, m in obs.events) == 1          # one warning per entry
+        obs.step(H, u)                                                  # forward again: resumes
+        assert obs.y != held and any("resumes" in m for _, m in obs.events)

@@ -31,7 +31,8 @@ SPEC = ModelSpec(
         Var("roll_rate", "rad/s", "measured roll rate"),
     ),
     outputs=(
-        Var("beta_hat", "rad", "estimated sideslip angle at the CG"),
+        Var("beta_hat", "rad", "estimated sideslip angle at the roll axis below the CG (the design model's beta; "
+                               "the CG's differs by hr*roll_rate/vx)"),
         Var("yaw_rate_hat", "rad/s", "estimated yaw rate"),
         Var("roll_angle_hat", "rad", "estimated roll angle"),
         Var("roll_rate_hat", "rad/s", "estimated roll rate"),
@@ -40,7 +41,8 @@ SPEC = ModelSpec(
     integer_outputs=(Var("mode", "1", "active switched mode, 1-based", start=1, min=1),),
     bounds=lambda data: {"mode": (1, len(data["modes"]))},
     parameters=(
-        Var("vx_hold", "m/s", "below this speed the observer is frozen and its estimates held",
+        Var("vx_hold", "m/s", "below this forward speed (standstill and reversing included) the observer is "
+                              "frozen and every estimate held",
             start=1.0, min=0.01, max=10.0),
     ),
     stop_time=30.0,
