@@ -50,7 +50,8 @@ _VEHICLE = ("m", "lf", "lr", "Iz", "Cf", "Cr")
 
 def _expm3(M):
     """exp of a 3x3 matrix (list of rows): scaling and squaring, Taylor series summed until a
-    term is below 1e-18 relative (as ``tf_estimator.expm``)."""
+    term is below 1e-18 relative: ``linalg.expm`` unrolled for 3x3, since the speed changes the
+    model at every step (this is the per-step hot path)."""
     norm = max(sum(abs(a) for a in row) for row in M)
     s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
     sc = 2.0 ** -s

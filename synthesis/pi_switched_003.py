@@ -567,17 +567,6 @@ def dwell_time_of(design: Design) -> dict:
     return dwell_time([s.P for s in design.solutions], Acls)
 
 
-def paper_speed_profile(t: float) -> float:
-    """Section IV / Fig. 1 speed profile (m/s): 12 m/s, up to 20, 4 s constant, down to 10.
-    The paper gives no ramp times; the same timing as the validation scenario
-    ``motorcycle-lane-change`` (latobs.validation.scenarios.MotorcycleLaneChange): 12 m/s until
-    1 s, a half-cosine rise to 20 m/s over 4 s, held to 9 s, a half-cosine fall to 10 m/s over 5 s,
-    then constant (to 16 s)."""
-    def blend(x: float) -> float:
-        return 0.0 if x <= 0 else 1.0 if x >= 1 else 0.5 - 0.5 * math.cos(math.pi * x)
-    return 12.0 + 8.0 * blend((t - 1.0) / 4.0) - 10.0 * blend((t - 9.0) / 5.0)
-
-
 # -- design file ----------------------------------------------------------------------------------------
 def iss_constants(P: np.ndarray, Acl: np.ndarray) -> dict:
     """The ISS bound after (23): kappa = sqrt(lambda_max/lambda_min) and the decay rates."""
@@ -653,12 +642,6 @@ def to_design_dict(design: Design) -> dict:
                                 "residual_norm", "mode"]},
         "solver": design.solver,
     }
-    prof_t = np.arange(0.0, 16.0 + 1e-9, 0.01)
-    seq = modes_of_speed(data, prof_t, [paper_speed_profile(t) for t in prof_t])
-    data["dwell_time"]["paper_scenario"] = {
-        "profile": "12 -> 20 m/s (half-cosine, 1-5 s), 20 m/s to 9 s, -> 10 m/s (half-cosine, 9-14 s), to 16 s: "
-                   "the timing of the motorcycle-lane-change scenario (the paper gives none)",
-        "all_pairs": dwell_report(data, seq), "adjacent": dwell_report(data, seq, adjacent=True)}
     data["notes"] = [
         "One Lyapunov matrix per mode: stability under switching only for signals with the average dwell "
         f"time tau_a > {dw['tau_a']:.3g} s (all mode pairs) / {dw['tau_a_adjacent']:.3g} s (neighbouring modes); "

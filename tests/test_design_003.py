@@ -155,16 +155,14 @@ def test_dwell_time_recomputed_and_reported(d003):
     assert ps.dwell_report(d003, slow)["satisfied"]
     rep = ps.dwell_report(d003, fast)
     assert not rep["satisfied"] and rep["switches"] == 39 and rep["worst_margin"] < 0
-    # the paper's speed profile (= the motorcycle-lane-change scenario's) through the runtime's rule
+    # the paper's speed profile (the motorcycle-lane-change scenario's) through the runtime's rule:
+    # what the demo's design section reports
     from latobs.validation.scenarios import SCENARIOS
     t = np.arange(0, 16, 0.01)
-    vx = [ps.paper_speed_profile(x) for x in t]
-    assert np.allclose(vx, SCENARIOS["motorcycle-lane-change"].speed(t), atol=1e-12)
-    seq = ps.modes_of_speed(d003, t, vx)
+    seq = ps.modes_of_speed(d003, t, SCENARIOS["motorcycle-lane-change"].speed(t))
     assert sorted({m for _, m in seq}) == [1, 2, 3]
-    rep = d003["dwell_time"]["paper_scenario"]["all_pairs"]
-    assert rep["switches"] == 4 and rep["satisfied"] and rep == ps.dwell_report(d003, seq) | {
-        "worst_window": rep["worst_window"]}
+    rep = ps.dwell_report(d003, seq)
+    assert rep["switches"] == 4 and rep["satisfied"] and rep["min_interval"] > 1.5
 
 
 # -- the certificate against corrupted files --------------------------------------------------------------

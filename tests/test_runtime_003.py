@@ -12,6 +12,7 @@ from latobs.fmu_src.motorcycle_observer import MotorcycleFaultObserver, step_map
 from latobs.synthesis import designs
 from latobs.synthesis import pi_switched_003 as ps
 from latobs.synthesis.params import load_vehicle
+from latobs.validation.scenarios import SCENARIOS
 
 H = 0.01  # s, communication step
 VEHICLE = load_vehicle("sharp_motorcycle")
@@ -46,14 +47,15 @@ def test_runtime_equals_solve_ivp_of_eq13_through_mode_switches(d003):
     rt = MotorcycleFaultObserver(d003)
     mats = [_observer_matrices(m) for m in d003["modes"]]
     ts = np.arange(0.0, 16.0, H)
-    seq = ps.modes_of_speed(d003, ts, [ps.paper_speed_profile(t) for t in ts])
+    speed = SCENARIOS["motorcycle-lane-change"].speed        # the paper's profile, 12 -> 20 -> 10 m/s
+    seq = ps.modes_of_speed(d003, ts, speed(ts))
     y0 = _measurements(0.0)
-    rt.initialize(_u(ps.paper_speed_profile(0.0), y0))
+    rt.initialize(_u(float(speed(np.array([0.0]))[0]), y0))
     s = np.concatenate([np.asarray(d003["modes"][0]["model"]["C"]).T @ y0, np.zeros(2)])   # x^(0) = C' y(0)
     err, scale, modes_seen = 0.0, 0.0, set()
     for k, (t, mode) in enumerate(seq):
         y = _measurements(t)
-        rt.step(H, _u(ps.paper_speed_profile(t), y))
+        rt.step(H, _u(float(speed(np.array([t]))[0]), y))
         assert rt.y["mode"] == mode
         modes_seen.add(mode)
         M, G = mats[mode - 1]
