@@ -48,7 +48,8 @@ def _fmu_step_time(path: Path, inputs: dict[str, np.ndarray], n: int, repeats: i
     times = []
     for _ in range(repeats):
         fmu = FmuInstance(path.stem, path)
-        names = [v.name for v in fmu.inputs]
+        names = [v.name for v in fmu.inputs if v.name in inputs]   # optional inputs (CarPlant's
+        # stiffness_scale_f/r) stay at their start values, as in the harness
         rows = [{k: float(inputs[k][i]) for k in names} for i in range(n)]
         fmu.start(rows[0])
         do_step = fmu.slave.doStep

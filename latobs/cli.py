@@ -175,6 +175,13 @@ def _user_error_types() -> tuple[type, ...]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["bench"]:
+        # argparse's REMAINDER does not pass an option-like first argument (`bench --fmu-dir D`)
+        # to the subcommand: bench parses its own arguments
+        from .bench import main as bench_main
+
+        return bench_main(argv[1:])
     args = parser().parse_args(argv)
     try:
         return args.func(args)

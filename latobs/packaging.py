@@ -64,6 +64,10 @@ PLANTS = {"CarPlant": FmuKind("CarPlant", "car_plant", "plant", "sedan"),
 OBSERVERS = {
     "SideslipBankObserver": FmuKind("SideslipBankObserver", "sideslip_bank_observer", "design", "sedan"),
     "SideslipBankObserverTire": FmuKind("SideslipBankObserverTire", "sideslip_bank_observer", "design", "sedan"),
+    # the paper-faithful designs (reproduction; issue 9): same runtime and model file
+    "SideslipBankObserverPaper": FmuKind("SideslipBankObserverPaper", "sideslip_bank_observer", "design", "sedan"),
+    "SideslipBankObserverTirePaper": FmuKind("SideslipBankObserverTirePaper", "sideslip_bank_observer", "design",
+                                             "sedan"),
     "LateralIntervalObserver": FmuKind("LateralIntervalObserver", "lateral_interval_observer", "design", "sedan"),
     "SideslipFixedOrderEstimator": FmuKind("SideslipFixedOrderEstimator", "sideslip_fixed_order_estimator",
                                            "design", "delibasi"),

@@ -84,6 +84,32 @@ def lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: float | None
     return {"A": [A0, A1, A2], "B": [B0, B1], "F": [F0, F1]}
 
 
+MODEL_ERRORS = ("lateral_force", "yaw_moment", "roll_moment")
+MODEL_ERROR_UNITS = ("m*g", "m*g*L", "m*g*hr")
+
+
+def model_error_coefficients(vehicle: Vehicle) -> list[np.ndarray]:
+    """E_k (4x3) with E(Vx) = E_0 + E_1 / Vx: how model errors enter eq. (1), x' = ... + E d.
+
+    d = [dFy / (m g), dMz / (m g L), dMx / (m g hr)] (dimensionless): a lateral-force residual
+    (N) at the CG, a yaw-moment residual (N m) and a roll-moment residual (N m) about the roll
+    axis, each divided by its natural scale (weight, weight x wheelbase, weight x roll lever),
+    so that d = 0.01 is "1 % of the vehicle's weight" whatever the car. They enter exactly like
+    the model's own forces (the columns of eq. (1) that the tire forces and the roll moment
+    Kr phi + br phi' use): a lateral force F acts on beta' as I_eq F / (I_x m V_x) and on the
+    roll acceleration as h_r F / I_x; a roll moment M_x on beta' as h_r M_x / (I_x V_x) and on
+    the roll acceleration as M_x / I_x; a yaw moment on r' as M_z / I_z. The tire-model errors
+    of the nonlinear vehicle (saturation, load transfer, stiffness error) are such residuals.
+    """
+    p = vehicle.require(REQUIRED, "the paper-000 model-error input matrix")
+    m, Iz, Ix, lf, lr, hr = (p[k] for k in ("m", "Iz", "Ix", "lf", "lr", "hr"))
+    Ieq = Ix + m * hr**2
+    scale = np.diag([m * G, m * G * (lf + lr), m * G * hr])
+    E0 = np.array([[0.0, 0.0, 0.0], [0.0, 1.0 / Iz, 0.0], [0.0, 0.0, 0.0], [hr / Ix, 0.0, 1.0 / Ix]]) @ scale
+    E1 = np.array([[Ieq / (Ix * m), 0.0, hr / Ix], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ scale
+    return [E0, E1]
+
+
 def evaluate(coeffs: dict[str, list[np.ndarray]], vx: float) -> LinearModel:
     """The model at speed ``vx`` (m/s) from its 1/Vx coefficients."""
     if not vx > 0:

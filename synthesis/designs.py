@@ -85,23 +85,35 @@ def _options_003(name: str):
     return pi_switched_003.DesignOptions(name=name)
 
 
-def _options_000(switching: str):
+def _options_000(switching: str, faithful: bool = False):
     def options(name: str):
         from . import pi_hinf_000
 
-        return pi_hinf_000.DesignOptions(name=name, switching=switching)
+        return pi_hinf_000.DesignOptions(name=name, switching=switching, faithful=faithful)
     return options
 
 
 DESIGNS: dict[str, DesignEntry] = {
     "SideslipBankObserver": DesignEntry(
         "SideslipBankObserver", "000", "sedan",
-        "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25)",
+        "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model "
+        "at the measured speed, robust to model error, valid flag with integral freeze",
         _options_000("speed"), _solve_000),
     "SideslipBankObserverTire": DesignEntry(
         "SideslipBankObserverTire", "000", "sedan",
-        "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) at alpha* = 0.5 deg (eq. 27)",
+        "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) "
+        "at alpha* = 0.5 deg (eq. 27), robust to model error, valid flag with integral freeze",
         _options_000("tire"), _solve_000),
+    "SideslipBankObserverPaper": DesignEntry(
+        "SideslipBankObserverPaper", "000", "sedan",
+        "the paper's speed-mode design as printed, for reproduction: LMI (20) + pole region only, each mode "
+        "at its grid speed (eq. 25 literally)",
+        _options_000("speed", faithful=True), _solve_000),
+    "SideslipBankObserverTirePaper": DesignEntry(
+        "SideslipBankObserverTirePaper", "000", "sedan",
+        "the paper's tire-mode design as printed, for reproduction: LMI (20) + pole region only on the grid "
+        "speeds 36/63/90 km/h (eq. 27)",
+        _options_000("tire", faithful=True), _solve_000),
     "LateralIntervalObserver": DesignEntry(
         "LateralIntervalObserver", "001", "sedan",
         "switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and axle "

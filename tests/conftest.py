@@ -18,12 +18,14 @@ def design_tire() -> dict:
 
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory, design_speed, design_tire):
-    """Both paper-000 observer FMUs and the CarPlant FMU, built by the packaging step."""
+    """The paper-000 observer FMUs (the two defaults and the two paper-faithful designs, the
+    default observers of `latobs validate`) and the CarPlant FMU, built by the packaging step."""
     from latobs import packaging
     from latobs.synthesis import design_file
 
     out = tmp_path_factory.mktemp("fmus")
-    for data in (design_speed, design_tire):
+    for data in (design_speed, design_tire, designs.run("SideslipBankObserverPaper"),
+                 designs.run("SideslipBankObserverTirePaper")):
         packaging.package_design(design_file.write(data, out), out)
     packaging.package_plant("CarPlant", None, out)
     return out

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from latobs.cli import main
 
 
@@ -76,3 +78,14 @@ def test_validate_loads_no_design_stack_and_can_skip_plots(tmp_path, fmu_dir):
     assert rc == 0 and heavy == []
     out = tmp_path / "double-lane-change"
     assert (out / "metrics.json").is_file() and not list(out.glob("*.png"))
+
+
+def test_bench_takes_its_own_options(capsys):
+    """`latobs bench --fmu-dir D` reaches bench's parser (argparse's REMAINDER alone would refuse
+    an option as the subcommand's first argument)."""
+    from latobs.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--help"])
+    assert exc.value.code == 0
+    assert "--fmu-dir" in capsys.readouterr().out

@@ -45,35 +45,44 @@ def test_detectability_assumption_a2(design_speed):
 @pytest.mark.parametrize("which", ["design_speed", "design_tire"])
 def test_lmi_solution_checked_independently(which, request):
     """The LMIs of the returned (P, gains) hold when re-evaluated with numpy, and gamma bounds the
-    H-infinity norm computed by Hamiltonian bisection (no P) at every vertex."""
+    H-infinity norm computed by Hamiltonian bisection (no P) at every LMI vertex of the file
+    (d["lmi_vertices"]: (v, w) = (1/Vx, 1/Vx^2) or a tangent corner off that curve)."""
     d = request.getfixturevalue(which)
     assert d["certified"]
     P = np.asarray(d["P"])
     T, C = np.asarray(d["structure"]["T"]), np.asarray(d["structure"]["C"])
     gamma, a, R = d["gamma"], d["region"]["alpha"], d["region"]["radius"]
+    modes = {m["index"]: m for m in d["modes"]}
     norms = []
-    for mode in d["modes"]:
-        for vx in mode["design_speeds"]:
-            Acl, Fa, La = pi_hinf_000.closed_loop(mode["model"], mode["gains"]["K_P"], mode["gains"]["K_I"], T, C, vx)
-            lmi20 = np.block([[Acl.T @ P + P @ Acl, P @ Fa, La.T],
-                              [Fa.T @ P, -gamma**2 * np.eye(1), np.zeros((1, 1))],
-                              [La, np.zeros((1, 1)), -np.eye(1)]])
-            assert np.max(np.linalg.eigvalsh(lmi20)) < 0
-            assert np.max(np.linalg.eigvalsh(Acl.T @ P + P @ Acl + 2 * a * P)) < 0
-            disk = np.block([[-R * P, P @ Acl], [Acl.T @ P, -R * P]])
-            assert np.max(np.linalg.eigvalsh(disk)) < 0
-            ev = np.linalg.eigvals(Acl)
-            assert ev.real.max() < -a and np.abs(ev).max() < R
-            norms.append(hinf.hinf_norm(Acl, Fa, La).norm)
+    for vertex in d["lmi_vertices"]:
+        mode = modes[vertex["mode"]]
+        c = {k: [np.asarray(M) for M in mats] for k, mats in mode["model"].items()}
+        A = c["A"][0] + vertex["v"] * c["A"][1] + vertex["w"] * c["A"][2]
+        F = c["F"][0] + vertex["v"] * c["F"][1]
+        Aa, Ca, Fa, La = pi_hinf_000.augmented(A, F, C, T)
+        Acl = Aa - np.vstack([mode["gains"]["K_P"], mode["gains"]["K_I"]]) @ Ca
+        lmi20 = np.block([[Acl.T @ P + P @ Acl, P @ Fa, La.T],
+                          [Fa.T @ P, -gamma**2 * np.eye(1), np.zeros((1, 1))],
+                          [La, np.zeros((1, 1)), -np.eye(1)]])
+        assert np.max(np.linalg.eigvalsh(lmi20)) < 0
+        assert np.max(np.linalg.eigvalsh(Acl.T @ P + P @ Acl + 2 * a * P)) < 0
+        disk = np.block([[-R * P, P @ Acl], [Acl.T @ P, -R * P]])
+        assert np.max(np.linalg.eigvalsh(disk)) < 0
+        ev = np.linalg.eigvals(Acl)
+        assert ev.real.max() < -a and np.abs(ev).max() < R
+        norms.append(hinf.hinf_norm(Acl, Fa, La).norm)
     assert max(norms) <= gamma * (1 + 1e-6)
-    # the common-P bound is not vacuous: it is within a factor 2 of the worst vertex norm
-    assert max(norms) >= 0.5 * gamma
+    # the common-P bound is not vacuous: within a factor 2.5 of the worst vertex norm (the robust
+    # objective's bank-row weight 0.05 on the model-error channel keeps gamma near 0.05 with one P,
+    # pi_hinf_000.DesignOptions.robust_output_weights; measured 0.027 / 0.055 for the speed modes)
+    assert max(norms) >= 0.4 * gamma
 
 
-def test_figures_near_errata(design_speed):
+def test_figures_near_errata():
     """ERRATA 000 reached gamma ~ 0.015, largest gain ~ 130, slowest bank pole ~ -0.58 with
-    a = 0.5, R = 100 on a representative sedan: same order here."""
-    s = certificate.summary(design_speed)
+    a = 0.5, R = 100 on a representative sedan: same order here, for the paper-faithful design
+    (LMI 20 + region only; the default robust design trades gamma for the model-error channel)."""
+    s = certificate.summary(designs.run("SideslipBankObserver", faithful=True))
     assert 0.005 < s["gamma"] < 0.05
     gains = max(m["largest_gain"] for m in s["per_mode"])
     assert 50 < gains < 500
@@ -89,9 +98,12 @@ def test_certificate_rejects_tampered_designs(design_speed):
     assert any("mode 2" in c.name and not c.passed for c in checks)
 
     optimistic = copy.deepcopy(design_speed)
-    optimistic["gamma"] *= 0.5
+    optimistic["gamma"] *= 0.5             # below what the common P proves: LMI (20) fails
     ok, checks = certificate.certify(optimistic)
     assert not ok
+    assert any(c.name.startswith("LMI (20)") and not c.passed for c in checks)
+    optimistic["gamma"] *= 0.6             # below the frozen-speed norm of a band: the Hamiltonian too
+    ok, checks = certificate.certify(optimistic)
     assert any(c.name.startswith("H-inf") and not c.passed for c in checks)
 
     drifted = copy.deepcopy(design_speed)

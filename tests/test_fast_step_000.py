@@ -7,6 +7,7 @@ selection, clamps and hold.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -17,9 +18,52 @@ from latobs.fmu_src.pi_observer import SwitchedPIObserver
 
 OUT = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat", "bank_angle_hat")
 
+KEEP = object()
+
+
+def variant(design: dict, *, hold=KEEP, validity=KEEP, speeds=KEEP) -> dict:
+    """A copy of a paper-000 design dict with the issue-9 keys set explicitly (the tests do not
+    depend on what the design side emits by default). hold: runtime.input_hold ("zero_order",
+    "first_order", None: key absent); validity: the "validity" dict (None: absent); speeds:
+    "fixed" (every speed mode at its grid speed, eq. 25 literally), "measured" (each speed mode's
+    model at the measured speed clamped to its own band) or a (lo, hi) range for every mode."""
+    d = copy.deepcopy(design)
+    if hold is not KEEP:
+        d["runtime"] = {k: v for k, v in d["runtime"].items() if k != "input_hold"}
+        if hold is not None:
+            d["runtime"]["input_hold"] = hold
+    if validity is not KEEP:
+        d.pop("validity", None)
+        if validity is not None:
+            d["validity"] = dict(validity)
+    if speeds is not KEEP:
+        for m in d["modes"]:
+            if speeds == "fixed":
+                m["model_speed"] = {"kind": "fixed", "value": m["scheduling"]["value"]}
+            elif speeds == "measured":
+                m["model_speed"] = {"kind": "measured", "range": list(m["scheduling"]["range"])}
+            else:
+                m["model_speed"] = {"kind": "measured", "range": list(speeds)}
+    return d
+
+
+def legacy(design: dict) -> dict:
+    """The design as the runtime read it before issue 9: zero-order hold (key absent), no validity,
+    speed modes at their grid speed; tire modes keep their common measured range."""
+    fixed = "fixed" if design["switching"]["kind"] == "speed_bands" else KEEP
+    return variant(design, hold=None, validity=None, speeds=fixed)
+
 
 class ReferenceObserver:
-    """Eq. (5) of paper 000 with classical RK4 substeps, numpy."""
+    """Eq. (5) of paper 000 with classical RK4 substeps, numpy.
+
+    Model speed per mode: its fixed speed, or the measured speed clamped to the mode's own range.
+    Input hold (design runtime.input_hold): zero-order (inputs held over the step) or first-order
+    (w(t + tau) = w_k + tau (w_k - w_{k-1}) / h_{k-1}, evaluated at the RK4 stage times; slope 0 at
+    the first step and after a frozen period; the outputs use the hold's y at t + h). Validity
+    (design "validity"): the slip angles from beta^, r^ at the start of the step and |vx yaw_rate|
+    against their limits with the release hysteresis; while invalid with freeze_integral, w^' = 0.
+    """
 
     def __init__(self, design: dict):
         st = design["structure"]
@@ -28,11 +72,11 @@ class ReferenceObserver:
         self.sw = design["switching"]
         self.max_step = float(design["runtime"]["max_step"])
         self.vx_hold = float(design["runtime"]["vx_hold"])
-        if self.sw["kind"] == "speed_bands":
-            self.lo, self.hi = self.sw["edges"][0], self.sw["edges"][-1]
-        else:
-            self.lo, self.hi = design["modes"][0]["model_speed"]["range"]
+        self.foh = design["runtime"].get("input_hold", "zero_order") == "first_order"
+        self.validity = design.get("validity")
         self.z, self.w, self.mode, self.started = np.zeros(4), 0.0, 0, False
+        self.prev = None               # first-order hold: (w_{k-1}, h_{k-1})
+        self.valid = 1
         self.y = {}
 
     def model(self, i: int, vx: float):
@@ -41,12 +85,29 @@ class ReferenceObserver:
         return tuple(sum(np.asarray(Mk, dtype=float) * vx**-k for k, Mk in enumerate(coeffs[key]))
                      for key in ("A", "B", "F"))
 
+    def model_speed(self, i: int, vx: float) -> float:
+        ms = self.design["modes"][i]["model_speed"]
+        if ms["kind"] == "fixed":
+            return ms["value"]
+        lo, hi = ms["range"]
+        return min(max(vx, lo), hi)
+
     def xhat(self, y):
         return self.z + self.N @ y
 
     def publish(self, y):
         xh = self.xhat(y)
-        self.y = dict(zip(OUT[:4], xh), bank_angle_hat=self.w, mode=self.mode + 1)
+        self.y = dict(zip(OUT[:4], xh), bank_angle_hat=self.w, mode=self.mode + 1, valid=self.valid)
+
+    def check_validity(self, xh, vx, delta, yaw_rate):
+        v = self.validity
+        a_f = delta - xh[0] - v["lf"] * xh[1] / vx
+        a_r = -xh[0] + v["lr"] * xh[1] / vx
+        alpha, ay = max(abs(a_f), abs(a_r)), abs(vx * yaw_rate)
+        if self.valid and (alpha > v["alpha_max"] or ay > v["ay_max"]):
+            self.valid = 0
+        elif not self.valid and alpha < v["release"] * v["alpha_max"] and ay < v["release"] * v["ay_max"]:
+            self.valid = 1
 
     def step(self, h: float, u: dict):
         vx, delta = u["vx"], u["delta"]
@@ -58,12 +119,12 @@ class ReferenceObserver:
                 self.mode = self.band(vx)
             self.publish(y)
         if vx < self.vx_hold:          # frozen (standstill or reversing): every output held
+            self.prev = None
             return
+        xh = self.xhat(y)
         if self.sw["kind"] == "speed_bands":
             self.mode = self.band(vx)
-            model_speed = self.design["modes"][self.mode]["model_speed"]["value"]
         else:
-            xh = self.xhat(y)
             a_f = delta - xh[0] - self.sw["lf"] * xh[1] / vx
             a_r = -xh[0] + self.sw["lr"] * xh[1] / vx
             premise = max(abs(a_f), abs(a_r))
@@ -71,30 +132,41 @@ class ReferenceObserver:
                 self.mode = 1
             elif self.mode == 1 and premise < self.sw["alpha_star"] - self.sw["hysteresis"]:
                 self.mode = 0
-            model_speed = min(max(vx, self.lo), self.hi)
-        A, B, F = self.model(self.mode, model_speed)
+        if self.validity is not None:
+            self.check_validity(xh, vx, delta, u["yaw_rate"])
+        frozen = not self.valid and self.validity is not None and self.validity.get("freeze_integral", False)
+        A, B, F = self.model(self.mode, self.model_speed(self.mode, vx))
         gains = self.design["modes"][self.mode]["gains"]
         KP, KI = np.asarray(gains["K_P"], dtype=float), np.asarray(gains["K_I"], dtype=float)
         T, N, C = self.T, self.N, self.C
+        w_k = np.concatenate([y, [delta]])
+        slope = np.zeros(4)
+        if self.foh:
+            if self.prev is not None:
+                slope = (w_k - self.prev[0]) / self.prev[1]
+            self.prev = (w_k, h)
 
-        def f(z, w):
-            xh = z + N @ y
-            innov = y - C @ xh
-            dz = T @ A @ xh + (T @ B)[:, 0] * delta + (T @ F)[:, 0] * w + KP @ innov
-            return dz, float((KI @ innov)[0])
+        def f(tau, z, w):
+            ww = w_k + tau * slope     # the hold at the stage time
+            yy, dd = ww[:3], ww[3]
+            xh = z + N @ yy
+            innov = yy - C @ xh
+            dz = T @ A @ xh + (T @ B)[:, 0] * dd + (T @ F)[:, 0] * w + KP @ innov
+            return dz, 0.0 if frozen else float((KI @ innov)[0])
 
         n = max(1, math.ceil(h / self.max_step - 1e-9))
         hs = h / n
         z, w = self.z, self.w
-        for _ in range(n):
-            k1 = f(z, w)
-            k2 = f(z + hs / 2 * k1[0], w + hs / 2 * k1[1])
-            k3 = f(z + hs / 2 * k2[0], w + hs / 2 * k2[1])
-            k4 = f(z + hs * k3[0], w + hs * k3[1])
+        for j in range(n):
+            t0 = j * hs
+            k1 = f(t0, z, w)
+            k2 = f(t0 + hs / 2, z + hs / 2 * k1[0], w + hs / 2 * k1[1])
+            k3 = f(t0 + hs / 2, z + hs / 2 * k2[0], w + hs / 2 * k2[1])
+            k4 = f(t0 + hs, z + hs * k3[0], w + hs * k3[1])
             z = z + hs / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
             w = w + hs / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
         self.z, self.w = z, w
-        self.publish(y)
+        self.publish(y + h * slope[:3])
 
     def band(self, vx):
         edges = self.sw["edges"]
@@ -127,14 +199,16 @@ def speed_run():
     return out
 
 
-def tire_run():
-    """(h, u) over 5 ms, 2 ms, 10 ms: in each, the speed varies continuously over 10..25 m/s with
-    excursions to 8 and 27 m/s, and the steering drives the slip premise across alpha* both ways."""
+def tire_run(lo: float = 10.0, hi: float = 25.0):
+    """(h, u) over 5 ms, 2 ms, 10 ms: in each, the speed varies continuously over the model range
+    lo..hi m/s with excursions 2 m/s beyond both ends, and the steering drives the slip premise
+    across alpha* both ways."""
     out, t = [], 0.0
     for h, n in ((0.005, 2400), (0.002, 2500), (0.010, 1200)):
         for k in range(n):
             phase = k / n
-            vx = 17.5 + 9.0 * math.sin(2 * math.pi * phase) + 0.5 * math.sin(14 * math.pi * phase)
+            vx = 0.5 * (lo + hi) + (0.5 * (hi - lo) + 1.5) * math.sin(2 * math.pi * phase) \
+                + 0.5 * math.sin(14 * math.pi * phase)
             steer = 0.03 * (0.5 + 0.5 * math.sin(2 * math.pi * 3 * phase)) ** 2
             out.append((h, dict(measurements(t, steer), vx=vx)))
             t += h
@@ -148,6 +222,7 @@ def compare(design: dict, run) -> tuple[float, set, list]:
         rt.step(h, u)
         ref.step(h, u)
         assert rt.y["mode"] == ref.y["mode"], f"step {i}: mode {rt.y['mode']} != {ref.y['mode']}"
+        assert rt.y["valid"] == ref.y["valid"], f"step {i}: valid {rt.y['valid']} != {ref.y['valid']}"
         for k in OUT:
             err = abs(rt.y[k] - ref.y[k]) / max(1.0, abs(ref.y[k]))
             worst = max(worst, err)
@@ -169,23 +244,31 @@ def empty_cache():
     clear_cache()
 
 
-def test_speed_modes_equal_rk4_substeps(design_speed, empty_cache):
-    worst, modes, speeds = compare(design_speed, speed_run())
+@pytest.mark.parametrize("form", ["legacy", "as designed"])
+def test_speed_modes_equal_rk4_substeps(design_speed, empty_cache, form):
+    """legacy: grid-speed models, inputs held, no validity; as designed: whatever the design emits
+    (issue 9: models at the measured speed per band, first-order hold, validity with freeze)."""
+    design = legacy(design_speed) if form == "legacy" else design_speed
+    worst, modes, speeds = compare(design, speed_run())
     assert modes == {1, 2, 3}
     edges = design_speed["switching"]["edges"]
     assert min(speeds) < edges[0] and max(speeds) > edges[-1]       # clamped excursions
     assert worst <= 1e-12, worst
 
 
-def test_tire_modes_equal_rk4_substeps(design_tire, empty_cache):
-    worst, modes, speeds = compare(design_tire, tire_run())
+@pytest.mark.parametrize("form", ["legacy", "as designed"])
+def test_tire_modes_equal_rk4_substeps(design_tire, empty_cache, form):
+    design = legacy(design_tire) if form == "legacy" else design_tire
+    lo, hi = design["modes"][0]["model_speed"]["range"]
+    worst, modes, speeds = compare(design, tire_run(lo, hi))
     assert modes == {1, 2}
-    lo, hi = design_tire["modes"][0]["model_speed"]["range"]
     assert min(speeds) < lo and max(speeds) > hi
     assert worst <= 1e-12, worst
-    # the tables in use are Taylor polynomials (not the RK4 fallback) of bounded degree
-    tables = [m for m in pi_observer._MAPS.values() if isinstance(m, pi_observer._TireTable)]
-    assert len(tables) == 6
+    # the tables in use are Taylor polynomials (not the RK4 fallback) of bounded degree; one per
+    # (mode, h), plus those of the frozen-integral maps if the design has them
+    tables = {key: m for key, m in pi_observer._MAPS.items() if isinstance(m, pi_observer._TireTable)}
+    assert len([key for key in tables if key[1] < 2]) == 6
+    tables = tables.values()
     fns = [f for tab in tables for f in tab.fns if f is not None]
     assert fns and all(getattr(f, "degree", 99) <= SwitchedPIObserver.TAYLOR_DEGREE + 1 for f in fns)
 
@@ -194,6 +277,7 @@ def test_each_step_map_is_built_once(design_speed, empty_cache, monkeypatch):
     calls = []
     real = pi_observer._compile
     monkeypatch.setattr(pi_observer, "_compile", lambda *a, **k: calls.append(1) or real(*a, **k))
+    design_speed = legacy(design_speed)                                 # grid-speed models: one map per mode
     rt = SwitchedPIObserver(design_speed, {})
     for k in range(3000):
         rt.step(0.005, dict(measurements(k * 0.005, 0.02), vx=18.0 + 13.0 * math.cos(k / 300)))
@@ -212,6 +296,7 @@ def _held_consistent() -> bool:
 def test_map_cache_stays_bounded_under_many_step_sizes(design_speed, design_tire, empty_cache, monkeypatch):
     rng = np.random.default_rng(0)
     # speed modes, default limits: 400 distinct step sizes, each used twice (so that a map is built)
+    design_speed = legacy(design_speed)                                 # grid-speed models: composite maps
     rt, ref = SwitchedPIObserver(design_speed, {}), ReferenceObserver(design_speed)
     worst = 0.0
     for i in range(400):

@@ -10,6 +10,7 @@ from scipy.integrate import solve_ivp
 from latobs.fmu_src.pi_observer import SwitchedPIObserver
 from latobs.synthesis import bicycle_roll_model as brm
 from latobs.synthesis.params import load_vehicle
+from test_fast_step_000 import variant
 
 H = 0.005  # s, communication step
 
@@ -37,37 +38,47 @@ def _true_states(vehicle, T_end):
 
 
 def _reference_observer(design, ts, X):
-    """Eq. (5) of the paper, integrated by solve_ivp between communication points with inputs held:
+    """Eq. (5) of the paper, integrated by solve_ivp between communication points:
     z' = Pi z + K_p y + T F w^ + T B u, w^' = K_I (y - C x^), x^ = z + N y,
-    Pi = T A - K C (7), K_p = K + Pi N (8). Modes by eq. (25)."""
+    Pi = T A - K C (7), K_p = K + Pi N (8). Modes by eq. (25); each mode's model at its fixed
+    speed or at the measured speed clamped to its range. Inputs [y; u] held over the step, or
+    (runtime.input_hold = first_order) w(t + tau) = w_k + tau (w_k - w_{k-1}) / h (slope 0 first)."""
     T, N, C = (np.asarray(design["structure"][k]) for k in ("T", "N", "C"))
     edges = design["switching"]["edges"]
+    foh = design["runtime"].get("input_hold") == "first_order"
     w = 0.0
     out_beta, out_w, modes = [], [], []
     y0 = C @ X[0]
     z = np.concatenate([[0.0], y0]) - N @ y0
+    prev = None
     for k in range(len(ts) - 1):
         delta, vx = _inputs(ts[k])
         y = C @ X[k]
+        wk = np.concatenate([y, [delta]])
+        slope = (wk - prev) / H if foh and prev is not None else np.zeros(4)
+        prev = wk
         i = next((j for j in range(len(edges) - 1) if edges[j] <= vx < edges[j + 1]),
                  0 if vx < edges[0] else len(edges) - 2)
         mode = design["modes"][i]
-        M = brm.evaluate({kk: [np.asarray(m) for m in v] for kk, v in mode["model"].items()},
-                         mode["model_speed"]["value"])
+        ms = mode["model_speed"]
+        speed = ms["value"] if ms["kind"] == "fixed" else min(max(vx, ms["range"][0]), ms["range"][1])
+        M = brm.evaluate({kk: [np.asarray(m) for m in v] for kk, v in mode["model"].items()}, speed)
         K, KI = np.asarray(mode["gains"]["K_P"]), np.asarray(mode["gains"]["K_I"])
         Pi = T @ M.A - K @ C
         Kp = K + Pi @ N
 
         def rhs(t, s):
-            zz, ww = s[:4], s[4]
-            xh = zz + N @ y
-            dz = Pi @ zz + Kp @ y + (T @ M.F)[:, 0] * ww + (T @ M.B)[:, 0] * delta
-            dw = KI @ (y - C @ xh)
+            ww = wk + t * slope
+            yy, dd = ww[:3], ww[3]
+            zz, wb = s[:4], s[4]
+            xh = zz + N @ yy
+            dz = Pi @ zz + Kp @ yy + (T @ M.F)[:, 0] * wb + (T @ M.B)[:, 0] * dd
+            dw = KI @ (yy - C @ xh)
             return np.concatenate([dz, dw])
 
         sol = solve_ivp(rhs, (0, H), np.concatenate([z, [w]]), method="DOP853", rtol=1e-12, atol=1e-14)
         z, w = sol.y[:4, -1], sol.y[4, -1]
-        out_beta.append((z + N @ y)[0])
+        out_beta.append((z + N @ (y + H * slope[:3]))[0])
         out_w.append(w)
         modes.append(i + 1)
     return np.array(out_beta), np.array(out_w), np.array(modes)
@@ -87,11 +98,15 @@ def _run_runtime(design, ts, X):
     return np.array(beta), np.array(w), np.array(modes)
 
 
-def test_runtime_matches_solve_ivp_of_paper_form(design_speed):
+@pytest.mark.parametrize("speeds, hold", [("fixed", None), ("measured", "first_order")])
+def test_runtime_matches_solve_ivp_of_paper_form(design_speed, speeds, hold):
+    """The paper's form (grid-speed models, inputs held) and the issue-9 one (each mode's model at
+    the measured speed clamped to its band, first-order hold); validity is tested elsewhere."""
+    design = variant(design_speed, speeds=speeds, hold=hold, validity=None)
     vehicle = load_vehicle("sedan")
     ts, X, _ = _true_states(vehicle, 8.0)
-    b_ref, w_ref, m_ref = _reference_observer(design_speed, ts, X)
-    b_rt, w_rt, m_rt = _run_runtime(design_speed, ts, X)
+    b_ref, w_ref, m_ref = _reference_observer(design, ts, X)
+    b_rt, w_rt, m_rt = _run_runtime(design, ts, X)
     assert set(m_ref) == {1, 2, 3}                 # the trajectory crosses every speed mode
     assert np.array_equal(m_rt, m_ref)
     # RK4 at 1 ms on poles up to 100 rad/s: one-step error <= 1e-7 relative (certificate check),
@@ -105,7 +120,7 @@ def test_observer_converges_on_its_own_model(design_speed):
     w^ -> phi_r for a constant bank."""
     vehicle = load_vehicle("sedan")
     mode = design_speed["modes"][1]
-    vx = mode["model_speed"]["value"]
+    vx = mode["scheduling"]["value"]                 # the mode's grid speed
     M = brm.model(vehicle, vx)
     obs = SwitchedPIObserver(design_speed, {})
     x = np.zeros(4)
@@ -119,7 +134,7 @@ def test_observer_converges_on_its_own_model(design_speed):
                         rtol=1e-10, atol=1e-12)
         x = sol.y[:, -1]
     # the estimate after the step uses y(t_k): compare with the state at t_k's measurement
-    assert obs.y["mode"] == 2
+    assert obs.y["mode"] == 2 and obs.y["valid"] == 1
     assert abs(obs.y["bank_angle_hat"] - bank) < 2e-3 * bank + 1e-4
     assert abs(obs.y["beta_hat"] - x[0]) < 1e-3
 
@@ -148,7 +163,8 @@ def test_speed_outside_grid_is_clamped_with_a_warning(design_speed, design_tire,
             assert any("frozen" in m for _, m in obs.events)
         else:
             assert any("outside the design grid" in m for _, m in obs.events)
-        assert len(obs.events) == 1    # one warning per excursion, not one per step
+        clamps = [m for _, m in obs.events if "frozen" in m or "outside the design grid" in m]
+        assert len(clamps) == 1        # one warning per excursion, not one per step
 
 
 def test_frozen_means_every_estimate_held_and_vx_hold_positive(design_speed, design_tire):

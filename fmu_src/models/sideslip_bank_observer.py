@@ -1,4 +1,4 @@
-"""FMU model file: SideslipBankObserver and SideslipBankObserverTire (paper 000).
+"""FMU model file of the paper-000 observers (SideslipBankObserver, SideslipBankObserverTire and variants).
 
 Interface per CONTRACT.md; the maths is in ``pi_observer.py``; the gains come from the design
 file baked into the FMU.
@@ -7,15 +7,39 @@ from ..pi_observer import SwitchedPIObserver
 from ..spec import ModelSpec, Var
 
 
+def _grid_speed(mode: dict):
+    """A speed mode's design speed (m/s): its fixed model speed, else its scheduling value."""
+    ms = mode.get("model_speed", {})
+    if ms.get("kind") == "fixed":
+        return ms.get("value")
+    speeds = mode.get("design_speeds") or [None]
+    return mode.get("scheduling", {}).get("value", speeds[0])
+
+
 def _variant(data: dict) -> str:
     """Which paper-000 variant the design file makes (the two FMUs share this model file)."""
     sw = data.get("switching", {})
+    modes = data.get("modes", [])
+    measured = [m["model_speed"].get("range") for m in modes if m.get("model_speed", {}).get("kind") == "measured"]
     if sw.get("kind") == "speed_bands":
-        speeds = "/".join(f"{3.6 * m['model_speed']['value']:.0f}" for m in data["modes"])
-        return f"speed modes: one gain pair per design speed {speeds} km/h, switched on vx (eq. 25)"
-    star = sw.get("alpha_star")
-    at = f" at alpha* = {star * 57.29577951308232:.2g} deg" if isinstance(star, (int, float)) else ""
-    return f"tire modes: linear (C1) and reduced (C2) cornering stiffness, switched on the estimated slip angles{at} (eq. 27)"
+        speeds = "/".join(f"{3.6 * v:.0f}" if isinstance(v, (int, float)) else "?" for v in map(_grid_speed, modes))
+        text = f"speed modes: one gain pair per design speed {speeds} km/h, switched on vx (eq. 25)"
+        if measured:
+            text += "; each mode's model at the measured speed clamped to its band (LPV)"
+    else:
+        star = sw.get("alpha_star")
+        at = f" at alpha* = {star * 57.29577951308232:.2g} deg" if isinstance(star, (int, float)) else ""
+        text = ("tire modes: linear (C1) and reduced (C2) cornering stiffness, switched on the estimated slip "
+                f"angles{at} (eq. 27)")
+        if measured and measured[0]:
+            lo, hi = measured[0]
+            text += f"; model at the measured speed clamped to {3.6 * lo:.4g}-{3.6 * hi:.4g} km/h"
+    if data.get("runtime", {}).get("input_hold") == "first_order":
+        text += "; first-order hold of the measurements over a step"
+    if data.get("validity"):
+        frozen = " (bank estimate frozen while 0)" if data["validity"].get("freeze_integral") else ""
+        text += f"; valid flag{frozen}"
+    return text
 
 
 SPEC = ModelSpec(
@@ -32,14 +56,22 @@ SPEC = ModelSpec(
     ),
     outputs=(
         Var("beta_hat", "rad", "estimated sideslip angle at the roll axis below the CG (the design model's beta; "
-                               "the CG's differs by hr*roll_rate/vx)"),
-        Var("yaw_rate_hat", "rad/s", "estimated yaw rate"),
-        Var("roll_angle_hat", "rad", "estimated roll angle"),
-        Var("roll_rate_hat", "rad/s", "estimated roll rate"),
-        Var("bank_angle_hat", "rad", "estimated road bank angle (unknown input)"),
+                               "the CG's differs by hr*roll_rate/vx), at the end of the step"),
+        Var("yaw_rate_hat", "rad/s", "estimated yaw rate, at the end of the step (z + N y with the input hold's y "
+                                     "there: the measurement, or its first-order extrapolation)"),
+        Var("roll_angle_hat", "rad", "estimated roll angle, at the end of the step (as yaw_rate_hat)"),
+        Var("roll_rate_hat", "rad/s", "estimated roll rate, at the end of the step (as yaw_rate_hat)"),
+        Var("bank_angle_hat", "rad", "estimated road bank angle (unknown input; the integral action, held while "
+                                     "valid = 0 if the design freezes it)"),
     ),
-    integer_outputs=(Var("mode", "1", "active switched mode, 1-based", start=1, min=1),),
-    bounds=lambda data: {"mode": (1, len(data["modes"]))},
+    integer_outputs=(
+        Var("mode", "1", "active switched mode, 1-based", start=1, min=1),
+        Var("valid", "1", "1 while the estimated slip angles and |vx*yaw_rate| are within the design's validity "
+                          "limits, 0 once either exceeds them until both fall below the release fraction "
+                          "(hysteresis); always 1 if the design has no validity limits; held while frozen "
+                          "below vx_hold", start=1, min=0, max=1),
+    ),
+    bounds=lambda data: {"mode": (1, len(data["modes"])), "valid": (0, 1)},
     parameters=(
         Var("vx_hold", "m/s", "below this forward speed (standstill and reversing included) the observer is "
                               "frozen and every estimate held",

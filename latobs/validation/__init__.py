@@ -2,9 +2,13 @@
 
     scenarios  manoeuvres (plant input signals) and their registry
     harness    fixed-step co-simulation wired by variable name (fmpy FMU2Slave)
-    metrics    errors, interval enclosure, paper 000's ||beta err||/||bank|| ratio, mode occupancy
+    metrics    errors, interval enclosure, paper 000's ||beta err||/||bank|| ratio, mode occupancy,
+               and the same errors for the baselines beside each observer
+    baselines  simple estimates on the same signals: zero, the open-loop linear bicycle (cars),
+               the steady turn (motorcycles); pure numpy/scipy
     plots      PNG figures (Agg canvas)
-    report     index.md with the tables and figures
+    report     index.md with the tables and figures (observer beside its baselines)
+    replay     recorded signals through an observer FMU, scored like the co-simulations
 
 Only the built FMUs are driven; the FMUs' Python sources (latobs.fmu_src) are never imported.
 """

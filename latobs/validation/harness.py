@@ -28,6 +28,12 @@ Timing (fixed step, zero-order hold)
     u(t_k) and observer inputs bus(t_k) are set, every FMU does doStep(t_k, dt), then the plant
     outputs and observer outputs at t_{k+1} are read. So an observer output at t_{k+1} depends on
     the bus at t_k (one step of transport delay, as for a sampled-data observer).
+Observer designs
+    A latobs observer FMU carries its design file in its resources (``resources/NAME.design.json``).
+    :func:`observer_design` reads it out of the archive (the FMU's Python is never imported) and
+    ``SimResult.info["observer_designs"][label]`` holds its summary: design name, paper and the
+    vehicle parameter set it was designed for (values and units), which the metrics' baselines
+    (:mod:`latobs.validation.baselines`) use; None for an FMU without a design file.
 """
 from __future__ import annotations
 
@@ -130,7 +136,9 @@ class SimResult:
     scenario   scenario name; dt communication step, s; settle_time, s (from the scenario)
     units      {variable name: unit} where the modelDescriptions declare one
     inputs     {label: [input names]} the wiring actually used
-    info       scenario info (derived amplitudes), noise spec, FMU paths, vehicle name
+    info       scenario info (derived amplitudes), noise spec, FMU paths, vehicle name,
+               observer_models {label: modelName}, observer_designs {label: design summary or
+               None} (see "Observer designs" above)
     """
 
     time: np.ndarray
@@ -368,6 +376,75 @@ def _groups(variables) -> dict[str, tuple[list[str], Any, Any]]:
 
 
 # --------------------------------------------------------------------------------------------
+# the design file baked into an observer FMU
+# --------------------------------------------------------------------------------------------
+def read_fmu_design(fmu_path: str | os.PathLike) -> tuple[dict, str] | None:
+    """(design dict, archive member name) of the design file in an observer FMU's resources
+    (``resources/*.design.json``), None when the FMU has none (or is not a readable zip)."""
+    import json
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(fmu_path) as z:
+            names = sorted(n for n in z.namelist()
+                           if n.startswith("resources/") and n.count("/") == 1 and n.endswith(".design.json"))
+            if not names:
+                return None
+            return json.loads(z.read(names[0]).decode("utf-8")), names[0]
+    except (OSError, zipfile.BadZipFile, ValueError, KeyError):
+        return None
+
+
+def design_summary(design: Mapping[str, Any], source: str = "") -> dict[str, Any]:
+    """What the validation needs of a design file: ``{"design", "name", "paper", "source",
+    "vehicle": {"name", "kind", "parameters": {p: {"value", "unit"}}}, "filled_from_vehicle_set":
+    {p: vehicle set}}``. The vehicle is the design's own ``vehicle`` entry (values as written, SI);
+    a parameter a baseline needs (:data:`latobs.validation.baselines.BICYCLE_PARAMETERS`,
+    ``STEADY_TURN_PARAMETERS``) that the design file leaves out (paper 002's fixed-order designs
+    keep only m, Iz, lf, lr) is taken from the shipped vehicle set of the same name
+    (latobs.synthesis.params) when it has it, and listed in ``filled_from_vehicle_set``."""
+    from .baselines import BICYCLE_PARAMETERS, STEADY_TURN_PARAMETERS
+
+    veh = design.get("vehicle") or {}
+    params: dict[str, dict[str, Any]] = {}
+    for k, v in (veh.get("parameters") or {}).items():
+        if isinstance(v, Mapping):
+            params[k] = {"value": v.get("value"), "unit": v.get("unit")}
+        else:
+            params[k] = {"value": v, "unit": None}
+    filled: dict[str, str] = {}
+    kind = veh.get("kind")
+    name = veh.get("name")
+    if name:
+        try:
+            from ..synthesis.params import load_vehicle
+
+            ref = load_vehicle(str(name))
+        except Exception:  # an unknown set (a design for a TOML file elsewhere): nothing to fill
+            ref = None
+        if ref is not None:
+            kind = kind or ref.kind
+            for k, p in ref.parameters.items():
+                if k not in params and k in (*BICYCLE_PARAMETERS, *STEADY_TURN_PARAMETERS):
+                    params[k] = {"value": p.value, "unit": p.unit}
+                    filled[k] = str(name)
+    return {"design": design.get("design"), "name": design.get("name"), "paper": design.get("paper"),
+            "source": source,
+            "vehicle": {"name": name, "kind": kind, "parameters": params},
+            "filled_from_vehicle_set": filled}
+
+
+def observer_design(fmu_path: str | os.PathLike) -> dict[str, Any] | None:
+    """:func:`design_summary` of the design file baked into the observer FMU at ``fmu_path``;
+    None when the FMU carries no design file."""
+    found = read_fmu_design(fmu_path)
+    if found is None:
+        return None
+    design, member = found
+    return design_summary(design, f"{Path(fmu_path).name}:{member}")
+
+
+# --------------------------------------------------------------------------------------------
 # the co-simulation
 # --------------------------------------------------------------------------------------------
 class CoSimulation:
@@ -573,6 +650,7 @@ class CoSimulation:
             "plant_model": plant.model_name,
             "observer_fmus": {lab: str(p) for lab, p in self.observer_paths.items()},
             "observer_models": {lab: f.model_name for lab, f in observers.items()},
+            "observer_designs": {lab: observer_design(p) for lab, p in self.observer_paths.items()},
             "plant_parameters": {k: (v if isinstance(v, (int, float, str, bool)) else str(v))
                                  for k, v in self.plant_parameters.items()},
             "plant_inputs_at_start": held,

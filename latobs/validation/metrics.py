@@ -23,13 +23,29 @@ the entry when a modelDescription declares it). Structure returned by :func:`com
           "saturation_zone": {"Ff"|"Fr": {"samples", "fraction", "rms", "max_abs", "rms_outside",
                               "peak_gamma_over_force"}},   # X_hat vs X where |Gamma_x| > 5 % |X|
           "unscored_outputs": [names without a truth on the bus],
-          "log_messages": int
+          "log_messages": int,
+          "baselines": {                     # simple estimates on the same signals (baselines.py)
+            "zero" | "bicycle" | "steady_turn": {name: {same keys as the observer's entry}},
+            "summary": {name: {"statistic": "rms_after_settle", "observer": "estimate"|"interval midpoint",
+                               "observer_rms": x, "baselines": {baseline: rms}, "best_baseline": b,
+                               "best_baseline_rms": y, "ratio": x / y, "baseline_as_good": y <= x}},
+            "skipped": {baseline: reason}, "about": {baseline: {what, inputs, vehicle ...}}
+          }
         }
       }
     }
 
 Errors are estimate minus truth (X_hat - X). "after settle" uses samples with t >= settle_time.
 Non-finite statistics are written as null so that the file is strict JSON.
+
+Baselines (:func:`baselines_for`): every scored estimate ``X_hat`` (and every scored interval ``X``,
+whose observer value is then the midpoint of its bounds) is also scored, against the same truth
+with the same statistics, for the trivial estimate 0 (``zero``) and for the observer's model
+baseline: the open-loop linear bicycle driven by the measured delta and vx for a car
+(``bicycle``; parameters of the vehicle the observer was designed for, from
+``SimResult.info["observer_designs"]``), the steady turn from the measured vx and yaw rate for a
+motorcycle (``steady_turn``). ``summary`` compares the observer's RMS after settle with the best
+baseline's; a baseline that cannot be computed is listed in ``skipped`` with the reason.
 
 Truth at the point the observer estimates: an estimate ``X_hat`` (or a pair ``X_lower`` /
 ``X_upper``) is scored against the bus signal ``X`` unless :data:`REFERENCE_SIGNALS` maps ``X``
@@ -49,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from . import baselines as _bl
 from .harness import SimResult
 
 ENCLOSURE_TOL = 1e-9  # absolute tolerance of the enclosure test, in the signal's unit
@@ -180,19 +197,8 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
         for name, y in outs.items():
             truth = truth_signal(name[:-4], bus, model) if name.endswith("_hat") else None
             if truth is not None:
-                e = np.asarray(y, dtype=float) - bus[truth]
-                finite = np.isfinite(e)
-                o["estimates"][name] = {
-                    "truth": truth,
-                    "unit": result.units.get(name) or result.units.get(truth),
-                    "rms": _rms(e),
-                    "max_abs": _maxabs(e),
-                    "rms_after_settle": _rms(e[after]),
-                    "max_abs_after_settle": _maxabs(e[after]),
-                    "mean_error_after_settle": _f(np.mean(e[after])) if np.any(after) else None,   # bias
-                    "truth_rms_after_settle": _rms(bus[truth][after]) if np.any(after) else None,
-                    "nonfinite_samples": int(np.sum(~finite)),
-                }
+                o["estimates"][name] = estimate_entry(y, bus[truth], after, truth,
+                                                      result.units.get(name) or result.units.get(truth))
                 scored.add(name)
         for name in outs:
             if name.endswith("_lower"):
@@ -253,9 +259,191 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
             o["mode_occupancy"] = mode_occupancy(t, m)
             o["mode_switches"] = int(np.sum(m[1:] != m[:-1]))
             scored.add("mode")
+        if "valid" in outs:                  # paper 000: the linear-domain flag (integral frozen at 0)
+            v = np.asarray(outs["valid"])
+            o["valid"] = {"fraction_invalid": _f(np.mean(v == 0)) if v.size else None,
+                          "invalid_episodes": int(np.sum((v[1:] == 0) & (v[:-1] != 0)) + (1 if v.size and v[0] == 0 else 0)),
+                          "time_invalid_s": _f(np.sum(v[:-1] == 0) * dt) if v.size else None}
+            scored.add("valid")
         o["unscored_outputs"] = sorted(set(outs) - scored)
         o["log_messages"] = len(result.logs.get(label, []))
+        o["baselines"] = _simulation_baselines(result, label, o, after)
         out["observers"][label] = o
+    return out
+
+
+def estimate_entry(estimate, truth, after, truth_name: str, unit: str | None) -> dict[str, Any]:
+    """The metrics entry of one estimate against ``truth`` (arrays over the run; ``after`` the
+    samples with t >= settle time): truth, unit, rms, max_abs, the same after settle, the bias
+    after settle, the truth's RMS after settle, nonfinite_samples (SI unit of the signal)."""
+    x = np.asarray(truth, dtype=float)
+    e = np.asarray(estimate, dtype=float) - x
+    return {
+        "truth": truth_name,
+        "unit": unit,
+        "rms": _rms(e),
+        "max_abs": _maxabs(e),
+        "rms_after_settle": _rms(e[after]),
+        "max_abs_after_settle": _maxabs(e[after]),
+        "mean_error_after_settle": _f(np.mean(e[after])) if np.any(after) else None,   # bias
+        "truth_rms_after_settle": _rms(x[after]) if np.any(after) else None,
+        "nonfinite_samples": int(np.sum(~np.isfinite(e))),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# baselines
+# --------------------------------------------------------------------------------------------
+#: The model baseline of each kind of vehicle (the zero baseline applies to all).
+MODEL_BASELINE = {"car": "bicycle", "motorcycle": "steady_turn"}
+#: Keys of a ``baselines`` entry that are not baselines.
+BASELINE_META_KEYS = ("summary", "skipped", "about")
+
+
+def baseline_names(entry: dict[str, Any] | None) -> list[str]:
+    """The baselines present in an observer's ``baselines`` entry, in report order."""
+    entry = entry or {}
+    return [b for b in _bl.BASELINES if b in entry] + sorted(
+        k for k in entry if k not in _bl.BASELINES and k not in BASELINE_META_KEYS)
+
+
+def design_vehicle(design: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The vehicle dict of a design summary (``harness.design_summary``) or design file; a plain
+    vehicle dict (with ``parameters``) as it is; None for None."""
+    if isinstance(design, dict) and isinstance(design.get("vehicle"), dict):
+        return design["vehicle"]
+    return design if isinstance(design, dict) else None
+
+
+def observer_kind(design: dict[str, Any] | None, model: str | None = None) -> str:
+    """"motorcycle" or "car": the kind of the design's vehicle, else guessed from the FMU model
+    name (a model named Motorcycle... is a motorcycle's)."""
+    kind = (design_vehicle(design) or {}).get("kind")
+    if kind in MODEL_BASELINE:
+        return kind
+    return "motorcycle" if (model or "").startswith("Motorcycle") else "car"
+
+
+def baselines_for(time, signals, quantities, design: dict[str, Any] | None = None, model: str | None = None,
+                  sources: dict[str, str] | None = None, initial: str = "rest") -> dict[str, Any]:
+    """Baseline estimates of ``quantities`` (names X of what an observer estimates) computed from
+    ``signals`` ({name: array on ``time``}: delta, vx for the bicycle; vx, yaw_rate for the steady
+    turn; SI units). ``design``: the observer's design summary (``harness.design_summary``: its
+    ``vehicle`` gives the parameters) or a vehicle dict; ``model`` its FMU model name;
+    ``sources``: {signal: where it comes from} for the record; ``initial``: the bicycle's
+    initial state ("rest" or "steady" at the first sample, :func:`baselines.bicycle`). Returns
+    {"series": {baseline: {X: array}}, "skipped": {baseline: reason}, "about": {baseline: {...}}}."""
+    quantities = list(dict.fromkeys(quantities))
+    t = np.asarray(time, dtype=float)
+    sources = sources or {}
+    vehicle = design_vehicle(design)
+    vname = (vehicle or {}).get("name")
+    series: dict[str, dict[str, np.ndarray]] = {}
+    skipped: dict[str, str] = {}
+    about: dict[str, Any] = {}
+    if quantities:
+        series["zero"] = _bl.zero(t.size, quantities)
+        about["zero"] = {"what": "every estimate 0 (beta, vy, bank angle, forces, roll angle, torque ...)"}
+    kind = observer_kind(design, model)
+    name = MODEL_BASELINE[kind]
+
+    def need(*names):
+        miss = [n for n in names if n not in signals]
+        if miss:
+            raise _bl.BaselineUnavailable(f"no signal {', '.join(repr(m) for m in miss)} to drive it")
+        return [np.asarray(signals[n], dtype=float) for n in names]
+
+    try:
+        if kind == "car":
+            qs = [q for q in quantities if q in _bl.BICYCLE_OUTPUTS]
+            if not qs:
+                raise _bl.BaselineUnavailable(f"the linear bicycle gives none of {', '.join(quantities) or '(none)'}")
+            params = _bl.parameter_values(vehicle, _bl.BICYCLE_PARAMETERS, "the linear bicycle baseline")
+            delta, vx = need("delta", "vx")
+            y = _bl.bicycle(t, delta, vx, params, initial=initial)
+            series[name] = {q: y[q] for q in qs}
+            start = "from rest" if initial == "rest" else "from the steady state of the first sample"
+            about[name] = {"what": "open-loop linear single-track model (Rajamani eq. 2.31) driven by delta and vx, "
+                                   f"exact zero-order hold, {start}, state held below "
+                                   f"{_bl.VX_MIN:g} m/s; quantities at the centre of gravity",
+                           "inputs": {n: sources.get(n, "signal") for n in ("delta", "vx")},
+                           "vehicle": vname, "parameters": params}
+        else:
+            qs = [q for q in quantities if q in (*_bl.STEADY_TURN_OUTPUTS, *_bl.STEADY_TURN_MODEL_OUTPUTS)]
+            if not qs:
+                raise _bl.BaselineUnavailable(f"the steady turn gives none of {', '.join(quantities) or '(none)'}")
+            vx, r = need("vx", "yaw_rate")
+            params, note = None, None
+            try:
+                params = _bl.parameter_values(vehicle, _bl.STEADY_TURN_PARAMETERS, "the steady-turn forces")
+            except _bl.BaselineUnavailable as exc:
+                note = f"{exc}: roll angle, rider torque and steering rate only"
+            y = _bl.steady_turn(vx, r, params)
+            series[name] = {q: y[q] for q in qs if q in y}
+            about[name] = {"what": "steady turn at the measured vx and yaw rate: roll angle atan(vx r / g), "
+                                   "rider torque 0, steering rate 0; tyre forces and vy of the linear model's "
+                                   "steady turn",
+                           "inputs": {n: sources.get(n, "signal") for n in ("vx", "yaw_rate")},
+                           "vehicle": vname, **({"parameters": params} if params else {}),
+                           **({"note": note} if note else {})}
+    except _bl.BaselineUnavailable as exc:
+        skipped[name] = str(exc)
+    return {"series": series, "skipped": skipped, "about": about}
+
+
+def baseline_summary(observer_rms: float | None, baseline_rms: dict[str, float | None], statistic: str,
+                     observer: str = "estimate") -> dict[str, Any]:
+    """One line of verdict: the observer's error statistic beside the best baseline's; ``ratio`` =
+    observer / best baseline (< 1: the observer is better), ``baseline_as_good`` when a baseline
+    is as good as or better than the observer."""
+    valid = {b: v for b, v in baseline_rms.items() if v is not None}
+    best = min(valid, key=valid.get) if valid else None
+    y = valid.get(best) if best else None
+    ratio = _f(observer_rms / y) if (observer_rms is not None and y) else None
+    return {"statistic": statistic, "observer": observer, "observer_rms": observer_rms,
+            "baselines": dict(baseline_rms), "best_baseline": best, "best_baseline_rms": y, "ratio": ratio,
+            "baseline_as_good": (y <= observer_rms) if (y is not None and observer_rms is not None) else None}
+
+
+def simulation_baselines(result: SimResult, label: str, quantities) -> dict[str, Any]:
+    """:func:`baselines_for` of observer ``label`` of a co-simulation: driven by what the observers
+    received (``result.measured``, noise included) where the signal was measured, else by the bus
+    (truth), with the design summary ``result.info["observer_designs"][label]``."""
+    info = result.info or {}
+    design = (info.get("observer_designs") or {}).get(label)
+    model = (info.get("observer_models") or {}).get(label)
+    bus, meas = result.bus, result.measured or {}
+    signals = {**bus, **meas}
+    sources = {k: ("measured (as the observers received it)" if k in meas else "bus (truth)") for k in signals}
+    return baselines_for(result.time, signals, quantities, design, model, sources)
+
+
+def _simulation_baselines(result: SimResult, label: str, o: dict[str, Any], after: np.ndarray) -> dict[str, Any]:
+    """The ``baselines`` entry of observer ``label`` (its estimates and intervals already scored in ``o``)."""
+    bus = result.bus
+    targets = {name: (name[:-4], e) for name, e in o["estimates"].items()}
+    targets.update({name: (name, e) for name, e in o["intervals"].items()})
+    b = simulation_baselines(result, label, [q for q, _ in targets.values()])
+    out: dict[str, Any] = {}
+    for base, ser in b["series"].items():
+        out[base] = {name: estimate_entry(ser[q], bus[e["truth"]], after, e["truth"], e.get("unit"))
+                     for name, (q, e) in targets.items() if q in ser}
+    summary = {}
+    outs = result.observers[label]
+    for name, (q, e) in targets.items():
+        if name in o["estimates"]:
+            obs_entry, what = e, "estimate"
+        else:
+            mid = 0.5 * (np.asarray(outs[e["lower"]], dtype=float) + np.asarray(outs[e["upper"]], dtype=float))
+            obs_entry, what = estimate_entry(mid, bus[e["truth"]], after, e["truth"], e.get("unit")), \
+                "interval midpoint"
+        stat = "rms_after_settle" if obs_entry.get("rms_after_settle") is not None else "rms"
+        rms = {base: out[base][name][stat] for base in out if name in out[base]}
+        if rms:
+            summary[name] = baseline_summary(obs_entry.get(stat), rms, stat, what)
+    out["summary"] = summary
+    out["skipped"] = b["skipped"]
+    out["about"] = b["about"]
     return out
 
 

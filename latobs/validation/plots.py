@@ -4,7 +4,9 @@ Angles are drawn in degrees and angular rates in deg/s (axis labels say so); oth
 their SI unit. Files written by :func:`plot_all` into ``out_dir``:
 
     estimates.png   truth vs every observer's estimate (and interval band) per estimated signal;
-                    the truth of an observer is the one its metrics use (metrics.REFERENCE_SIGNALS)
+                    the truth of an observer is the one its metrics use (metrics.REFERENCE_SIGNALS);
+                    the model baseline of the metrics (a car's open-loop linear bicycle, a
+                    motorcycle's steady turn; latobs.validation.baselines) as a thin dashed line
     modes.png       active mode of each observer over time (observers with a `mode` output)
     residual.png    each observer's `residual_norm` output (paper 003)
     bank_angle.png  road bank angle: truth vs each observer's bank_angle_hat
@@ -110,11 +112,44 @@ def estimated_signals(result: SimResult) -> list[str]:
     return [s for s in PREFERRED if s in found] + sorted(found - set(PREFERRED))
 
 
+#: style of a model baseline's line (thin, dashed)
+BASELINE_STYLE = {"color": "tab:gray", "lw": 0.8, "ls": "--"}
+
+
+def model_baseline_lines(result: SimResult) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """{quantity X: [(legend label, array), ...]}: the model baselines (not ``zero``) of the
+    observers' metrics for every estimated X, one line per distinct series (observers designed
+    for the same vehicle share one)."""
+    from .metrics import simulation_baselines
+
+    truths = _truths(result)
+    lines: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for label in result.observers:
+        qs = [q for q, labs in truths.items() if label in labs]
+        if not qs:
+            continue
+        b = simulation_baselines(result, label, qs)
+        for base, ser in b["series"].items():
+            if base == "zero":
+                continue
+            veh = (b["about"].get(base) or {}).get("vehicle")
+            name = f"{base.replace('_', ' ')} baseline" + (f" ({veh})" if veh else "")
+            for q, y in ser.items():
+                have = lines.setdefault(q, [])
+                if any(np.array_equal(y, y0) for _, y0 in have):
+                    continue
+                if any(n == name for n, _ in have):
+                    name = f"{name}, {label}"
+                have.append((name, np.asarray(y, dtype=float)))
+    return lines
+
+
 def plot_estimates(result: SimResult, out_dir: str | os.PathLike) -> Path | None:
     truths = _truths(result)
     sigs = estimated_signals(result)
     if not sigs:
         return None
+    base_lines = model_baseline_lines(result)
     t = result.time
     fig = Figure(figsize=(10, 2.3 * len(sigs) + 0.8))
     axes = fig.subplots(len(sigs), 1, sharex=True, squeeze=False)[:, 0]
@@ -133,6 +168,8 @@ def plot_estimates(result: SimResult, out_dir: str | os.PathLike) -> Path | None
                 lo, hi = k * np.asarray(outs[s + "_lower"], float), k * np.asarray(outs[s + "_upper"], float)
                 i = thin(t, lo, hi)
                 ax.fill_between(t[i], lo[i], hi[i], alpha=0.25, label=f"{label}: [{s}_lower, {s}_upper]")
+        for name, y in base_lines.get(s, []):
+            _plot(ax, t, k * y, label=name, **BASELINE_STYLE)
         ax.set_ylabel(_ylabel(s, result.units))
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")

@@ -31,7 +31,8 @@ Scoring (:mod:`latobs.validation.metrics` conventions)
 
 Output: ``metrics.json`` (structure in :func:`score`) and, unless disabled, ``replay.png`` (whole
 record; the held-out part shaded) and ``replay_zoom.png`` (the 20 s window of most activity,
-taken before the split when there is one).
+taken before the split when there is one); the model baseline (the car's linear bicycle driven
+by the record's delta and vx) is drawn there as a thin dashed line.
 """
 from __future__ import annotations
 
@@ -181,6 +182,7 @@ class ReplayRun:
     outputs   {output: array} every Real/Integer/Boolean output of the FMU (outputs at t_k)
     inputs    FMU input names (each wired to the column of the same name)
     units     {variable: unit} as the modelDescription declares them
+    design    summary of the design file baked into the FMU (harness.design_summary), None if none
     """
 
     time: np.ndarray
@@ -193,13 +195,14 @@ class ReplayRun:
     label: str
     units: dict[str, str] = field(default_factory=dict)
     logs: list[str] = field(default_factory=list)
+    design: dict[str, Any] | None = None
 
 
 def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: str | None = None,
           source: Any = "the record") -> ReplayRun:
     """Drive the FMU at ``fmu_path`` with the columns of ``data`` (``t`` and one column per FMU
     input; see the module docstring for the timing). ``source`` names the data in errors."""
-    from .harness import FmuInstance, WiringError, _unit_of
+    from .harness import FmuInstance, WiringError, _unit_of, observer_design
 
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
@@ -259,7 +262,8 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
         if f.dropped_logs:
             logs.append(f"[INFO] replay: {f.dropped_logs} further log messages dropped")
         return ReplayRun(time=t, columns=cols, outputs=rec, inputs=in_names, dt=dt, fmu=fmu_path,
-                         model_name=f.model_name, label=label, units=units, logs=logs)
+                         model_name=f.model_name, label=label, units=units, logs=logs,
+                         design=observer_design(fmu_path))
     finally:
         f.close()
 
@@ -293,13 +297,27 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
              "intervals": {"X": {"truth": column, "lower", "upper", "unit",
                                  SEG: {"n_samples", "enclosure_violations", "violation_rate",
                                        "enclosure_rate", "max_violation", "mean_width",
-                                       "nonfinite_samples"}}},
+                                       "nonfinite_samples"},
+                                 "midpoint": {SEG: {as an estimate: the bounds' midpoint}}}},
              "may_in_force_sum": {"quantity": "m*ay", "lower": ..., "upper": ..., "mass_kg",
                                   "vehicle", "unit": "N", SEG: {as an interval}},   # if applicable
              "modes": {SEG: {"occupancy": {"1": fraction, ...}, "switches": int}},   # if `mode`
+             "baselines": {"zero" | "bicycle" | "steady_turn": {name: {"truth", "unit", SEG: {as an
+                                                                estimate}}},
+                           "summary": {name: {"segment": SEG, "statistic": "rms", "observer", "observer_rms",
+                                              "baselines", "best_baseline", "best_baseline_rms", "ratio",
+                                              "baseline_as_good"}},
+                           "skipped": {baseline: reason}, "about": {baseline: {...}}},
              "unscored_outputs": [...], "log_messages": int, "log_excerpt": [first messages]}}}
 
     SEG is each key of "segments" (``all``; with a split also ``before_split``/``after_split``).
+    Baselines (:func:`latobs.validation.metrics.baselines_for`): every scored estimate (and
+    interval, by its midpoint) is also scored for the zero estimate and the model baseline
+    driven by the record's own columns (the car's linear bicycle needs ``delta`` and ``vx``,
+    started from the steady state of the first row; the motorcycle's steady turn ``vx`` and
+    ``yaw_rate``), with the parameters of the design file baked into the FMU (``run.design``);
+    the summary compares RMS errors on the held-out part (``after_split``) when there is a split,
+    else on the whole record. A baseline without its columns or parameters is in ``skipped``.
     """
     t = run.time
     cols = run.columns
@@ -323,9 +341,12 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
             continue
         lo, hi = np.asarray(outs[q + "_lower"], dtype=float), np.asarray(outs[q + "_upper"], dtype=float)
         x = cols[truth]
+        mid = 0.5 * (lo + hi)
         o["intervals"][q] = {"truth": truth, "lower": q + "_lower", "upper": q + "_upper",
                              "unit": run.units.get(q + "_lower") or run.units.get(truth),
-                             **{s: _metrics.enclosure_stats(lo[m], hi[m], x[m]) for s, m in segs.items()}}
+                             **{s: _metrics.enclosure_stats(lo[m], hi[m], x[m]) for s, m in segs.items()},
+                             # the interval's midpoint as a point estimate (compared with the baselines)
+                             "midpoint": {s: _metrics.error_stats(mid[m], x[m]) for s, m in segs.items()}}
         scored.update((q + "_lower", q + "_upper"))
     if all(b in outs for b in FORCE_BOUNDS) and "ay" in cols:
         entry: dict[str, Any] = {"quantity": "m*ay", "lower": "Fyf_lower + Fyr_lower",
@@ -345,6 +366,7 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
         o["modes"] = {s: ({"occupancy": _metrics.mode_occupancy(t[m], mo[m]),
                            "switches": int(np.sum(mo[m][1:] != mo[m][:-1]))} if m.any() else None)
                       for s, m in segs.items()}
+    o["baselines"] = _replay_baselines(run, o, segs, "after_split" if split is not None else "all")
     o["unscored_outputs"] = sorted(set(outs) - scored - {"mode"})
     o["log_messages"] = len(run.logs)
     o["log_excerpt"] = run.logs[:10]
@@ -377,6 +399,34 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
     return out
 
 
+def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, np.ndarray],
+                      seg: str) -> dict[str, Any]:
+    """The ``baselines`` entry of a replay (see :func:`score`)."""
+    cols = run.columns
+    targets = {name: (name[:-4], e) for name, e in o["estimates"].items()}
+    targets.update({name: (name, e) for name, e in o["intervals"].items()})
+    b = _metrics.baselines_for(run.time, cols, [q for q, _ in targets.values()], run.design, run.model_name,
+                               sources={k: "recorded column" for k in cols}, initial="steady")
+    out: dict[str, Any] = {}
+    for base, ser in b["series"].items():
+        out[base] = {name: {"truth": e["truth"], "unit": e.get("unit"),
+                            **{s: _metrics.error_stats(ser[q][m], cols[e["truth"]][m]) for s, m in segs.items()}}
+                     for name, (q, e) in targets.items() if q in ser}
+    summary = {}
+    for name, (q, e) in targets.items():
+        if name in o["estimates"]:
+            obs_rms, what = (e.get(seg) or {}).get("rms"), "estimate"
+        else:
+            obs_rms, what = ((e.get("midpoint") or {}).get(seg) or {}).get("rms"), "interval midpoint"
+        rms = {base: out[base][name][seg]["rms"] for base in out if name in out[base]}
+        if rms:
+            summary[name] = {"segment": seg, **_metrics.baseline_summary(obs_rms, rms, "rms", what)}
+    out["summary"] = summary
+    out["skipped"] = b["skipped"]
+    out["about"] = b["about"]
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # figures
 # --------------------------------------------------------------------------------------------
@@ -389,11 +439,15 @@ def _panels(run: ReplayRun, mass: float | None) -> list[dict[str, Any]]:
     hats, pairs = _metrics.estimated_quantities(outs)
     qs = list(dict.fromkeys([*hats, *pairs]))
     qs = [q for q in PREFERRED if q in qs] + sorted(set(qs) - set(PREFERRED))
+    # the model baseline of the metrics (not zero), drawn thin and dashed
+    b = _metrics.baselines_for(run.time, run.columns, qs, run.design, run.model_name, initial="steady")
+    base = {q: (f"{n.replace('_', ' ')} baseline", y) for n, ser in b["series"].items() if n != "zero"
+            for q, y in ser.items()}
     panels = []
     for q in qs:
         truth = _metrics.truth_signal(q, run.columns, run.model_name)
         p = {"name": q, "truth": truth, "truth_y": run.columns[truth] if truth else None,
-             "hat": outs.get(q + "_hat"), "band": None}
+             "hat": outs.get(q + "_hat"), "band": None, "baseline": base.get(q)}
         if q in pairs:
             p["band"] = (outs[q + "_lower"], outs[q + "_upper"])
         panels.append(p)
@@ -441,7 +495,7 @@ def activity_window(run: ReplayRun, panels: list[dict[str, Any]], length: float 
 def _figure(run: ReplayRun, panels, sl: slice, title: str, split: float | None, path: Path) -> Path:
     from matplotlib.figure import Figure
 
-    from .plots import _save, _ylabel, display_scale, thin
+    from .plots import BASELINE_STYLE, _save, _ylabel, display_scale, thin
 
     t = run.time[sl]
     fig = Figure(figsize=(10, 2.3 * len(panels) + 0.8))
@@ -464,6 +518,10 @@ def _figure(run: ReplayRun, panels, sl: slice, title: str, split: float | None, 
             y = k * np.asarray(p["truth_y"], float)[sl]
             i = thin(t, y)
             ax.plot(t[i], y[i], color="black", lw=1.0, label=f"{p['truth']} (recorded)")
+        if p.get("baseline") is not None:
+            y = k * np.asarray(p["baseline"][1], float)[sl]
+            i = thin(t, y)
+            ax.plot(t[i], y[i], label=p["baseline"][0], **BASELINE_STYLE)
         if p["hat"] is not None:
             y = k * np.asarray(p["hat"], float)[sl]
             i = thin(t, y)

@@ -9,6 +9,13 @@ A section is one of
 
 Image links are made relative to the report directory. Metric values are in the SI unit of the
 signal (rad, rad/s, m/s, N); the unit column repeats it when the FMU declares it.
+
+Baselines (``metrics["observers"][label]["baselines"]``, see :mod:`latobs.validation.metrics`): the
+tables show each scored estimate beside the zero estimate and the model baseline (the car's
+open-loop linear bicycle, the motorcycle's steady turn) on the same signals: extra columns (RMS
+after settle) in the markdown tables, extra rows in the text tables and replay tables. The lowest
+RMS of each estimate is marked (**bold** in markdown, ``*`` in text); a ``⚠``/``!`` flags an
+estimate where a baseline is as good as or better than the observer.
 """
 from __future__ import annotations
 
@@ -52,6 +59,54 @@ def _table(header: list[str], rows: list[list[Any]]) -> str:
 
 
 SEGMENTS = ("all", "before_split", "after_split")
+BASELINE_TITLES = {"zero": "zero", "bicycle": "linear bicycle", "steady_turn": "steady turn"}
+WARN_MD = "⚠"      # a baseline is as good as or better than the observer (markdown)
+WARN_TEXT = "!"    # the same in plain text
+
+
+def _baseline_title(name: str) -> str:
+    return BASELINE_TITLES.get(name, name.replace("_", " "))
+
+
+def _all_baselines(metrics: Mapping[str, Any]) -> list[str]:
+    """Every baseline some observer of ``metrics`` has, in report order."""
+    from .metrics import baseline_names
+
+    found: list[str] = []
+    for o in metrics.get("observers", {}).values():
+        for b in baseline_names(o.get("baselines")):
+            if b not in found:
+                found.append(b)
+    from .baselines import BASELINES
+
+    return [b for b in BASELINES if b in found] + [b for b in found if b not in BASELINES]
+
+
+def _verdict(summary: Mapping[str, Any] | None, warn: str) -> str | None:
+    """"observer" or the best baseline's title, with ``warn`` when a baseline is as good or better."""
+    if not summary or summary.get("best_baseline") is None:
+        return None
+    if summary.get("baseline_as_good"):
+        return f"{warn} {_baseline_title(summary['best_baseline'])} baseline"
+    return "observer"
+
+
+def _bold(x) -> str:
+    return f"**{_fmt(x)}**"
+
+
+def _baseline_cells(o: Mapping[str, Any], name: str, observer_value, bases: list[str]) -> list[Any]:
+    """Cells appended to an estimate's (or interval's) markdown row: per baseline its RMS after
+    settle (bold when it is the lowest of the row, the observer's included), observer ÷ best
+    baseline, and the verdict."""
+    bl = o.get("baselines") or {}
+    summ = (bl.get("summary") or {}).get(name)
+    stat = (summ or {}).get("statistic", "rms_after_settle")
+    vals = {b: ((bl.get(b) or {}).get(name) or {}).get(stat) for b in bases}
+    cand = [v for v in (observer_value, *vals.values()) if v is not None]
+    best = min(cand) if cand else None
+    cells: list[Any] = [(_bold(v) if (v is not None and v == best) else v) for v in vals.values()]
+    return cells + [(summ or {}).get("ratio"), _verdict(summ, WARN_MD)]
 
 
 def _segment_headers(metrics: Mapping[str, Any]) -> list[str]:
@@ -61,22 +116,58 @@ def _segment_headers(metrics: Mapping[str, Any]) -> list[str]:
     return ["whole record", f"t < {split:g} s", f"t ≥ {split:g} s"]
 
 
-def replay_rows(metrics: Mapping[str, Any]) -> tuple[list[str], list[list[Any]]]:
+def replay_rows(metrics: Mapping[str, Any], mark: str | None = None) -> tuple[list[str], list[list[Any]]]:
     """(header, rows) of a replay's metrics (``metrics["kind"] == "replay"``): per scored output
-    its truth column, the metric, and the value on the whole record and each side of the split."""
+    its truth column, the metric, and the value on the whole record and each side of the split;
+    after an estimate's rows (an interval's: after the RMS error of its midpoint), the RMS error
+    of each baseline. ``mark``: None (raw values), "md" or "text": the lowest RMS error of each
+    output and segment is then written bold (md) or with a trailing ``*`` (text), and the
+    baseline rows' metric names end with a warning when the baseline is as good as or better
+    than the observer on the summary's segment."""
     segs = [s for s in SEGMENTS if s in metrics.get("segments", {"all": None})]
     header = ["observer", "output", "truth", "metric", *_segment_headers(metrics)]
     rows: list[list[Any]] = []
+    warn = WARN_MD if mark == "md" else WARN_TEXT
+
+    def baseline_rows(lab, shown, o, name, e, first_rms_row):
+        from .metrics import baseline_names
+
+        bl = o.get("baselines") or {}
+        summ = (bl.get("summary") or {}).get(name) or {}
+        for b in baseline_names(bl):
+            be = (bl.get(b) or {}).get(name)
+            if not be:
+                continue
+            flag = f" {warn}" if (mark and summ.get("best_baseline") == b and summ.get("baseline_as_good")) else ""
+            rows.append([lab, shown, e.get("truth"), f"RMS error, {_baseline_title(b)} baseline "
+                         f"[{e.get('unit') or 'SI'}]{flag}", *[(be.get(s) or {}).get("rms") for s in segs]])
+        if mark:
+            group = [r for r in rows[first_rms_row:] if str(r[3]).startswith("RMS error")]
+            for j in range(4, 4 + len(segs)):
+                vals = [r[j] for r in group if isinstance(r[j], (int, float))]
+                if len(vals) > 1:
+                    best = min(vals)
+                    for r in group:
+                        if isinstance(r[j], (int, float)) and r[j] == best:
+                            r[j] = _bold(best) if mark == "md" else f"{_fmt(best)}*"
+
     for lab, o in metrics.get("observers", {}).items():
         for name, e in o.get("estimates", {}).items():
+            first = len(rows)
             for key, what in (("rms", "RMS error"), ("max_abs", "max abs error"), ("mean_error", "mean error")):
                 rows.append([lab, name, e.get("truth"), f"{what} [{e.get('unit') or 'SI'}]",
                              *[(e.get(s) or {}).get(key) for s in segs]])
+            baseline_rows(lab, name, o, name, e, first)
         for name, e in o.get("intervals", {}).items():
+            shown = f"[{e.get('lower')}, {e.get('upper')}]"
             for key, what in (("violation_rate", "violation rate"), ("enclosure_violations", "violations"),
                               ("mean_width", f"mean width [{e.get('unit') or 'SI'}]")):
-                rows.append([lab, f"[{e.get('lower')}, {e.get('upper')}]", e.get("truth"), what,
-                             *[(e.get(s) or {}).get(key) for s in segs]])
+                rows.append([lab, shown, e.get("truth"), what, *[(e.get(s) or {}).get(key) for s in segs]])
+            if e.get("midpoint"):
+                first = len(rows)
+                rows.append([lab, shown, e.get("truth"), f"RMS error of the midpoint [{e.get('unit') or 'SI'}]",
+                             *[(e["midpoint"].get(s) or {}).get("rms") for s in segs]])
+                baseline_rows(lab, shown, o, name, e, first)
         f = o.get("may_in_force_sum")
         if f and "skipped" not in f:
             for key, what in (("enclosure_rate", "enclosure rate (eq. 47)"), ("enclosure_violations", "violations"),
@@ -109,8 +200,10 @@ def replay_markdown(metrics: Mapping[str, Any]) -> str:
     if metrics.get("nothing_scored"):
         parts.append(_nothing_scored(metrics) + "\n")
     else:
-        header, rows = replay_rows(metrics)
-        parts.append("Scores (estimate − recorded truth, SI units):\n\n" + _table(header, rows))
+        header, rows = replay_rows(metrics, mark="md")
+        parts.append("Scores (estimate − recorded truth, SI units; baselines on the same recorded signals, the "
+                     f"lowest RMS error in bold, {WARN_MD} where a baseline is as good as or better than the "
+                     "observer):\n\n" + _table(header, rows))
     return "\n".join(parts)
 
 
@@ -129,26 +222,41 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
     if head:
         parts.append("; ".join(head) + "\n")
     est_rows, int_rows, sum_rows = [], [], []
+    bases = _all_baselines(metrics)
     for lab, o in obs.items():
+        summ = (o.get("baselines") or {}).get("summary") or {}
         for name, e in o.get("estimates", {}).items():
-            est_rows.append([lab, name, e.get("truth"), e.get("unit"), e.get("rms"), e.get("max_abs"),
-                             e.get("rms_after_settle"), e.get("max_abs_after_settle")])
+            row = [lab, name, e.get("truth"), e.get("unit"), e.get("rms"), e.get("max_abs"),
+                   e.get("rms_after_settle"), e.get("max_abs_after_settle")]
+            if bases:
+                row += _baseline_cells(o, name, (summ.get(name) or {}).get("observer_rms"), bases)
+            est_rows.append(row)
         for name, e in o.get("intervals", {}).items():
-            int_rows.append([lab, name, e.get("unit"), e.get("enclosure_violations"),
-                             e.get("enclosure_violations_after_settle"), e.get("mean_width"),
-                             e.get("max_violation")])
+            row = [lab, name, e.get("unit"), e.get("enclosure_violations"),
+                   e.get("enclosure_violations_after_settle"), e.get("mean_width"), e.get("max_violation")]
+            if bases:
+                mid = (summ.get(name) or {}).get("observer_rms")
+                row += [mid, *_baseline_cells(o, name, mid, bases)]
+            int_rows.append(row)
         occ = o.get("mode_occupancy")
         occ_s = ", ".join(f"{m}: {v:.0%}" for m, v in occ.items()) if occ else None
         sum_rows.append([lab, o.get("beta_error_to_bank_l2_ratio"), o.get("beta_error_to_bank_l2_ratio_after_settle"),
                          occ_s, o.get("mode_switches"), o.get("log_messages")])
+    bcols = [f"{_baseline_title(b)} baseline: RMS after settle" for b in bases]
+    if bases:
+        bcols += ["observer ÷ best baseline", "best"]
+    note = (f" Baselines on the same signals (zero estimate; {', '.join(_baseline_title(b) for b in bases[1:]) or '—'}"
+            f" model): the lowest RMS after settle in bold, {WARN_MD} where a baseline is as good as or better "
+            "than the observer." if bases else "")
     if est_rows:
-        parts.append("Estimation errors (estimate − truth, SI units):\n\n" + _table(
-            ["observer", "estimate", "truth", "unit", "RMS", "max abs", "RMS after settle", "max abs after settle"],
-            est_rows))
+        parts.append("Estimation errors (estimate − truth, SI units)." + note + "\n\n" + _table(
+            ["observer", "estimate", "truth", "unit", "RMS", "max abs", "RMS after settle", "max abs after settle",
+             *bcols], est_rows))
     if int_rows:
-        parts.append("Interval outputs:\n\n" + _table(
+        parts.append("Interval outputs" + (" (the midpoint of the bounds beside the baselines)" if bases else "")
+                     + ":\n\n" + _table(
             ["observer", "signal", "unit", "enclosure violations", "violations after settle", "mean width",
-             "max violation"], int_rows))
+             "max violation", *(["midpoint: RMS after settle", *bcols] if bases else [])], int_rows))
     if sum_rows:
         parts.append("Per observer (‖β − β̂‖₂ / ‖φr‖₂ is paper 000 eq. (26)):\n\n" + _table(
             ["observer", "‖β−β̂‖₂/‖φr‖₂", "same after settle", "mode occupancy", "mode switches", "log messages"],
@@ -199,20 +307,28 @@ def render(report_dir: str | os.PathLike, sections: Iterable, title: str = "lato
             for lab, o in s.metrics.get("observers", {}).items():
                 est = o.get("estimates", {})
                 beta = est.get("beta_hat", {})
+                bsum = ((o.get("baselines") or {}).get("summary") or {})
+                bsum = bsum.get("beta_hat") or bsum.get("beta")       # an estimate, else an interval's midpoint
+                best = None
+                if bsum and bsum.get("best_baseline") is not None:
+                    best = (f"{WARN_MD + ' ' if bsum.get('baseline_as_good') else ''}"
+                            f"{_baseline_title(bsum['best_baseline'])}: {_fmt(bsum.get('best_baseline_rms'))}")
                 if replay:  # the held-out part when there is one, else the whole record
                     seg = "after_split" if s.metrics.get("split_s") is not None else "all"
                     viol = sum((v.get("all") or {}).get("enclosure_violations") or 0
                                for v in o.get("intervals", {}).values()) if o.get("intervals") else None
-                    rows.append([s.title, lab, (beta.get(seg) or {}).get("rms"), None, viol, len(est)])
+                    rows.append([s.title, lab, (beta.get(seg) or {}).get("rms"), None, viol, len(est), best])
                     continue
                 viol = sum(v.get("enclosure_violations") or 0 for v in o.get("intervals", {}).values()) \
                     if o.get("intervals") else None
                 rows.append([s.title, lab, beta.get("rms_after_settle"), o.get("beta_error_to_bank_l2_ratio"), viol,
-                             len(est)])
+                             len(est), best])
     if rows:
         out.append("## Overview\n\n" + _table(
             ["scenario", "observer", "β̂ RMS after settle (replay: held-out part) [rad]", "‖β−β̂‖₂/‖φr‖₂", "enclosure violations",
-             "scored estimates"], rows))
+             "scored estimates",
+             f"β: best baseline RMS, same statistic [rad] ({WARN_MD}: as good as the observer or better)"],
+            rows))
     for s in secs:
         if isinstance(s, str):
             out.append(s.rstrip() + "\n")
@@ -249,7 +365,7 @@ def replay_text_table(metrics: Mapping[str, Any]) -> str:
     head = _replay_head(metrics)
     if metrics.get("nothing_scored"):
         return head + "\n" + _nothing_scored(metrics)
-    header, rows = replay_rows(metrics)
+    header, rows = replay_rows(metrics, mark="text")
     header, rows = header[1:], [r[1:] for r in rows]    # one observer per replay
     shown, last = [], None
     for r in rows:
@@ -264,19 +380,54 @@ def text_table(metrics: Mapping[str, Any]) -> str:
     :func:`replay_text_table`."""
     if metrics.get("kind") == "replay":
         return replay_text_table(metrics)
+    from .metrics import baseline_names
+
     rows = [("observer", "output", "RMS", "max abs", "RMS settled", "max settled")]
+    marked = False
+
+    def with_baselines(lab, o, name, own: tuple | None, what: str):
+        """The observer's row ``own`` (None: none) then one row per baseline, the lowest RMS settled
+        starred, a ``!`` on the name of a baseline as good as or better than the observer."""
+        nonlocal marked
+        bl = o.get("baselines") or {}
+        summ = (bl.get("summary") or {}).get(name) or {}
+        group = []
+        if own is not None:
+            group.append([lab, what, *own])
+        for b in baseline_names(bl):
+            be = (bl.get(b) or {}).get(name)
+            if not be:
+                continue
+            flag = f" {WARN_TEXT}" if (summ.get("best_baseline") == b and summ.get("baseline_as_good")) else ""
+            group.append(["", f"  {_baseline_title(b)} baseline{flag}", be.get("rms"), be.get("max_abs"),
+                          be.get("rms_after_settle"), be.get("max_abs_after_settle")])
+        vals = [g[4] for g in group if g[4] is not None]
+        best = min(vals) if len(group) > 1 and vals else None
+        for g in group:
+            star = best is not None and g[4] == best
+            marked = marked or star
+            rows.append((*g[:2], *(_fmt(c) for c in g[2:4]), _fmt(g[4]) + ("*" if star else ""), _fmt(g[5])))
+
     for lab, o in metrics.get("observers", {}).items():
+        summ = (o.get("baselines") or {}).get("summary") or {}
         for name, e in o.get("estimates", {}).items():
-            rows.append((lab, name, _fmt(e.get("rms")), _fmt(e.get("max_abs")), _fmt(e.get("rms_after_settle")),
-                         _fmt(e.get("max_abs_after_settle"))))
+            with_baselines(lab, o, name, (e.get("rms"), e.get("max_abs"), e.get("rms_after_settle"),
+                                          e.get("max_abs_after_settle")), name)
         for name, e in o.get("intervals", {}).items():
             rows.append((lab, f"[{name}] violations/width", _fmt(e.get("enclosure_violations")),
                          _fmt(e.get("mean_width")), _fmt(e.get("enclosure_violations_after_settle")),
                          _fmt(e.get("mean_width_after_settle"))))
+            s = summ.get(name)
+            if s:
+                own = (None, None, s.get("observer_rms"), None) if s.get("statistic") == "rms_after_settle" \
+                    else (s.get("observer_rms"), None, None, None)
+                with_baselines(lab, o, name, own, f"[{name}] midpoint")
         if o.get("beta_error_to_bank_l2_ratio") is not None:
             rows.append((lab, "|beta err|/|bank| L2", _fmt(o["beta_error_to_bank_l2_ratio"]), "",
                          _fmt(o.get("beta_error_to_bank_l2_ratio_after_settle")), ""))
     widths = [max(len(str(r[i])) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    return f"scenario {metrics.get('scenario', '?')} (SI units: rad, rad/s, m/s, N)\n" + "\n".join(lines)
+    foot = (f"\n* lowest RMS settled of an output (observer or baseline); {WARN_TEXT}: a baseline as good as or "
+            "better than the observer") if marked else ""
+    return f"scenario {metrics.get('scenario', '?')} (SI units: rad, rad/s, m/s, N)\n" + "\n".join(lines) + foot

@@ -29,6 +29,7 @@ approximate the standards' steering traces, they do not track a course.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -79,6 +80,132 @@ def steady_state_ay_gain(vehicle: Vehicle | str, vx_mps: float) -> float:
 def steer_for_ay(vehicle: Vehicle | str, vx_mps: float, ay_mps2: float) -> float:
     """Road-wheel angle (rad) giving a steady-state lateral acceleration ay (m/s^2) at vx (m/s)."""
     return ay_mps2 / steady_state_ay_gain(vehicle, vx_mps)
+
+
+#: CarPlant parameters its flat-road steady state depends on (the inertias, the roll damping and
+#: the relaxation length do not enter a steady state)
+_CARPLANT_STEADY = ("m", "lf", "lr", "hr", "Kr", "Cf", "Cr", "track", "h_rc", "roll_share_f",
+                    "mf_C", "mf_E", "mu")
+_CARPLANT_V_SLIP_MIN = 1.0  # m/s, CarPlant's floor of the wheel's longitudinal velocity (E4)
+
+
+def carplant_steady_turn(vehicle: Vehicle | str, vx_mps: float, ay_mps2: float) -> dict[str, Any]:
+    """Steady turn of the NONLINEAR CarPlant on a flat road: the road-wheel angle (rad) that holds
+    its output ``ay`` (sum of the tire forces / m) at ``ay_mps2`` (m/s^2) at the constant speed
+    ``vx_mps`` (m/s), with the plant's default parameters for the vehicle (mu = the vehicle's mu,
+    stiffness scales 1, Magic Formula tires, relaxation length = the vehicle's sigma > 0: in the
+    steady state the relaxed forces see the exact ay = S/m in the load transfer; with algebraic
+    tires, sigma <= 0, the plant's one-pass load-transfer loop shifts ay slightly).
+
+    The validation stage never imports the plant's runtime (package docstring): this solves the
+    algebraic steady state of the equations DOCUMENTED in ``fmu_src/car_plant.py`` (E1-E6, flat
+    road, ax = 0, forces at their relaxed values) on its own; tests/test_vehicles_000.py holds it
+    against the runtime. In a steady turn vy' = r' = phi' = phi'' = 0, so E2 gives
+    ay = S/m = vx r: the yaw rate is r = ay/vx. E1 (roll, S = m ay) is solved for phi by Newton;
+    then two equations remain, S(vy, delta) = m ay and the yaw moment Mz(vy, delta) = 0, solved
+    by Newton with a central-difference Jacobian from the linear bicycle's steady state. The
+    two-track slip angles (E4), the lateral load transfer with the roll moment Kr phi (E5) and
+    the Magic Formula (E6, B per axle from the static wheel load) are those of the plant.
+
+    Returns {delta, vy, beta, yaw_rate, roll_angle, ay, alpha_f, alpha_r, Fyf, Fyr, iterations}
+    (SI units; beta = atan(vy/vx) at the roll axis, alpha_* the axle means as the plant reports
+    them). Raises ValueError when no steady turn exists (ay beyond the tires' grip). Cached per
+    (parameter values, vx, ay): deterministic, computed once.
+    """
+    v = _vehicle(vehicle)
+    p = v.require(_CARPLANT_STEADY, "the CarPlant steady-turn calibration of the validation scenarios")
+    if not (math.isfinite(vx_mps) and vx_mps > _CARPLANT_V_SLIP_MIN):
+        raise ValueError(f"a steady turn needs a speed > {_CARPLANT_V_SLIP_MIN} m/s, got {vx_mps}")
+    if not math.isfinite(ay_mps2):
+        raise ValueError(f"a steady turn needs a finite lateral acceleration, got {ay_mps2}")
+    key = tuple(float(p[k]) for k in _CARPLANT_STEADY)
+    return dict(_carplant_steady_turn(key, float(vx_mps), float(ay_mps2)))
+
+
+@functools.lru_cache(maxsize=256)
+def _carplant_steady_turn(key: tuple[float, ...], vx: float, ay: float) -> dict[str, Any]:
+    m, lf, lr, hr, Kr, Cf, Cr, track, h_rc, share_f, C, E, mu = key
+    L = lf + lr
+    t2 = 0.5 * track
+    Wf = m * G * lr / (2.0 * L)          # static wheel loads (N), flat road
+    Wr = m * G * lf / (2.0 * L)
+    Bf = Cf / (2.0 * mu * Wf * C)        # E6: mu Fz_static B C = C_axle / 2
+    Br = Cr / (2.0 * mu * Wr * C)
+    r = ay / vx
+    S_target = m * ay
+    # E1 with phi'' = phidot = 0 and S = m ay: hr S cos(phi) + m g hr sin(phi) - Kr phi = 0
+    phi = hr * S_target / (Kr - m * G * hr)
+    for _ in range(50):
+        g = hr * S_target * math.cos(phi) + m * G * hr * math.sin(phi) - Kr * phi
+        dg = -hr * S_target * math.sin(phi) + m * G * hr * math.cos(phi) - Kr
+        step = g / dg
+        phi -= step
+        if abs(step) < 1e-15:
+            break
+    # E5: lateral load transfer with ay_eff = S/m = ay (relaxed forces), clamped to the axle load
+    Mroll = Kr * phi
+
+    def clamp(x, lim):
+        return min(max(x, -lim), lim)
+
+    df = clamp(mu * ((m * lr / L * h_rc / track) * ay + share_f / track * Mroll), mu * Wf)
+    dr = clamp(mu * ((m * lf / L * h_rc / track) * ay + (1.0 - share_f) / track * Mroll), mu * Wr)
+    loads = (mu * Wf - df, mu * Wf + df, mu * Wr - dr, mu * Wr + dr)   # mu Fz of fl, fr, rl, rr
+
+    def mf(alpha, B):
+        x = B * alpha
+        return math.sin(C * math.atan(x - E * (x - math.atan(x))))
+
+    def wheel_alpha(u_body, v_body, steer):
+        # E4: along / across the wheel, the along component floored at V_SLIP_MIN
+        u = u_body * math.cos(steer) + v_body * math.sin(steer)
+        w = v_body * math.cos(steer) - u_body * math.sin(steer)
+        return -math.atan(w / max(u, _CARPLANT_V_SLIP_MIN))
+
+    def forces(vy, delta):
+        vf, vr = vy + r * lf, vy - r * lr
+        a = (wheel_alpha(vx - r * t2, vf, delta), wheel_alpha(vx + r * t2, vf, delta),
+             wheel_alpha(vx - r * t2, vr, 0.0), wheel_alpha(vx + r * t2, vr, 0.0))
+        F = [loads[i] * mf(a[i], Bf if i < 2 else Br) for i in range(4)]
+        cd, sd = math.cos(delta), math.sin(delta)
+        S = (F[0] + F[1]) * cd + F[2] + F[3]
+        Mz = lf * cd * (F[0] + F[1]) + t2 * sd * (F[0] - F[1]) - lr * (F[2] + F[3])
+        return S, Mz, a, F
+
+    def residual(z):
+        S, Mz, _, _ = forces(z[0], z[1])
+        return np.array([(S - S_target) / (m * G), Mz / (m * G * L)])
+
+    # start: the linear bicycle's steady state (rear axle: Cr (lr r / vx - beta) = m ay lf / L)
+    k_us = m / L * (lr / Cf - lf / Cr)
+    z = np.array([vx * (lr * r / vx - m * ay * lf / (L * Cr)), ay * (L + k_us * vx**2) / vx**2])
+    iterations = 0
+    res = residual(z)
+    for iterations in range(1, 60):
+        J = np.empty((2, 2))
+        for j, h in enumerate((1e-6 * max(vx, 1.0), 1e-7)):
+            e = np.zeros(2)
+            e[j] = h
+            J[:, j] = (residual(z + e) - residual(z - e)) / (2 * h)
+        dz = np.linalg.solve(J, -res)
+        lam = 1.0
+        while True:   # damped Newton: never accept a step that makes the residual larger
+            trial = residual(z + lam * dz)
+            if np.max(np.abs(trial)) < np.max(np.abs(res)) or lam < 1e-6:
+                break
+            lam *= 0.5
+        z = z + lam * dz
+        res = trial
+        if np.max(np.abs(res)) < 1e-14:
+            break
+    S, Mz, a, F = forces(z[0], z[1])
+    if not (np.all(np.isfinite(z)) and abs(S - S_target) <= 1e-9 * m * G and abs(Mz) <= 1e-9 * m * G * L):
+        raise ValueError(f"CarPlant has no steady turn at vx = {vx} m/s, ay = {ay} m/s^2 "
+                         f"(residual S - m ay = {S - S_target:.3g} N, Mz = {Mz:.3g} N m): beyond the tires' grip?")
+    cd = math.cos(z[1])
+    return {"delta": float(z[1]), "vy": float(z[0]), "beta": math.atan(z[0] / vx), "yaw_rate": r,
+            "roll_angle": phi, "ay": S / m, "alpha_f": 0.5 * (a[0] + a[1]), "alpha_r": 0.5 * (a[2] + a[3]),
+            "Fyf": (F[0] + F[1]) * cd, "Fyr": F[2] + F[3], "iterations": iterations}
 
 
 def _cosine_blend(x: np.ndarray) -> np.ndarray:
@@ -237,6 +364,85 @@ class BankBraking(Scenario):
         return {"v_start_mps": self.v_start, "v_end_mps": self.v_end, "decel_mps2": self.decel,
                 "braking_s": [self.t_brake, self.t_brake_end], "steer_amplitude_rad": self.steer_amplitude,
                 "speed_bands_kmh": [list(b) for b in SPEED_BANDS_KMH]}
+
+
+# --------------------------------------------------------------------------------------------
+# steady turn on a flat road (paper 000, issue 9: the bank estimate must not see the turn)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SteadyTurn(Scenario):
+    """A steady turn on a FLAT road (bank 0) at constant speed: what a bank estimator must not
+    mistake for a bank (paper 000, issue 9).
+
+    Speed ``speed`` (m/s, default 50 km/h) throughout. Road-wheel steer: 0 for ``t_start`` s, a
+    cosine blend (C1-smooth, :func:`_cosine_blend`) over ``ramp`` s to the angle delta_ss, held to
+    the end. delta_ss is the angle at which the NONLINEAR CarPlant of the vehicle (its default
+    parameters: Magic Formula tires, the vehicle's mu) settles at the lateral acceleration
+    ``ay_g`` x g (output ``ay`` = sum of the tire forces / m; > 0 turns left): the algebraic
+    steady state of the plant's equations (:func:`carplant_steady_turn`), not the linear
+    bicycle's angle (:func:`steer_for_ay`, ~0.2 % smaller at 0.19 g; both in :meth:`info`).
+    The settle time leaves the last ``duration - settle_time`` = 10 s for the "after settle"
+    metrics (CarPlant's ay and roll angle are within 0.1 % of the steady state < 1 s after the
+    end of the ramp for sedan, compact and suv; the observers get 12 s). Open loop.
+
+    Calibration figures at 50 km/h, 0.19 g (tests/test_vehicles_000.py): steer 0.032627 rad
+    (sedan), 0.029633 rad (compact), 0.032086 rad (suv); the CarPlant FMU settles at
+    ay = 1.8639 m/s^2 to 1e-9. The linear bicycle's angles (0.2 % smaller) would give 0.1896 g.
+    """
+
+    name: str = "steady-turn"
+    description: str = (
+        "Paper 000 (issue 9): steady left turn on a flat road (bank 0) at 50 km/h: straight 1 s, road-wheel "
+        "steer blended in (cosine, 2 s) to the angle holding 0.19 g on the nonlinear CarPlant, held to 25 s; "
+        "metrics over the last 10 s. A bank estimate should stay at 0. Open loop."
+    )
+    duration: float = 25.0
+    settle_time: float = 15.0
+    speed: float = 50.0 * KMH  # m/s
+    ay_g: float = 0.19  # 1, steady lateral acceleration in units of g (> 0: left turn)
+    t_start: float = 1.0  # s, steering starts
+    ramp: float = 2.0  # s, cosine blend to the steady angle
+
+    def __post_init__(self):
+        if not (math.isfinite(self.speed) and self.speed > 1.0):
+            raise ValueError(f"steady-turn needs a speed > 1 m/s, got {self.speed}")
+        if not math.isfinite(self.ay_g):
+            raise ValueError(f"steady-turn needs a finite ay_g, got {self.ay_g}")
+        if not (self.t_start >= 0 and self.ramp >= 0 and math.isfinite(self.t_start + self.ramp)):
+            raise ValueError("steady-turn needs t_start >= 0 s and ramp >= 0 s")
+        if not self.t_start + self.ramp <= self.settle_time <= self.duration:
+            raise ValueError("steady-turn needs t_start + ramp <= settle_time <= duration")
+
+    @property
+    def ay_target(self) -> float:
+        """Steady lateral acceleration, m/s^2."""
+        return self.ay_g * G
+
+    def steady_state(self, vehicle) -> dict[str, Any]:
+        """CarPlant's steady turn at this speed and ay (:func:`carplant_steady_turn`), SI units."""
+        return carplant_steady_turn(vehicle, self.speed, self.ay_target)
+
+    def steer(self, vehicle) -> float:
+        """Road-wheel angle held in the turn, rad."""
+        return self.steady_state(vehicle)["delta"]
+
+    def signals(self, t, vehicle="sedan"):
+        t = np.asarray(t, dtype=float)
+        d = self.steer(vehicle)
+        if self.ramp > 0:
+            w = _cosine_blend((t - self.t_start) / self.ramp)
+        else:
+            w = (t >= self.t_start).astype(float)
+        return {"delta": d * w, "vx": np.full_like(t, self.speed), "bank_angle": np.zeros_like(t)}
+
+    def _derived(self, vehicle):
+        ss = self.steady_state(vehicle)
+        return {"speed_mps": self.speed, "ay_target_mps2": self.ay_target, "ay_g": self.ay_g,
+                "steer_rad": ss["delta"], "steer_linear_bicycle_rad": steer_for_ay(vehicle, self.speed, self.ay_target),
+                "steer_calibration": "steady state of the nonlinear CarPlant (default parameters) at ay_target",
+                "steady_state": {k: ss[k] for k in ("yaw_rate", "beta", "roll_angle", "alpha_f", "alpha_r", "ay")},
+                "steer_ramp_s": [self.t_start, self.t_start + self.ramp], "bank_angle_rad": 0.0,
+                "open_loop": True}
 
 
 # --------------------------------------------------------------------------------------------
@@ -795,7 +1001,7 @@ class UnknownScenarioError(KeyError):
 
 SCENARIOS: dict[str, Scenario] = {
     s.name: s for s in (
-        BankBraking(), DoubleLaneChange(), SineWithDwell(), Fishhook(),
+        BankBraking(), SteadyTurn(), DoubleLaneChange(), SineWithDwell(), Fishhook(),
         # paper 001's operating range (speed modes 11.5/14.5/18 m/s): the same lane change at 15 m/s
         DoubleLaneChange(name="double-lane-change-15",
                          description="The double lane change at 15 m/s (paper 001's speed range): open-loop "
