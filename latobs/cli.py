@@ -2,14 +2,31 @@
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
 from pathlib import Path
 
 DEFAULT_OUT = Path("build")
 
+# Exit codes (README, "Exit codes and errors"): 0 done; 2 a user's mistake (bad argument, file,
+# vehicle, parameter, design that does not certify, FMU that fails in the co-simulation): one
+# line ``latobs CMD: error: ...`` naming the culprit on stderr, no traceback; 1 an internal error
+# (a bug): one line ``latobs CMD: internal error: ...``, the traceback with LATOBS_DEBUG=1;
+# 130 interrupted (Ctrl-C): one line ``latobs CMD: interrupted``.
+EXIT_OK, EXIT_INTERNAL, EXIT_USER, EXIT_INTERRUPTED = 0, 1, 2, 130
+DEBUG_ENV = "LATOBS_DEBUG"
+
 
 class CliError(RuntimeError):
     """A user-facing failure: printed without a traceback, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line, like every other user error (exit 2)."""
+
+    def error(self, message):
+        self.exit(EXIT_USER, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
 
 
 def _cmd_list(args) -> int:
@@ -42,17 +59,41 @@ def _cmd_design(args) -> int:
 
 
 def _cmd_build(args) -> int:
-    from .pipeline import build
+    import contextlib
+    import json
 
-    build(args.names, args.vehicle, Path(args.out), args.backend)
+    from .pipeline import build, build_summary
+
+    to_stdout = args.json == "-"
+    if args.json is not None and not to_stdout and not args.json.endswith(".json"):
+        # `--json NAME` would otherwise take an FMU name for the file (argparse's optional value)
+        raise CliError(f"--json takes a FILE ending in .json (or '-' for stdout), got {args.json!r}; "
+                       "put the FMU names before --json")
+    # with the summary on stdout, the progress lines go to stderr so that stdout is the JSON alone
+    with contextlib.redirect_stdout(sys.stderr) if to_stdout else contextlib.nullcontext():
+        built = build(args.names, args.vehicle, Path(args.out), args.backend)
+    if args.json is not None:
+        text = json.dumps(build_summary(built), indent=1) + "\n"
+        if to_stdout:
+            sys.stdout.write(text)
+        else:
+            from .atomic import atomic_write_text
+
+            try:
+                atomic_write_text(args.json, text)
+            except OSError as exc:
+                raise CliError(f"--json: cannot write {args.json}: {exc}") from exc
+            print(f"wrote {args.json}")
     return 0
 
 
 def _cmd_validate(args) -> int:
     from .pipeline import run_validation
 
+    plant_parameters = _plant_params(args.plant_param)
+    _check_observers(args.observer or [], Path(args.fmu_dir))
     run_validation(args.scenario, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
-                   plant_parameters=dict(_kv(p) for p in args.plant_param), noise=args.noise, seed=args.seed,
+                   plant_parameters=plant_parameters, noise=args.noise, seed=args.seed,
                    tag=args.tag, plots=not args.no_plots, plant_vehicle=args.plant_vehicle)
     return 0
 
@@ -91,43 +132,188 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+def _cmd_export_ssp(args) -> int:
+    from .ssp import SspError, export_ssp
+
+    plant_parameters = _plant_params(args.plant_param)
+    _check_observers(args.observer or [], Path(args.fmu_dir))
+    try:
+        export_ssp(args.scenario, observers=args.observer, out=Path(args.out) if args.out else None,
+                   fmu_dir=Path(args.fmu_dir), plant_parameters=plant_parameters, plant_vehicle=args.plant_vehicle)
+    except SspError as exc:
+        raise CliError(str(exc)) from None
+    return 0
+
+
+# --- argument values -------------------------------------------------------------------------
+# Checked before any work. The ``type=`` checks below raise argparse.ArgumentTypeError, which
+# argparse reports as "latobs CMD: error: argument --X: ..." (exit 2). What only the FMU knows
+# (a parameter's name and its declared [min, max]) is checked by the harness against the FMU.
+
 def _kv(text: str) -> tuple[str, float]:
     if "=" not in text:
         raise CliError(f"--plant-param wants NAME=VALUE, got {text!r}")
-    k, v = text.split("=", 1)
+    k, v = (s.strip() for s in text.split("=", 1))
+    if not k:
+        raise CliError(f"--plant-param wants NAME=VALUE, got {text!r} (no NAME)")
     try:
-        return k.strip(), float(v)
-    except ValueError as exc:
-        raise CliError(f"--plant-param {k}: {v!r} is not a number") from exc
+        value = float(v)
+    except ValueError:
+        raise CliError(f"--plant-param {k}: {v!r} is not a number") from None
+    if not math.isfinite(value):
+        raise CliError(f"--plant-param {k}: {v!r} is not a finite number")
+    return k, value
+
+
+def _plant_params(items: list[str]) -> dict[str, float]:
+    """--plant-param NAME=VALUE ... as a dict; a NAME given twice is refused."""
+    out: dict[str, float] = {}
+    for text in items:
+        k, value = _kv(text)
+        if k in out:
+            raise CliError(f"--plant-param {k} given twice ({out[k]:g} and {value:g})")
+        out[k] = value
+    return out
+
+
+def _check_observers(names: list[str], fmu_dir: Path) -> None:
+    """--observer NAME: an FMU in --fmu-dir, or a design (NAME or NAME_V) that can be built there."""
+    from .synthesis import designs
+
+    for name in names:
+        if not (fmu_dir / f"{name}.fmu").is_file():
+            try:
+                designs.parse_artefact(name)
+            except KeyError as exc:
+                raise CliError(f"--observer {name}: no {fmu_dir / (name + '.fmu')} and {exc.args[0]}") from None
+
+
+def _int_at_least(minimum: int, text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid int value: {text!r}") from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"must be an integer >= {minimum}, got {text!r}")
+    return value
+
+
+def _seed(text: str) -> int:
+    """--seed: an integer >= 0 (numpy's default_rng refuses negative seeds)."""
+    return _int_at_least(0, text)
+
+
+def _tag(text: str) -> str:
+    """--tag: the suffix of a folder name, so no path separator."""
+    if "/" in text or "\\" in text or text in (".", ".."):
+        raise argparse.ArgumentTypeError(f"must be a plain name (no '/', not '.' or '..'), got {text!r}")
+    return text
+
+
+def _dir(text: str, writable: bool) -> str:
+    """A directory argument: an existing directory, or a path whose nearest existing ancestor is
+    a directory (it is created when written to); with ``writable``, that one must be writable."""
+    try:
+        path = Path(text)
+        if path.exists() and not path.is_dir():
+            raise argparse.ArgumentTypeError(f"{text!r} is a file, not a directory")
+        anc = path.absolute()
+        while not anc.exists():
+            anc = anc.parent
+        if not anc.is_dir():
+            raise argparse.ArgumentTypeError(f"{text!r}: {anc} is a file, not a directory")
+        if writable and not os.access(anc, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"{text!r}: directory {anc} is not writable")
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc.strerror or exc}") from None
+    return text
+
+
+def _out_dir(text: str) -> str:
+    """--out: where the command writes."""
+    return _dir(text, writable=True)
+
+
+def _fmu_dir(text: str) -> str:
+    """--fmu-dir: where the FMUs are (written only when one is missing and gets built)."""
+    return _dir(text, writable=False)
+
+
+def _vehicle(text: str) -> str:
+    """--vehicle / --plant-vehicle: a shipped set's name or a vehicle TOML file, loaded and
+    validated now (the value is passed on unchanged)."""
+    from .synthesis.params import VehicleParameterError, load_vehicle
+
+    is_file = text.endswith(".toml")
+    if is_file and not Path(text).is_file():
+        raise argparse.ArgumentTypeError(f"{text!r}: no such file" if not Path(text).exists()
+                                         else f"{text!r} is not a file")
+    try:
+        load_vehicle(text)
+    except Exception as exc:            # a file's content is the user's, whatever it breaks
+        if not (is_file or isinstance(exc, VehicleParameterError)):
+            raise
+        msg = str(exc) if isinstance(exc, (VehicleParameterError, OSError, UnicodeError)) else \
+            f"malformed vehicle file ({type(exc).__name__}: {exc})"
+        raise argparse.ArgumentTypeError(msg if not is_file or msg.startswith(text) else f"{text}: {msg}") \
+            from None
+    return text
+
+
+def _positive_int(text: str) -> int:
+    return _int_at_least(1, text)
+
+
+def _out_file(text: str) -> str:
+    """A file the command writes (its folder is created if missing)."""
+    if Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a directory, not a file")
+    _dir(str(Path(text).parent), writable=True)
+    return text
+
+
+def _check_bench_args(argv: list[str]) -> None:
+    """The values of `latobs bench`'s options (bench parses them itself: latobs.bench.main),
+    checked here so that a bad one is one line, not a traceback."""
+    p = _Parser(prog="latobs bench", add_help=False)
+    p.add_argument("--fmu-dir", type=_fmu_dir)
+    p.add_argument("--steps", type=_positive_int)
+    p.add_argument("--repeats", type=_positive_int)
+    p.add_argument("--json", type=_out_file)
+    p.parse_known_args(argv)
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="latobs", description=__doc__)
+    p = _Parser(prog="latobs", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="designs, plants, vehicles and scenarios").set_defaults(func=_cmd_list)
     d = sub.add_parser("design", help="solve the LMIs, certify, write NAME.design.json")
     d.add_argument("name")
-    d.add_argument("--vehicle")
-    d.add_argument("--out", default=str(DEFAULT_OUT))
+    d.add_argument("--vehicle", type=_vehicle)
+    d.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
     d.set_defaults(func=_cmd_design)
     b = sub.add_parser("build", help="design and package FMUs (default: every observer and plant)")
     b.add_argument("names", nargs="*")
-    b.add_argument("--vehicle")
+    b.add_argument("--vehicle", type=_vehicle)
     b.add_argument("--backend", choices=("python", "c"), default="python")
-    b.add_argument("--out", default=str(DEFAULT_OUT))
+    b.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+    b.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
+                   help="a machine-readable summary of the FMUs built (name, kind, paper, vehicle, path, "
+                        "sha256, size; gamma and certificate of observers): written atomically to FILE "
+                        "(*.json), or to stdout without FILE (or with '-'; progress goes to stderr then)")
     b.set_defaults(func=_cmd_build)
     v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
     v.add_argument("scenario")
     v.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable)")
-    v.add_argument("--out", default=str(DEFAULT_OUT))
-    v.add_argument("--fmu-dir", default=str(DEFAULT_OUT), help="where the FMUs are (built if missing)")
+    v.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+    v.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
     v.add_argument("--plant-param", action="append", default=[], metavar="NAME=VALUE",
                    help="CarPlant parameter, e.g. scale_f=0.8 or mu=0.3 (repeatable)")
     v.add_argument("--noise", action="store_true", help="add the default sensor noise and bias")
-    v.add_argument("--seed", type=int, default=0)
-    v.add_argument("--tag", default="", help="suffix of the output folder (SCENARIO_TAG)")
+    v.add_argument("--seed", type=_seed, default=0, help="seed of the --noise draws (an integer >= 0)")
+    v.add_argument("--tag", default="", type=_tag, help="suffix of the output folder (SCENARIO_TAG)")
     v.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
-    v.add_argument("--plant-vehicle", default=None, metavar="V",
+    v.add_argument("--plant-vehicle", default=None, metavar="V", type=_vehicle,
                    help="vehicle of the plant FMU (default: the plant's default vehicle), e.g. sedan_no_roll")
     v.set_defaults(func=_cmd_validate)
     r = sub.add_parser("replay", help="drive an observer FMU with recorded signals and score it against the "
@@ -135,9 +321,10 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("csv", metavar="CSV", help="a .csv or .csv.gz file with a header row and a time column t, "
                                             "or 'mbds' for the bundled MBDS real-vehicle record")
     r.add_argument("--observer", required=True, help="observer FMU name (see `latobs list`)")
-    r.add_argument("--vehicle", help="vehicle of the FMU: NAME_V.fmu for a non-default vehicle (built if missing)")
-    r.add_argument("--out", default=str(DEFAULT_OUT), help="writes OUT/replay_<csv stem>_<FMU name>/")
-    r.add_argument("--fmu-dir", default=str(DEFAULT_OUT), help="where the FMUs are (built if missing)")
+    r.add_argument("--vehicle", type=_vehicle,
+                   help="vehicle of the FMU: NAME_V.fmu for a non-default vehicle (built if missing)")
+    r.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, help="writes OUT/replay_<csv stem>_<FMU name>/")
+    r.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
     r.add_argument("--split", default="auto", metavar="T",
                    help="also score t < T and t >= T separately (s); 'none', or 'auto' (default: 425 s for the "
                         "MBDS record, whose t >= 425 s is a held-out test, none for other files)")
@@ -148,30 +335,112 @@ def parser() -> argparse.ArgumentParser:
     bn.add_argument("bench_args", nargs=argparse.REMAINDER, help="see `latobs bench --help`")
     bn.set_defaults(func=_cmd_bench)
     m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
-    m.add_argument("--out", default=str(DEFAULT_OUT))
+    m.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
     m.set_defaults(func=_cmd_demo)
+    x = sub.add_parser("export-ssp", help="write a scenario's co-simulation as an SSP 1.0 package (.ssp)")
+    x.add_argument("scenario")
+    x.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable; default: "
+                                                                      "those of `latobs validate SCENARIO`)")
+    x.add_argument("--out", default=None, type=_out_file, metavar="FILE",
+                   help="the .ssp file to write (default: build/SCENARIO.ssp)")
+    x.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
+    x.add_argument("--plant-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="plant parameter written into its parameter set, e.g. mu=0.3 (repeatable)")
+    x.add_argument("--plant-vehicle", default=None, metavar="V", type=_vehicle,
+                   help="vehicle of the plant FMU (default: the plant's default vehicle)")
+    x.set_defaults(func=_cmd_export_ssp)
     return p
 
 
 # The user-facing errors of each stage, as (module, class). A command imports only what it uses
 # (``latobs validate`` never loads the solver stack), so the classes are looked up among the
-# modules that are loaded: an exception can only be of a class whose module is.
+# modules that are loaded: an exception can only be of a class whose module is. A new stage or
+# subcommand adds its error class here. Besides these, every OSError (a file or folder that is
+# missing, unreadable or unwritable; a full disk) is the user's (exit 2), and a KeyError is when
+# one of USER_KEY_ERRORS raised it (the catalogue's lookups of a name, by contract); any other
+# exception is an internal error (exit 1).
 USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.packaging", "PackagingError"), ("latobs.synthesis.designs", "CertificateError"),
                ("latobs.synthesis.pi_hinf_000", "DesignError"), ("latobs.synthesis.interval_001", "DesignError"),
                ("latobs.synthesis.fixed_order_002", "DesignError"), ("latobs.synthesis.kalman_baseline", "DesignError"),
                ("latobs.synthesis.pi_switched_003", "DesignError"),
                ("latobs.synthesis.params", "VehicleParameterError"),
+               ("latobs.validation.scenarios", "UnknownScenarioError"),
+               ("latobs.validation.harness", "WiringError"), ("latobs.validation.harness", "CoSimulationError"),
                ("latobs.validation.replay", "ReplayError"))
+#: (module, function) whose KeyError means "unknown name" (the message names it and the known ones).
+USER_KEY_ERRORS = (("latobs.synthesis.designs", "get"), ("latobs.synthesis.designs", "parse_artefact"))
 
 
 def _user_error_types() -> tuple[type, ...]:
-    types = [KeyError]
+    types: list[type] = [OSError]
     for module, name in USER_ERRORS:
-        m = sys.modules.get(module)
-        if m is not None:
-            types.append(getattr(m, name))
+        cls = getattr(sys.modules.get(module), name, None)
+        if isinstance(cls, type):
+            types.append(cls)
     return tuple(types)
+
+
+def _is_user_error(exc: BaseException) -> bool:
+    if isinstance(exc, _user_error_types()):
+        return True
+    if isinstance(exc, KeyError):          # only where a lookup of a user's name raised it
+        tb = exc.__traceback__
+        while tb is not None and tb.tb_next is not None:
+            tb = tb.tb_next
+        code = tb.tb_frame if tb is not None else None
+        return code is not None and (code.f_globals.get("__name__"), code.f_code.co_name) in USER_KEY_ERRORS
+    return False
+
+
+def _one_line(text) -> str:
+    """The message on one line (a file's or an FMU's text may hold line breaks)."""
+    return " ".join(str(text).split())
+
+
+def _message(exc: BaseException) -> str:
+    if isinstance(exc, KeyError) and exc.args:         # str(KeyError) is the repr of its argument
+        return _one_line(exc.args[0])
+    if isinstance(exc, OSError) and exc.filename is not None:
+        where = f"{exc.filename}" + (f" -> {exc.filename2}" if exc.filename2 is not None else "")
+        return _one_line(f"{where}: {exc.strerror or exc}")
+    return _one_line(exc) or type(exc).__name__
+
+
+def _debug() -> bool:
+    return os.environ.get(DEBUG_ENV, "") not in ("", "0")
+
+
+def _run(command: str, fn, *args) -> int:
+    """Run a command; a failure becomes its exit code and one line on stderr (module comment at
+    the top). With LATOBS_DEBUG=1 the traceback is printed too (internal errors: re-raised)."""
+    prefix = f"latobs {command}:" if command else "latobs:"
+    try:
+        return fn(*args)
+    except KeyboardInterrupt:
+        if _debug():
+            raise
+        print(f"{prefix} interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:              # `latobs list | head`: the reader left; say nothing more
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+        return EXIT_INTERNAL
+    except Exception as exc:
+        if _is_user_error(exc):
+            if _debug():
+                import traceback
+
+                traceback.print_exc()
+            print(f"{prefix} error: {_message(exc)}", file=sys.stderr)
+            return EXIT_USER
+        if _debug():
+            raise
+        print(f"{prefix} internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(run with {DEBUG_ENV}=1 for the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -179,18 +448,18 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["bench"]:
         # argparse's REMAINDER does not pass an option-like first argument (`bench --fmu-dir D`)
         # to the subcommand: bench parses its own arguments
-        from .bench import main as bench_main
+        def bench(rest):
+            from .bench import main as bench_main
 
-        return bench_main(argv[1:])
-    args = parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except Exception as exc:
-        if not isinstance(exc, _user_error_types()):
-            raise
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"latobs {args.command}: error: {msg}", file=sys.stderr)
-        return 2
+            _check_bench_args(rest)
+            return bench_main(rest)
+
+        return _run("bench", bench, argv[1:])
+    command = argv[0] if argv and not argv[0].startswith("-") else ""
+    args = _run(command, parser().parse_args, argv)    # argparse's errors exit 2 (SystemExit)
+    if isinstance(args, int):                          # a type= check failed unexpectedly, or Ctrl-C
+        return args
+    return _run(args.command, args.func, args)
 
 
 if __name__ == "__main__":

@@ -284,6 +284,7 @@ def package_plant(name: str, vehicle: str | None, out_dir: Path) -> Path:
     kind = PLANTS.get(name)
     if kind is None:
         raise PackagingError(f"unknown plant {name!r}; known: {', '.join(PLANTS)}")
-    veh = vehicle or kind.default_vehicle
+    data = plant_data(vehicle or kind.default_vehicle)
+    veh = data["vehicle"]["name"]       # a set by name or a TOML file by path: named after its `name`
     class_name = name if veh == kind.default_vehicle else f"{name}_{veh}"
-    return build_fmu(kind, class_name, plant_data(veh), out_dir)
+    return build_fmu(kind, class_name, data, out_dir)

@@ -82,6 +82,71 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
     return built
 
 
+#: ``schema`` of :func:`build_summary`'s document (``latobs build --json``).
+BUILD_SUMMARY_SCHEMA = "latobs.build-summary/1"
+
+
+def build_summary(fmus: list[Path]) -> dict:
+    """The machine-readable summary of built FMUs (``latobs build --json``)::
+
+        {"schema": "latobs.build-summary/1", "latobs_version": str, "fmus": [{
+            "name": FMU name (NAME or NAME_V), "kind": "observer" | "plant",
+            "model": catalogue design or plant name, "paper": "000".."003" | null (plants),
+            "vehicle": vehicle set name, "path": str, "sha256": hex of the .fmu, "size": bytes,
+            # observers (null for plants), read from NAME.design.json beside the FMU:
+            "design_file": str, "design_sha256": hex, "gamma": the design's "gamma",
+            "model_error_gamma": its "model_error"."gamma" (paper 000's default designs) | null,
+            "certificate": {"certified": bool, "passed": int, "total": int}}, ...]}
+
+    The design file beside an observer FMU must be the one inside it (same bytes), else
+    PipelineError: a summary never describes a design the FMU does not carry."""
+    import hashlib
+    import json
+    import zipfile
+
+    from . import __version__
+    from .packaging import PLANTS
+
+    def sha(raw: bytes) -> str:
+        return hashlib.sha256(raw).hexdigest()
+
+    entries = []
+    for fmu in map(Path, fmus):
+        raw = fmu.read_bytes()
+        with zipfile.ZipFile(fmu) as z:
+            members = {n: z.read(n) for n in z.namelist()
+                       if n.startswith("resources/") and n.endswith((".design.json", ".plant.json"))
+                       and n.count("/") == 1}
+        entry = {"name": fmu.stem, "path": str(fmu), "sha256": sha(raw), "size": len(raw)}
+        inner = members.get(f"resources/{fmu.stem}.design.json")
+        if inner is not None:
+            design_path = fmu.with_name(f"{fmu.stem}.design.json")
+            if not design_path.is_file() or design_path.read_bytes() != inner:
+                raise PipelineError(f"{design_path} is missing or is not the design file inside {fmu}")
+            d = json.loads(inner)
+            me = d.get("model_error")
+            entry.update(kind="observer", model=d.get("design"), paper=d.get("paper"),
+                         vehicle=(d.get("vehicle") or {}).get("name"), design_file=str(design_path),
+                         design_sha256=sha(inner), gamma=d.get("gamma"),
+                         model_error_gamma=me.get("gamma") if isinstance(me, dict) else None,
+                         certificate={"certified": bool(d.get("certified")),
+                                      "passed": sum(bool(c.get("passed")) for c in d.get("checks", [])),
+                                      "total": len(d.get("checks", []))})
+        else:
+            plant = members.get(f"resources/{fmu.stem}.plant.json")
+            if plant is None:
+                raise PipelineError(f"{fmu} carries neither a design nor a plant data file: not a latobs FMU")
+            veh = json.loads(plant).get("vehicle") or {}
+            model = next((k for k in sorted(PLANTS, key=len, reverse=True)
+                          if fmu.stem == k or fmu.stem.startswith(k + "_")), None)
+            entry.update(kind="plant", model=model, paper=None, vehicle=veh.get("name"), design_file=None,
+                         design_sha256=None, gamma=None, model_error_gamma=None, certificate=None)
+        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "design_file",
+                 "design_sha256", "gamma", "model_error_gamma", "certificate")
+        entries.append({k: entry[k] for k in order})
+    return {"schema": BUILD_SUMMARY_SCHEMA, "latobs_version": __version__, "fmus": entries}
+
+
 def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
     """Paths of the named FMUs in ``fmu_dir``, building the missing ones."""
     missing = [n for n in names if not (fmu_dir / f"{n}.fmu").is_file()]
@@ -112,7 +177,13 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     fmus = ensure_fmus(observers, fmu_dir)
     kind = packaging.PLANTS[sc.plant]
     plant_vehicle = plant_vehicle or kind.default_vehicle
-    plant_name = sc.plant if plant_vehicle == kind.default_vehicle else f"{sc.plant}_{plant_vehicle}"
+    if str(plant_vehicle).endswith(".toml"):   # a TOML file by path: its FMU is named after its `name`
+        from .synthesis.params import load_vehicle
+
+        plant_vehicle_name = load_vehicle(plant_vehicle).name
+    else:
+        plant_vehicle_name = plant_vehicle
+    plant_name = sc.plant if plant_vehicle_name == kind.default_vehicle else f"{sc.plant}_{plant_vehicle_name}"
     plant = fmu_dir / f"{plant_name}.fmu"
     if not plant.is_file():
         print(f"building missing FMU: {plant_name}")
@@ -152,7 +223,7 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
     if rp.default_split(path) is not None and veh.name != rp.MBDS_VEHICLE and not quiet:
         print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
               f"{veh.name!r} (use --vehicle {rp.MBDS_VEHICLE} for the dataset's own parameters)")
-    name = designs.artefact_name(observer, vehicle)
+    name = designs.artefact_name(observer, veh.name)   # a TOML path: named after the set's `name`
     fmu_dir = Path(fmu_dir)
     fmu = fmu_dir / f"{name}.fmu"
     if not fmu.is_file():

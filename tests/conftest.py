@@ -1,31 +1,94 @@
-"""Shared fixtures: designs are solved once per session, FMUs built once per session."""
+"""Shared fixtures: designs are solved once per session, FMUs built once per session.
+
+``built_fmus`` is THE session build: every FMU that ``latobs build`` makes (the observers of
+``latobs.packaging.OBSERVERS``, designed by ``designs.run`` as ``latobs.pipeline.build`` does, and
+the plants of ``latobs.packaging.PLANTS``), each designed and packaged at most once per session,
+on first use, into one temporary folder. Tests that need one of these FMUs or its design dict
+take them from there instead of designing again (the scheduled paper-002 estimator alone takes
+~40 s to design); ``fmu_dir`` holds paper 000's four observers and CarPlant from it.
+"""
 from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
 
 import pytest
 
+from latobs import packaging
 from latobs.synthesis import designs
 
+#: every FMU ``latobs build`` makes (observers, then plants): tests parametrised over it check a
+#: new FMU automatically
+FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
+
+
+class SessionBuild:
+    """Every FMU of ``latobs build`` (default vehicles), designed and packaged on first use.
+
+    ``design(name)``  the design dict of an observer, as ``designs.run(name)`` returns it (shared
+                      by the whole session: copy it before changing it)
+    ``path(name)``    the FMU, built into ``out`` by the packaging step (observers from their
+                      design file ``out/NAME.design.json``, re-certified by ``package_design``)
+    ``all()``         {name: path} of every FMU in :data:`FMU_NAMES`
+    """
+
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self._designs: dict[str, dict] = {}
+        self._paths: dict[str, Path] = {}
+
+    def design(self, name: str) -> dict:
+        if name not in packaging.OBSERVERS:
+            raise KeyError(f"{name!r} is not an observer of latobs.packaging.OBSERVERS")
+        if name not in self._designs:
+            self._designs[name] = designs.run(name)
+        return self._designs[name]
+
+    def path(self, name: str) -> Path:
+        if name not in self._paths:
+            from latobs.synthesis import design_file
+
+            if name in packaging.OBSERVERS:
+                path = packaging.package_design(design_file.write(self.design(name), self.out), self.out)
+            elif name in packaging.PLANTS:
+                path = packaging.package_plant(name, None, self.out)
+            else:
+                raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
+            assert path == self.out / f"{name}.fmu", path
+            self._paths[name] = path
+        return self._paths[name]
+
+    def all(self) -> dict[str, Path]:
+        return {name: self.path(name) for name in FMU_NAMES}
+
 
 @pytest.fixture(scope="session")
-def design_speed() -> dict:
-    return designs.run("SideslipBankObserver")
+def built_fmus(tmp_path_factory) -> SessionBuild:
+    return SessionBuild(tmp_path_factory.mktemp("fmus"))
 
 
 @pytest.fixture(scope="session")
-def design_tire() -> dict:
-    return designs.run("SideslipBankObserverTire")
+def design_speed(built_fmus) -> dict:
+    return built_fmus.design("SideslipBankObserver")
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(tmp_path_factory, design_speed, design_tire):
-    """The paper-000 observer FMUs (the two defaults and the two paper-faithful designs, the
-    default observers of `latobs validate`) and the CarPlant FMU, built by the packaging step."""
-    from latobs import packaging
-    from latobs.synthesis import design_file
+def design_tire(built_fmus) -> dict:
+    return built_fmus.design("SideslipBankObserverTire")
 
-    out = tmp_path_factory.mktemp("fmus")
-    for data in (design_speed, design_tire, designs.run("SideslipBankObserverPaper"),
-                 designs.run("SideslipBankObserverTirePaper")):
-        packaging.package_design(design_file.write(data, out), out)
-    packaging.package_plant("CarPlant", None, out)
+
+@pytest.fixture(scope="session")
+def fmu_dir(built_fmus, tmp_path_factory):
+    """A folder holding the paper-000 observer FMUs (the two defaults and the two paper-faithful
+    designs, the default observers of `latobs validate`) and the CarPlant FMU of the session build
+    (hard links, or copies), and nothing else: what a test builds into it stays out of the build."""
+    out = tmp_path_factory.mktemp("fmus_000")
+    for name in ("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
+                 "SideslipBankObserverTirePaper", "CarPlant"):
+        src = built_fmus.path(name)
+        try:
+            os.link(src, out / src.name)
+        except OSError:
+            shutil.copy2(src, out / src.name)
     return out

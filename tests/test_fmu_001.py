@@ -6,9 +6,7 @@ import math
 import pytest
 from fmpy import read_model_description
 
-from latobs import packaging
 from latobs.fmu_src.interval_observer import IntervalObserver
-from latobs.synthesis import design_file, designs
 from latobs.validation.harness import FmuInstance
 
 pytestmark = pytest.mark.slow
@@ -16,10 +14,9 @@ H = 0.005
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("fmu_001")
-    data = designs.run("LateralIntervalObserver")
-    return packaging.package_design(design_file.write(data, out), out), data
+def built(built_fmus):
+    name = "LateralIntervalObserver"               # the session build (conftest.py)
+    return built_fmus.path(name), built_fmus.design(name)
 
 
 def inputs(k: int) -> dict:

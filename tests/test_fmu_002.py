@@ -25,10 +25,9 @@ H = 0.01
 
 
 @pytest.fixture(scope="module")
-def single(tmp_path_factory):
-    out = tmp_path_factory.mktemp("fmu_002")
-    data = designs.run("SideslipFixedOrderEstimator")
-    return packaging.package_design(design_file.write(data, out), out), data
+def single(built_fmus):
+    name = "SideslipFixedOrderEstimator"           # the session build (conftest.py)
+    return built_fmus.path(name), built_fmus.design(name)
 
 
 @pytest.fixture(scope="module")
@@ -204,13 +203,12 @@ def test_mbds_box_centre_is_the_tuning_half_optimum():
     assert np.mean([veh.ranges["Cr"].min, veh.ranges["Cr"].max]) == pytest.approx(res["Cr"])
 
 
-def test_scheduled_estimator_beats_the_kalman_baseline_on_held_out_data(tmp_path):
+def test_scheduled_estimator_beats_the_kalman_baseline_on_held_out_data(built_fmus):
     """Issue 7's goal on the real record: beta RMS on t >= 425 s (never used for tuning) below the
     Kalman baseline's (same record, its noise tuned on t < 425 s), through the built FMU."""
     from latobs.synthesis import kalman_baseline as kb
     from latobs.validation import replay as rp
-    data = designs.run("SideslipFixedOrderEstimatorScheduled")
-    fmu = packaging.package_design(design_file.write(data, tmp_path), tmp_path)
+    fmu = built_fmus.path("SideslipFixedOrderEstimatorScheduled")   # the session build (conftest.py)
     cols = rp.load_csv(rp.MBDS_CSV)
     run = rp.drive(fmu, cols)
     m = rp.score(run, split=425.0)

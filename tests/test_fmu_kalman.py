@@ -20,7 +20,7 @@ from fmpy import read_model_description
 
 from latobs import packaging
 from latobs.fmu_src.kalman_observer import KalmanObserver
-from latobs.synthesis import certificate, design_file, designs
+from latobs.synthesis import certificate, design_file
 from latobs.synthesis import kalman_baseline as kb
 from latobs.synthesis.params import VehicleParameterError, load_vehicle
 from latobs.validation import replay as rp
@@ -31,8 +31,8 @@ OUTPUTS = ("beta_hat", "vy_hat", "yaw_rate_hat")
 
 
 @pytest.fixture(scope="module")
-def design():
-    return designs.run("SideslipKalmanFilter")
+def design(built_fmus):
+    return built_fmus.design("SideslipKalmanFilter")     # the session build (conftest.py)
 
 
 @pytest.fixture(scope="module")
@@ -42,9 +42,8 @@ def mbds():
 
 
 @pytest.fixture(scope="module")
-def built(design, tmp_path_factory):
-    out = tmp_path_factory.mktemp("fmu_kalman")
-    return packaging.package_design(design_file.write(design, out), out)
+def built(built_fmus):
+    return built_fmus.path("SideslipKalmanFilter")
 
 
 @pytest.fixture(scope="module")

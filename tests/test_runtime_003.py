@@ -9,7 +9,6 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from latobs.fmu_src.motorcycle_observer import MotorcycleFaultObserver, step_map
-from latobs.synthesis import designs
 from latobs.synthesis import pi_switched_003 as ps
 from latobs.synthesis.params import load_vehicle
 from latobs.validation.scenarios import SCENARIOS
@@ -19,8 +18,8 @@ VEHICLE = load_vehicle("sharp_motorcycle")
 
 
 @pytest.fixture(scope="module")
-def d003() -> dict:
-    return designs.run("MotorcycleFaultObserver")
+def d003(built_fmus) -> dict:
+    return built_fmus.design("MotorcycleFaultObserver")   # the session build's design (conftest.py)
 
 
 def _observer_matrices(mode: dict):

@@ -500,7 +500,12 @@ class CoSimulation:
             for p in [self.plant_path, *self.observer_paths.values()]:
                 key = p.resolve()
                 if key not in unzipped:
-                    unzipped[key] = extract(str(p), unzipdir=os.path.join(tmp, f"fmu{len(unzipped)}"))
+                    try:
+                        unzipped[key] = extract(str(p), unzipdir=os.path.join(tmp, f"fmu{len(unzipped)}"))
+                    except OSError:
+                        raise
+                    except Exception as exc:    # not a zip, truncated, corrupted: the file, not a bug
+                        raise WiringError(f"FMU file {p}: not a readable FMU (zip archive): {exc}") from exc
             plant = FmuInstance(PLANT_LABEL, self.plant_path, unzipped[self.plant_path.resolve()])
             fmus.append(plant)
             observers = {lab: FmuInstance(lab, p, unzipped[p.resolve()]) for lab, p in self.observer_paths.items()}
@@ -603,7 +608,7 @@ class CoSimulation:
                 return fn(*args)
             except Exception as exc:
                 raise CoSimulationError(
-                    f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {exc}. Last log messages: "
+                    f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {str(exc).rstrip('.')}. Last log messages: "
                     f"{f.log_tail()}") from exc
 
         # ---- initialisation: plant first (its outputs at t0 feed the observers)

@@ -236,7 +236,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
             try:
                 return fn(*args)
             except Exception as exc:
-                raise ReplayError(f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {exc}. "
+                raise ReplayError(f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {str(exc).rstrip('.')}. "
                                   f"Last log messages: {f.log_tail()}") from None
 
         def record(k: int, values: Mapping[str, float]):
@@ -255,7 +255,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
                 what = "getting outputs"
                 values = get_outputs()
             except Exception as exc:
-                raise ReplayError(f"{f.describe()} failed in {what} at t = {tl[k]:.6g} s: {exc}. "
+                raise ReplayError(f"{f.describe()} failed in {what} at t = {tl[k]:.6g} s: {str(exc).rstrip('.')}. "
                                   f"Last log messages: {f.log_tail()}") from None
             record(k + 1, values)
         logs = list(f.logs)

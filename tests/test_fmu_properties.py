@@ -1,0 +1,284 @@
+"""Property-based tests (hypothesis) of every FMU ``latobs build`` makes (issue 10, item 6).
+
+Parametrised over ``latobs.packaging.OBSERVERS`` and ``PLANTS``: a new FMU gets them automatically.
+Hypothesis draws, per FMU, FMI call programs: random input values (realistic ones, and extreme but
+finite ones: +-1e6, +-1e-300, 0, the smallest subnormal, jumps between them from one step to the
+next; now and then a non-finite one), random communication steps (1e-4 ... 0.1 s, now and then a
+zero, negative or non-finite one), parameters inside and outside their declared range, and calls
+out of order (doStep or get before initialisation, exitInitializationMode without enter, double
+initialisation, set/step/get after terminate, fmi2Reset anywhere). Asserted:
+
+* the host never crashes (the program ends and the host process is alive);
+* no call to get returns a non-finite output, or an Integer output outside its declared
+  [min, max], unless the doStep just before it returned fmi2Discard or worse;
+* after fmi2Reset, anywhere in a program, a run is bit-identical (every status and every output)
+  to the same run on a freshly instantiated FMU;
+* (not random) with constant realistic inputs, a 0.1 s communication step keeps the outputs within
+  10 times those at 10 ms: LateralIntervalObserver fails it (a strict xfail, see
+  ``UNBOUNDED_AT_LONG_STEPS``).
+
+Each FMU runs in a worker process (``conformance_runs.py serve``, the FMU extracted once, one
+fresh instance per program): a crash kills the worker, never pytest, and is reported with the
+program that caused it (the worker is restarted for the next example). Hypothesis runs in the
+test process (derandomized: the same examples on every run; no example database), so shrinking
+works as usual across the worker boundary.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+from fmpy import read_model_description
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from latobs import packaging
+
+pytestmark = pytest.mark.slow
+RUNNER = Path(__file__).with_name("conformance_runs.py")
+FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
+#: examples per FMU and property; LATOBS_PROPERTY_EXAMPLES=500 for a deeper (local) search
+EXAMPLES = int(os.environ.get("LATOBS_PROPERTY_EXAMPLES", "25"))
+SETTINGS = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+# ---------------------------------------------------------------------------------------------
+# the worker (one process per FMU)
+# ---------------------------------------------------------------------------------------------
+class HostCrash(RuntimeError):
+    """The FMU took its host process down."""
+
+
+class Worker:
+    def __init__(self, path: Path):
+        self.path = path
+        self.proc = None
+        md = read_model_description(str(path))
+        self.inputs = [v.name for v in md.modelVariables if v.causality == "input"]
+        self.params = {v.name: (v.min, v.max) for v in md.modelVariables
+                       if v.causality == "parameter" and v.type == "Real"}
+        self.int_range = {v.name: (v.min, v.max) for v in md.modelVariables
+                          if v.causality == "output" and v.type == "Integer"}
+
+    def _start(self):
+        self.stderr = tempfile.TemporaryFile(mode="w+")
+        self.proc = subprocess.Popen([sys.executable, str(RUNNER), "serve", str(self.path)], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=self.stderr, text=True)
+
+    def run(self, program: list) -> dict:
+        if self.proc is None or self.proc.poll() is not None:
+            self._start()
+        try:
+            self.proc.stdin.write(json.dumps(program) + "\n")
+            self.proc.stdin.flush()
+            line = self.proc.stdout.readline()
+        except BrokenPipeError:
+            line = ""
+        if not line:
+            rc = self.proc.wait(timeout=60)
+            self.stderr.seek(0)
+            tail = self.stderr.read()[-3000:]
+            self.proc = None
+            raise HostCrash(f"{self.path.name}: the host died (return code {rc}) running {program}\n{tail}")
+        return json.loads(line)
+
+    def close(self):
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=60)
+        self.proc = None
+
+
+@pytest.fixture(scope="module", params=FMU_NAMES)
+def worker(request, built_fmus):
+    """The worker of one FMU of the session build, shared by the properties of that FMU."""
+    w = Worker(built_fmus.path(request.param))
+    yield w
+    w.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# strategies
+# ---------------------------------------------------------------------------------------------
+EXTREMES = [0.0, -0.0, 1e6, -1e6, 1e-300, -1e-300, 5e-324, 1e5, -1e5]
+NON_FINITE = [math.nan, math.inf, -math.inf]
+#: realistic ranges (SI) by input name; other names: [-1, 1]
+REALISTIC = {"vx": (0.0, 70.0), "delta": (-0.5, 0.5), "steer_angle": (-0.5, 0.5), "bank_angle": (-0.3, 0.3),
+             "roll_angle": (-0.8, 0.8), "yaw_rate": (-2.0, 2.0), "roll_rate": (-3.0, 3.0), "ay": (-15.0, 15.0),
+             "rider_torque": (-100.0, 100.0), "stiffness_scale_f": (0.5, 2.0), "stiffness_scale_r": (0.5, 2.0)}
+
+
+def finite_value(name: str):
+    lo, hi = REALISTIC.get(name, (-1.0, 1.0))
+    return st.one_of(st.floats(lo, hi), st.floats(lo, hi), st.sampled_from(EXTREMES),
+                     st.floats(-1e6, 1e6, allow_nan=False))
+
+
+def any_value(name: str):
+    """A finite value, or one time in 20 a non-finite one (it sticks until that input is set again)."""
+    return st.integers(0, 19).flatmap(lambda i: st.sampled_from(NON_FINITE) if i == 0 else finite_value(name))
+
+
+STEP_SIZES = st.one_of(st.sampled_from([1e-4, 0.005, 0.01, 0.1]), st.floats(1e-4, 0.1))
+BAD_STEP_SIZES = st.sampled_from([0.0, -0.005, math.nan, math.inf])
+
+
+def input_sets(names: list[str], finite: bool = False):
+    value = finite_value if finite else any_value
+    return st.lists(st.sampled_from(names), min_size=1, max_size=len(names), unique=True).flatmap(
+        lambda chosen: st.fixed_dictionaries({n: value(n) for n in chosen}))
+
+
+def full_inputs(names: list[str]):
+    return st.fixed_dictionaries({n: finite_value(n) for n in names})
+
+
+def parameter_sets(params: dict):
+    def one(name):
+        lo, hi = params[name]
+        lo = float(lo) if lo is not None else -1e3
+        hi = float(hi) if hi is not None else 1e3
+        return st.fixed_dictionaries({name: st.one_of(st.floats(lo, hi), st.sampled_from([lo - 1.0, hi + 1.0]))})
+    return st.sampled_from(sorted(params)).flatmap(one)
+
+
+@st.composite
+def calls(draw, w: Worker, n_min: int, n_max: int):
+    """A random call sequence (without "new"): initialisation done right or not, in any order."""
+    out = []
+    t = 0.0
+    if draw(st.integers(0, 3)) > 0:                       # usually a proper start first
+        out += [["setup", 0.0], ["enter"], ["set", draw(full_inputs(w.inputs))], ["exit"]]
+    kinds = ["step", "step", "step", "set", "set", "get", "setup", "enter", "exit", "terminate", "reset",
+             "badstep"] + (["param"] if w.params else [])
+    for _ in range(draw(st.integers(n_min, n_max))):
+        k = draw(st.sampled_from(kinds))
+        if k in ("step", "badstep"):
+            h = draw(STEP_SIZES if k == "step" else BAD_STEP_SIZES)
+            out += [["set", draw(input_sets(w.inputs))], ["step", t, h], ["get"]]
+            t += h if math.isfinite(h) and h > 0 else 0.0
+        elif k == "set":
+            out.append(["set", draw(input_sets(w.inputs))])
+        elif k == "param":
+            out.append(["set", draw(parameter_sets(w.params))])
+        elif k == "setup":
+            out.append(["setup", t])
+        else:
+            out.append([k])
+    return out
+
+
+@st.composite
+def clean_runs(draw, w: Worker):
+    """A proper run: initialise with every input set, then steps (finite inputs, sizes 1e-4..0.1 s)."""
+    out = [["setup", 0.0], ["enter"], ["set", draw(full_inputs(w.inputs))], ["exit"], ["get"]]
+    t = 0.0
+    for _ in range(draw(st.integers(1, 12))):
+        h = draw(STEP_SIZES)
+        out += [["set", draw(input_sets(w.inputs, finite=True))], ["step", t, h], ["get"]]
+        t += h
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# properties
+# ---------------------------------------------------------------------------------------------
+def check_outputs(w: Worker, program: list, result: dict):
+    """Every get: status OK/warning; finite Reals and in-range Integers unless the step before it
+    was refused (fmi2Discard or worse)."""
+    last_step = None
+    for call in result["calls"]:
+        if call[0] == "step":
+            last_step = call[1]
+        elif call[0] == "get":
+            status, values = call[1], call[2]
+            assert status <= 1, f"{w.path.name}: get returned status {status} in {program}"
+            bad = {k: v for k, v in values.items() if isinstance(v, float) and not math.isfinite(v)}
+            for k, (lo, hi) in w.int_range.items():
+                if (lo is not None and values[k] < int(lo)) or (hi is not None and values[k] > int(hi)):
+                    bad[k] = values[k]
+            if bad:
+                assert last_step is not None and last_step >= 2, (
+                    f"{w.path.name}: outputs {bad} returned after a doStep with status {last_step} "
+                    f"(OK or warning); program {program}; FMU log {result['logs']}")
+
+
+@SETTINGS
+@given(data=st.data())
+def test_any_call_sequence_leaves_the_host_alive_and_outputs_finite(worker, data):
+    w = worker
+    program = [["new"], *data.draw(calls(w, 1, 40), label="calls")]
+    result = w.run(program)
+    assert len(result["calls"]) == len(program)
+    check_outputs(w, program, result)
+
+
+def _same(a, b) -> bool:
+    """Equal calls: same statuses, outputs bit-identical (NaN equal to NaN of the same sign)."""
+    return json.dumps(a) == json.dumps(b)
+
+
+@SETTINGS
+@given(data=st.data())
+def test_reset_anywhere_then_a_run_equals_a_fresh_instance(worker, data):
+    w = worker
+    before = data.draw(calls(w, 0, 10), label="before reset")
+    run = data.draw(clean_runs(w), label="run")
+    after_reset = w.run([["new"], *before, ["reset"], *run])
+    fresh = w.run([["new"], *run])
+    got, want = after_reset["calls"][-len(run):], fresh["calls"][-len(run):]
+    assert after_reset["calls"][len(before) + 1][1] == 0, f"fmi2Reset returned {after_reset['calls'][len(before) + 1]}"
+    for i, (a, b) in enumerate(zip(got, want)):
+        assert _same(a, b), (f"{w.path.stem}: call {i} of the run after reset {run[i]} gave {a}, a fresh instance {b} "
+                             f"(before the reset: {before}); logs {after_reset['logs']}")
+    check_outputs(w, run, fresh)
+
+
+# ---------------------------------------------------------------------------------------------
+# long communication steps
+# ---------------------------------------------------------------------------------------------
+#: constant, realistic inputs (SI; any other input 0): a steady turn at 15 m/s
+STEADY = {"delta": 0.02, "vx": 15.0, "yaw_rate": 0.1, "ay": 1.0, "roll_angle": 0.01, "roll_rate": 0.0,
+          "bank_angle": 0.0, "steer_angle": 0.01, "rider_torque": 5.0, "stiffness_scale_f": 1.0,
+          "stiffness_scale_r": 1.0}
+#: FMUs known to fail the test below (issue 10, item 6): a strict xfail flips when they are fixed
+UNBOUNDED_AT_LONG_STEPS = {
+    "LateralIntervalObserver": "its bounds diverge exponentially at communication steps >= ~40 ms (vy width "
+                               "1e34 m/s after 20 s at 50 ms, 1e101 at 100 ms), with status OK, consistent = 1 "
+                               "and no warning; the runtime only restarts them when they overflow",
+}
+
+
+def _steady_run(w: Worker, h: float, duration: float) -> dict:
+    u = {n: STEADY.get(n, 0.0) for n in w.inputs}
+    program = [["new"], ["setup", 0.0], ["enter"], ["set", u], ["exit"]]
+    for k in range(int(round(duration / h))):
+        program += [["step", k * h, h], ["get"]]
+    return w.run(program)
+
+
+@pytest.mark.parametrize("worker", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=UNBOUNDED_AT_LONG_STEPS[n]))
+    if n in UNBOUNDED_AT_LONG_STEPS else n for n in FMU_NAMES], indirect=True)
+def test_outputs_stay_bounded_at_long_communication_steps(worker):
+    """Constant realistic inputs for 10 s: at a 0.1 s step (the top of the range above) every step is
+    either accepted with outputs within 10 times (plus 1) of the largest seen at 10 ms, or refused."""
+    w = worker
+    ref = _steady_run(w, 0.01, 10.0)
+    peak = max(abs(v) for c in ref["calls"] if c[0] == "get" for v in c[2].values())
+    long = _steady_run(w, 0.1, 10.0)
+    last = None
+    for c in long["calls"]:
+        if c[0] == "step":
+            last = c[1]
+        elif c[0] == "get" and last == 0:
+            worst = max(abs(v) for v in c[2].values())
+            assert worst <= 10.0 * peak + 1.0, (f"{w.path.stem}: |output| {worst:.3g} at a 0.1 s step, "
+                                                f"{peak:.3g} at 10 ms; logs {long['logs'][-3:]}")
