@@ -316,9 +316,11 @@ def test_an_fmu_level_user_error_is_one_line_and_exit_2(argv, command, culprits,
 def test_the_issue_command_in_a_real_process(fmu_dir, tmp_path):
     """`latobs validate bank-braking --plant-param mu=-1` (the issue's report): exit 2, one line
     on stderr naming the FMU, the parameter and its range, nothing on stdout, no traceback."""
-    proc = subprocess.run([sys.executable, "-m", "latobs", "validate", "bank-braking", "--plant-param", "mu=-1",
+    # -P: the installed latobs, not the source folder of the working directory (a non-editable
+    # install maps synthesis/ to latobs.synthesis; the source tree's latobs/ has no such package)
+    proc = subprocess.run([sys.executable, "-P", "-m", "latobs", "validate", "bank-braking", "--plant-param", "mu=-1",
                            "--fmu-dir", str(fmu_dir), "--out", str(tmp_path), "--no-plots"],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
     _assert_one_line(proc.returncode, proc.stderr, "validate", ["CarPlant", "'mu'", "[0.01, 2.0]"])
     assert proc.stdout == ""
 
@@ -350,10 +352,14 @@ def test_ctrl_c_is_exit_130_with_one_line(capsys, monkeypatch):
     rc, out, err = _cli(["list"], capsys)
     _assert_one_line(rc, err, "list", [], code=130, kind="interrupted")
     # and a real SIGINT to a running command
-    code = ("import sys, time\nimport latobs.cli as cli\n"
+    # SIGINT's default handler first: a shell that starts a job in the background (CI runners may)
+    # leaves SIGINT ignored, and Python then never raises KeyboardInterrupt
+    code = ("import signal, sys, time\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+            "import latobs.cli as cli\n"
             "def slow(args):\n    print('running', flush=True)\n    time.sleep(60)\n"
             "cli._cmd_list = slow\nsys.exit(cli.main(['list']))\n")
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-P", "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
     assert proc.stdout.readline() == "running\n"
     time.sleep(0.1)
     proc.send_signal(signal.SIGINT)
