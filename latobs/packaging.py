@@ -32,6 +32,7 @@ import zipfile
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
+from typing import Callable, Mapping
 
 from . import __version__
 from .atomic import atomic_path
@@ -170,21 +171,53 @@ def _guid(digest: str) -> str:
     return f"{{{h[:8]}-{h[8:12]}-5{h[13:16]}-{h[16:20]}-{h[20:32]}}}"
 
 
-def _write_zip(path: Path, files: dict[str, bytes]) -> None:
-    """A reproducible zip: entries sorted, fixed date and permissions, fixed compression."""
+def write_zip(path: Path, files: Mapping[str, bytes], stored: tuple[str, ...] = ()) -> None:
+    """A reproducible zip: entries sorted, fixed date and permissions, fixed compression; names
+    ending in one of ``stored`` are not recompressed (e.g. FMUs inside an SSP package)."""
     with zipfile.ZipFile(path, "w") as z:
         for name in sorted(files):
             info = zipfile.ZipInfo(name, date_time=ZIP_DATE)
-            info.compress_type = zipfile.ZIP_DEFLATED
+            info.compress_type = zipfile.ZIP_STORED if name.endswith(stored) else zipfile.ZIP_DEFLATED
             info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
             info.create_system = 3  # unix, whatever the build machine
             z.writestr(info, files[name], compresslevel=6)
 
 
-def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path:
-    """Build ``out_dir/<class_name>.fmu`` from the runtime and ``data``; returns its path."""
+def seal_fmu(files: dict[str, bytes], model_identifier: str, model_description: Callable[[str], bytes],
+             guard_variables: list[tuple[int, str, bool]], path: Path) -> list[str]:
+    """Finish an FMU archive and write it to ``path``; returns fmpy validate's problems.
+
+    ``files`` holds everything but the model description (with pythonfmu's library moved to
+    ``binaries/linux64/<id>_pythonfmu.so`` when the native guard is to be built);
+    ``model_description(guid)`` gives its bytes. The guid is derived from the content (the
+    description without guid, the guard's source, every file), the guard is compiled for it with
+    ``guard_variables`` [(value reference, type, settable)], and the zip is reproducible."""
     from fmpy.validation import validate_fmu
 
+    from . import native_guard
+
+    guarded = f"binaries/linux64/{model_identifier}_pythonfmu.so" in files
+    g = hashlib.sha256(model_description(""))
+    if guarded:  # the guard's binary holds the guid; its source stands for it in the hash
+        g.update(native_guard.GUARD_SOURCE.read_bytes())
+    for name in sorted(files):
+        g.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
+    guid = _guid(g.hexdigest())
+    files["modelDescription.xml"] = model_description(guid)
+    if guarded:
+        guard = path.with_suffix(".guard.so")
+        try:
+            native_guard.build_guard(model_identifier, guid, f"{model_identifier}_pythonfmu.so", guard_variables,
+                                     guard)
+            files[f"binaries/linux64/{model_identifier}.so"] = guard.read_bytes()
+        finally:
+            guard.unlink(missing_ok=True)
+    write_zip(path, files)
+    return validate_fmu(str(path))
+
+
+def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path:
+    """Build ``out_dir/<class_name>.fmu`` from the runtime and ``data``; returns its path."""
     if not class_name.isidentifier():
         raise PackagingError(f"FMU name {class_name!r} is not a valid identifier")
     out_dir = Path(out_dir)
@@ -234,30 +267,13 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
     tool = f"latobs {__version__} (pythonfmu {pythonfmu.__version__} binaries)"
     md = lambda guid: _framework.model_description(  # noqa: E731
         spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT)
-    g = hashlib.sha256(md(""))
-    if guarded:  # the guard's binary holds the guid; its source stands for it in the hash
-        g.update(native_guard.GUARD_SOURCE.read_bytes())
-    for name in sorted(files):
-        g.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
-    guid = _guid(g.hexdigest())
-    files["modelDescription.xml"] = md(guid)
+    guard_variables = [(vr, typ, caus in ("input", "parameter"))
+                       for vr, typ, caus, _ in _framework.variable_table(spec)]
 
     out_dir.mkdir(parents=True, exist_ok=True)
     final = out_dir / f"{class_name}.fmu"
     with atomic_path(final, suffix=".fmu") as tmp_fmu:
-        if guarded:
-            from .fmu_src.framework import variable_table
-
-            guard = tmp_fmu.with_suffix(".guard.so")
-            try:
-                native_guard.build_guard(class_name, guid, f"{class_name}_pythonfmu.so",
-                                         [(vr, typ, caus in ("input", "parameter"))
-                                          for vr, typ, caus, _ in variable_table(spec)], guard)
-                files[f"binaries/linux64/{class_name}.so"] = guard.read_bytes()
-            finally:
-                guard.unlink(missing_ok=True)
-        _write_zip(tmp_fmu, files)
-        problems = validate_fmu(str(tmp_fmu))
+        problems = seal_fmu(files, class_name, md, guard_variables, tmp_fmu)
         if problems:
             raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
     return final

@@ -74,7 +74,6 @@ NS = {
 }
 OSP_ANNOTATION = "com.opensimulationplatform"
 LATOBS_ANNOTATION = "org.latobs.export"
-ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 TIMING = ("Jacobi fixed step: every FMU steps from t_k with its inputs at t_k (plant: the scenario "
           "signals u(t_k); observers: the plant outputs at t_k), then outputs are copied to inputs. "
           "The signal source outputs after its step from t_k the sample of t_(k+1).")
@@ -169,17 +168,10 @@ class Connection:
 
 def scenario_signals(scenario, t: np.ndarray, vehicle) -> dict[str, np.ndarray]:
     """The scenario's signals and parameter signals on the grid t, as the harness samples them."""
-    sig = {k: np.asarray(v, dtype=float) for k, v in scenario.signals(t, vehicle).items()}
-    extra = {k: np.asarray(v, dtype=float) for k, v in scenario.parameter_signals(t, vehicle).items()}
-    clash = sorted(set(sig) & set(extra))
-    if clash:
-        raise SspError(f"scenario {scenario.name!r}: signal(s) {', '.join(clash)} given by both signals() and "
-                       "parameter_signals()")
-    sig.update(extra)
-    for k, v in sig.items():
-        if v.shape != t.shape or not np.all(np.isfinite(v)):
-            raise SspError(f"scenario {scenario.name!r}: signal {k!r} is not a finite array on the time grid")
-    return sig
+    try:
+        return scenario.sampled(t, vehicle)
+    except ValueError as exc:
+        raise SspError(str(exc)) from None
 
 
 def wiring(scenario, signal_names, plant: FmuInterface, observers: Mapping[str, FmuInterface]) -> list[Connection]:
@@ -406,22 +398,6 @@ def _num(x: float) -> str:
     return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
-def _guid(digest: str) -> str:
-    h = digest[:32]
-    return f"{{{h[:8]}-{h[8:12]}-5{h[13:16]}-{h[16:20]}-{h[20:32]}}}"
-
-
-def _write_zip(path: Path, files: Mapping[str, bytes], stored: tuple[str, ...] = ()) -> None:
-    """A reproducible zip: sorted entries, fixed dates; ``stored`` suffixes are not recompressed."""
-    with zipfile.ZipFile(path, "w") as z:
-        for name in sorted(files):
-            info = zipfile.ZipInfo(name, date_time=ZIP_DATE)
-            info.compress_type = zipfile.ZIP_STORED if name.endswith(stored) else zipfile.ZIP_DEFLATED
-            info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
-            info.create_system = 3
-            z.writestr(info, files[name])
-
-
 def build_source_fmu(scenario_name: str, t: np.ndarray, signals: Mapping[str, np.ndarray],
                      units: Mapping[str, str | None], unit_defs: Mapping[str, dict], out: Path) -> Path:
     """Write the signal-source FMU ``out`` (model ``ScenarioSignals``): one Real output per signal,
@@ -432,7 +408,7 @@ def build_source_fmu(scenario_name: str, t: np.ndarray, signals: Mapping[str, np
     from lxml import etree
 
     from . import __version__, native_guard
-    from .packaging import COPYRIGHT, pythonfmu_binaries
+    from .packaging import COPYRIGHT, pythonfmu_binaries, seal_fmu
 
     names = list(signals)
     dt = float(t[1] - t[0]) if len(t) > 1 else DEFAULT_DT
@@ -495,29 +471,11 @@ def build_source_fmu(scenario_name: str, t: np.ndarray, signals: Mapping[str, np
             etree.SubElement(ini, "Unknown", index=str(vr + 1))
         return _xml_bytes(root)
 
-    g = hashlib.sha256(model_description(""))
-    if guarded:
-        g.update(native_guard.GUARD_SOURCE.read_bytes())
-    for name in sorted(files):
-        g.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
-    guid = _guid(g.hexdigest())
-    files["modelDescription.xml"] = model_description(guid)
-    out = Path(out)
-    if guarded:
-        guard = out.with_suffix(".guard.so")
-        try:
-            native_guard.build_guard(SOURCE_MODEL, guid, f"{SOURCE_MODEL}_pythonfmu.so",
-                                     [(vr, "Real", False) for vr in range(len(names))], guard)
-            files[f"binaries/linux64/{SOURCE_MODEL}.so"] = guard.read_bytes()
-        finally:
-            guard.unlink(missing_ok=True)
-    _write_zip(out, files)
-    from fmpy.validation import validate_fmu
-
-    problems = validate_fmu(str(out))
+    problems = seal_fmu(files, SOURCE_MODEL, model_description, [(vr, "Real", False) for vr in range(len(names))],
+                        Path(out))
     if problems:
         raise SspError(f"the signal-source FMU fails fmpy validate: {problems}")
-    return out
+    return Path(out)
 
 
 def _base_unit_attrs(exps: Mapping[str, float]) -> dict[str, str]:
@@ -921,7 +879,7 @@ def export_ssp(scenario, observers: list[str] | None = None, out: Path | None = 
         files[SSD_NAME] = ssd_bytes(sc.name, desc, components, conns, float(t[0]), float(t[-1]), dt, info)
         try:
             with atomic_path(out, suffix=".ssp") as tmp_ssp:
-                _write_zip(tmp_ssp, files, stored=(".fmu",))
+                packaging.write_zip(tmp_ssp, files, stored=(".fmu",))
                 problems = check_package(tmp_ssp)
                 if problems:
                     raise SspError(f"the package would not be valid SSP 1.0, nothing written: {'; '.join(problems)}")

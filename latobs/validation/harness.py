@@ -521,18 +521,7 @@ class CoSimulation:
         sc, dt = self.scenario, self.dt
         t = sc.time_grid(dt)
         n = len(t)
-        scen = {k: np.asarray(v, dtype=float) for k, v in sc.signals(t, self.vehicle).items()}
-        extra = {k: np.asarray(v, dtype=float) for k, v in sc.parameter_signals(t, self.vehicle).items()}
-        clash = sorted(set(extra) & set(scen))
-        if clash:
-            raise ValueError(f"scenario {sc.name!r}: signal(s) {', '.join(clash)} given by both signals() and "
-                             "parameter_signals()")
-        scen.update(extra)
-        for k, v in scen.items():
-            if v.shape != t.shape:
-                raise ValueError(f"scenario {sc.name!r}: signal {k!r} has shape {v.shape}, expected {t.shape}")
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"scenario {sc.name!r}: signal {k!r} is not finite everywhere")
+        scen = sc.sampled(t, self.vehicle)
 
         # ---- wiring, checked before anything is instantiated
         optional = set(getattr(sc, "optional_plant_inputs", ()))

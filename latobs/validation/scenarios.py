@@ -266,6 +266,23 @@ class Scenario:
         harness puts them on the bus beside :meth:`signals`. Default: none."""
         return {}
 
+    def sampled(self, t: np.ndarray, vehicle: Vehicle | str = "sedan") -> dict[str, np.ndarray]:
+        """:meth:`signals` and :meth:`parameter_signals` on the grid t, as float arrays; raises
+        ValueError naming the signal when both give it, or when one is not a finite array on t."""
+        sig = {k: np.asarray(v, dtype=float) for k, v in self.signals(t, vehicle).items()}
+        extra = {k: np.asarray(v, dtype=float) for k, v in self.parameter_signals(t, vehicle).items()}
+        clash = sorted(set(extra) & set(sig))
+        if clash:
+            raise ValueError(f"scenario {self.name!r}: signal(s) {', '.join(clash)} given by both signals() and "
+                             "parameter_signals()")
+        sig.update(extra)
+        for k, v in sig.items():
+            if v.shape != t.shape:
+                raise ValueError(f"scenario {self.name!r}: signal {k!r} has shape {v.shape}, expected {t.shape}")
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"scenario {self.name!r}: signal {k!r} is not finite everywhere")
+        return sig
+
     def time_grid(self, dt: float) -> np.ndarray:
         """Communication points 0, dt, ..., duration (s); duration is rounded to whole steps."""
         if not dt > 0:
