@@ -55,7 +55,12 @@ BASE_UNITS = {
     "1": {}, "rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "m": {"m": "1"},
     "m/s": {"m": "1", "s": "-1"}, "m/s2": {"m": "1", "s": "-2"}, "N": {"kg": "1", "m": "1", "s": "-2"},
     "N.m": {"kg": "1", "m": "2", "s": "-2"}, "s": {"s": "1"},
+    "rad/s2": {"rad": "1", "s": "-2"}, "N/s": {"kg": "1", "m": "1", "s": "-3"}, "m/s3": {"m": "1", "s": "-3"},
+    "1/s": {"s": "-1"},
 }
+# the unit of a state's time derivative (ModelExchange)
+DERIVATIVE_UNITS = {"1": "1/s", "rad": "rad/s", "rad/s": "rad/s2", "m": "m/s", "m/s": "m/s2", "m/s2": "m/s3",
+                    "N": "N/s"}
 # display units offered to tools: (name, factor) with display value = factor * SI value
 DISPLAY_UNITS = {"rad": ("deg", 180.0 / math.pi), "rad/s": ("deg/s", 180.0 / math.pi), "m/s": ("km/h", 3.6)}
 DEFAULT_STEP = 0.005  # s, communication step suggested in the model description
@@ -379,7 +384,7 @@ def _num(x: float) -> str:
 
 def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: str, *, version: str,
                       generation_tool: str, copyright: str, license: str = "MIT",
-                      author: str = "latobs") -> bytes:
+                      author: str = "latobs", native: "NativeInterfaces | None" = None) -> bytes:
     """modelDescription.xml of an FMU of ``spec`` with ``data``: UTF-8 bytes, deterministic.
 
     Beyond what pythonfmu writes: units with base units and display units (deg, deg/s, km/h),
@@ -388,20 +393,43 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     algebraic loop for a tool that closes one), InitialUnknowns (outputs after initialisation may
     depend on every known, as the observers start from their initial inputs) and a
     DefaultExperiment with a stop time.
+
+    ``native`` (the native C backend, ``latobs.cbackend``): a self-contained binary with its
+    sources; CoSimulation without an execution tool and with the FMU state, and ModelExchange
+    when ``native.states`` is not empty: the states (local, after the other variables) and their
+    derivatives ``der(name)``, the event indicators, and outputs that may depend on the states
+    and inputs (no ``dependencies``: in ModelExchange an estimate such as z + N y feeds the
+    measurement through).
     """
     description = spec.description + (f" -- {spec.describe(data)}" if spec.describe else "")
     root = Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model_identifier, "guid": guid, "description": description,
         "author": author, "version": version, "copyright": copyright, "license": license,
         "generationTool": generation_tool, "variableNamingConvention": "flat",
-        "numberOfEventIndicators": "0"})
-    SubElement(root, "CoSimulation", {
-        "modelIdentifier": model_identifier, "needsExecutionTool": "true",
+        "numberOfEventIndicators": str(native.event_indicators if native else 0)})
+    states = native.states if native else ()
+    if states:
+        me = SubElement(root, "ModelExchange", {
+            "modelIdentifier": model_identifier, "needsExecutionTool": "false",
+            "completedIntegratorStepNotNeeded": "true", "canBeInstantiatedOnlyOncePerProcess": "false",
+            "canNotUseMemoryManagementFunctions": "true", "canGetAndSetFMUstate": "true",
+            "canSerializeFMUstate": "true"})
+        _source_files(me, native.source_files)
+    cs = SubElement(root, "CoSimulation", {
+        "modelIdentifier": model_identifier, "needsExecutionTool": "false" if native else "true",
         "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
-        "canGetAndSetFMUstate": "false", "canSerializeFMUstate": "false"})
+        "canGetAndSetFMUstate": "true" if native else "false", "canSerializeFMUstate": "true" if native else "false"})
+    if native:
+        _source_files(cs, native.source_files)
     table = variable_table(spec)
-    used = sorted({v.unit for _, typ, _, v in table if typ == "Real" and v.unit in BASE_UNITS})
+    first_state = len(table)
+    table += [(first_state + k, "Real", "state", v) for k, v in enumerate(states)]
+    table += [(first_state + len(states) + k, "Real", "derivative", v) for k, v in enumerate(states)]
+    used = sorted({v.unit for _, typ, caus, v in table if typ == "Real" and caus != "derivative"
+                   and v.unit in BASE_UNITS}
+                  | {DERIVATIVE_UNITS[v.unit] for _, _, caus, v in table if caus == "derivative"
+                     and v.unit in DERIVATIVE_UNITS})
     if used:
         ud = SubElement(root, "UnitDefinitions")
         for u in used:
@@ -427,6 +455,10 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
             attrs.update(variability="fixed", initial="exact")
         elif caus == "input":
             attrs["variability"] = "continuous"
+        elif caus in ("state", "derivative"):
+            attrs.update(causality="local", variability="continuous", initial="calculated")
+            if caus == "derivative":
+                attrs.update(name=f"der({v.name})", description=f"time derivative of {v.name}")
         else:
             attrs.update(variability="continuous" if typ == "Real" else "discrete", initial="calculated")
         sv = SubElement(mv, "ScalarVariable", attrs)
@@ -445,18 +477,47 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
             tattrs["start"] = repr(starts[v.name])
         elif caus == "input":
             tattrs["start"] = _num(v.start)
+        elif caus == "derivative":
+            tattrs = {"derivative": str(vr - len(states) + 1)}     # the state's 1-based index
+            if v.unit in DERIVATIVE_UNITS:
+                tattrs["unit"] = DERIVATIVE_UNITS[v.unit]
         SubElement(sv, typ, tattrs)
     ms = SubElement(root, "ModelStructure")
     outputs = [vr for vr, _, caus, _ in table if caus == "output"]
+    derivatives = [vr for vr, _, caus, _ in table if caus == "derivative"]
     if outputs:
         out_el = SubElement(ms, "Outputs")
         for vr in outputs:
-            SubElement(out_el, "Unknown", index=str(vr + 1), dependencies="")
+            SubElement(out_el, "Unknown", {"index": str(vr + 1)} if states else {"index": str(vr + 1),
+                                                                                "dependencies": ""})
+    if derivatives:
+        der_el = SubElement(ms, "Derivatives")
+        for vr in derivatives:
+            SubElement(der_el, "Unknown", index=str(vr + 1))
+    initial = outputs + [vr for vr, _, caus, _ in table if caus in ("state", "derivative")]
+    if initial:
         init_el = SubElement(ms, "InitialUnknowns")
-        for vr in outputs:
+        for vr in sorted(initial):
             SubElement(init_el, "Unknown", index=str(vr + 1))
     _indent(root)
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="unicode") + "\n").encode("utf-8")
+
+
+class NativeInterfaces:
+    """What a native (C) FMU adds to its model description (see ``model_description``):
+    ``states`` (``Var``s, ModelExchange's continuous states; empty: co-simulation only),
+    ``event_indicators`` (their number) and ``source_files`` (the C files to compile, in
+    ``sources/``)."""
+
+    def __init__(self, states=(), event_indicators: int = 0, source_files=()):
+        self.states, self.event_indicators, self.source_files = tuple(states), int(event_indicators), tuple(source_files)
+
+
+def _source_files(interface: Element, names) -> None:
+    if names:
+        sf = SubElement(interface, "SourceFiles")
+        for name in names:
+            SubElement(sf, "File", name=name)
 
 
 def _indent(el: Element, level: int = 0) -> None:

@@ -1171,6 +1171,7 @@ class IntervalObserver:
         over [t, t + h] and the predicted box at t + h (``predict``), published; the correction of
         this step waits for the measurement at t + h (the observer runs one step behind the
         published prediction, which is itself a guaranteed bound)."""
+        h = float(h)          # a numpy float would print as np.float64(...) into the generated code
         if not self._started:
             self.initialize(u)
         vx, d = u["vx"], u["delta"]

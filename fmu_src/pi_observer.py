@@ -434,12 +434,14 @@ class _TireTable:
         coeffs += [_zeros(n, len(W[0][0]))] * (self.J + 1 - len(coeffs))
         return coeffs, E1, alpha
 
-    def build(self, k):
-        """Compile interval k. Per row, the Taylor terms c d^j (j >= 1) are dropped, smallest
-        |c| delta^j first, while their sum plus the bound of all terms beyond degree J stays
-        within tol ||[Phi | Gam]||_inf: a rigorous bound of the row's truncation error per unit
-        ||[s; w]||_inf (first-order hold: [s; w; e] and the top rows of the augmented map). If
-        the terms beyond J alone exceed it: the RK4 substeps."""
+    def coefficients(self, k):
+        """(center, kept) of interval k: its center in v and the Taylor coefficients kept, kept[j]
+        the top n + 1 rows of the map's coefficient of (v - center)**j (trailing all-zero degrees
+        removed). Per row, the terms c d^j (j >= 1) are dropped, smallest |c| delta^j first, while
+        their sum plus the bound of all terms beyond degree J stays within tol ||[Phi | Gam]||_inf:
+        a rigorous bound of the row's truncation error per unit ||[s; w]||_inf (first-order hold:
+        [s; w; e] and the top rows of the augmented map). kept is None if the terms beyond J
+        alone exceed it (the interval runs the RK4 substeps)."""
         width = self.v_hi - self.v_lo
         center = self.v_lo + (k + 0.5) * width / self.K
         delta = 0.5 * width / self.K * (1 + 1e-6) + 1e-300   # slack for the rounding of k
@@ -448,20 +450,27 @@ class _TireTable:
         budget = (self.tol * _norm_inf(coeffs[0][:n1])
                   - _truncation_bound(coeffs, self.J, delta, E1, alpha, self.nsub))
         if budget < 0:
+            return center, None
+        kept = [[row[:] for row in P[:n1]] for P in coeffs]
+        for i in range(n1):
+            terms = sorted((abs(c) * delta**j, j, col) for j in range(1, len(kept))
+                           for col, c in enumerate(kept[j][i]))
+            dropped = 0.0
+            for w, j, col in terms:
+                dropped += w
+                if dropped > budget:
+                    break
+                kept[j][i][col] = 0.0
+        while len(kept) > 1 and not any(any(row) for row in kept[-1]):
+            kept.pop()
+        return center, kept
+
+    def build(self, k):
+        """Compile interval k (``coefficients``; the RK4 substeps where it has none)."""
+        center, kept = self.coefficients(k)
+        if kept is None:
             fn = _rk4_map(self.Mc, self.Gc, self.N, self.nsub, self.hs, self.h)
         else:
-            kept = [[row[:] for row in P[:n1]] for P in coeffs]
-            for i in range(n1):
-                terms = sorted((abs(c) * delta**j, j, col) for j in range(1, len(kept))
-                               for col, c in enumerate(kept[j][i]))
-                dropped = 0.0
-                for w, j, col in terms:
-                    dropped += w
-                    if dropped > budget:
-                        break
-                    kept[j][i][col] = 0.0
-            while len(kept) > 1 and not any(any(row) for row in kept[-1]):
-                kept.pop()
             fn = _compile(kept, self.N, "v", center, self.h is not None)
             fn.degree = len(kept) - 1
         with _LOCK:
@@ -739,27 +748,35 @@ class SwitchedPIObserver:
         with _LOCK:
             fn = _MAPS.get(key)
             if fn is None:
-                nsub, hs = self._substeps(h)
-                mode = idx % self._nm
-                v = self._fixed_v[mode]
-                limits = (self.MAP_CACHE_SIZE, self.MAX_COMPILED)
-                hold = h if self._foh else None
-                if v is not None:       # fixed model speed: the composite map, exact
-                    Ms, Gs = _shift(self._Mc[idx], v)[:1], _shift(self._Gc[idx], v)[:1]
-                    if hold is not None:
-                        Ms, Gs = _augment(Ms, Gs, hold)
-                    W = _substep(Ms, Gs, hs, 0)
-                    fn = _compile(_power(W, nsub, len(Ms[0]), 0), self.N, foh=hold is not None)
+                if self._fixed_v[idx % self._nm] is not None:   # fixed model speed: the composite map
+                    fn = _compile(self._fixed_map(idx, h), self.N, foh=self._foh)
                     _HELD[0] += 1
                 else:
-                    v_lo, v_hi = self._v_range[mode]
-                    fn = _TireTable(key, self._Mc[idx], self._Gc[idx], self.N, v_lo, v_hi,
-                                    nsub, hs, self.TAYLOR_DEGREE, self.TAYLOR_TOL, self.MAX_INTERVALS, limits,
-                                    taylor=nsub <= self.TAYLOR_MAX_SUBSTEPS, h=hold)
+                    fn = self._table(idx, h, key)
                 _MAPS[key] = fn
-                _trim(fn, *limits)
+                _trim(fn, self.MAP_CACHE_SIZE, self.MAX_COMPILED)
         self._fns[idx] = fn
         return fn
+
+    def _fixed_map(self, idx: int, h: float):
+        """The composite map of the RK4 substeps over h for fixed-speed map index idx, exact: the
+        series [[Phi | Gam]] (first-order hold: the augmented map, whose top rows are
+        [Phi | Gam | Gam_e])."""
+        nsub, hs = self._substeps(h)
+        v = self._fixed_v[idx % self._nm]
+        Ms, Gs = _shift(self._Mc[idx], v)[:1], _shift(self._Gc[idx], v)[:1]
+        if self._foh:
+            Ms, Gs = _augment(Ms, Gs, h)
+        return _power(_substep(Ms, Gs, hs, 0), nsub, len(Ms[0]), 0)
+
+    def _table(self, idx: int, h: float, key=None) -> _TireTable:
+        """The piecewise Taylor table of measured-speed map index idx at step h (``key``: its
+        entry in the map cache, for the count of compiled functions)."""
+        nsub, hs = self._substeps(h)
+        v_lo, v_hi = self._v_range[idx % self._nm]
+        return _TireTable(key, self._Mc[idx], self._Gc[idx], self.N, v_lo, v_hi, nsub, hs, self.TAYLOR_DEGREE,
+                          self.TAYLOR_TOL, self.MAX_INTERVALS, (self.MAP_CACHE_SIZE, self.MAX_COMPILED),
+                          taylor=nsub <= self.TAYLOR_MAX_SUBSTEPS, h=h if self._foh else None)
 
     def _step_rk4(self, idx, h, s, w, v, e=None):
         M, G = _shift(self._Mc[idx], v)[0], _shift(self._Gc[idx], v)[0]

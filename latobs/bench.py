@@ -2,19 +2,19 @@
 
 Not a test: nothing here asserts a time. Every figure is printed beside a reference measured in
 the same process, so that ratios (not absolute microseconds, which depend on the machine) are
-what gets compared:
+what gets compared. Per backend (``python``: pythonfmu, ``c``: the native C backend), with the
+FMUs of ``--fmu-dir``/<backend> (built there if missing):
 
 * **per FMU**, µs per communication step through fmpy's ``FMU2Slave`` (the same prebuilt ctypes
   set/doStep/get calls as the validation harness): set the inputs, ``doStep``, get the outputs;
+* **the same FMU in a plain C host** (``latobs/native/fmi2_host.c``, no Python in the process; a
+  pythonfmu FMU gets libpython preloaded): µs per ``fmi2DoStep`` alone, and per set + doStep + get;
 * **the same arithmetic in numpy**, per step, in the same run: for an observer, the affine map
   of one step (``Phi @ s + Gam @ w``, 5 states, 4 inputs) and, for comparison, the classical RK4
-  substeps it replaces; for the plant, one call of the FMU's own runtime class stepping outside
-  any FMU (the FMI overhead is the difference);
+  substeps it replaces; for the plant, one call of the FMU's own Python runtime class stepping
+  outside any FMU;
 * **the coupled run**: ``bank-braking`` (30 s at 5 ms: CarPlant + both paper-000 observers)
-  through the validation harness, wall time and real-time factor.
-
-The FMUs are taken from ``--fmu-dir`` (built there if missing), so that FMUs built by another
-latobs version can be measured with the same script.
+  through the validation harness, wall time and real-time factor, per backend.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 OBSERVERS = ("SideslipBankObserver", "SideslipBankObserverTire")
+BACKENDS = ("python", "c")
 PLANT = "CarPlant"
 SCENARIO = "bank-braking"
 DT = 0.005
@@ -123,23 +124,52 @@ def _coupled(fmu_dir: Path, repeats: int) -> dict[str, float]:
             "us_per_step": best / steps * 1e6}
 
 
+def _c_host_time(path: Path, inputs: dict[str, np.ndarray], n: int, repeats: int) -> dict[str, float] | None:
+    """µs per fmi2DoStep alone and per set + doStep + get in the plain C host (None: no C host here:
+    no compiler, or a pythonfmu FMU and no shared libpython)."""
+    from .cbackend import host
+
+    try:
+        r = host.bench(path, {k: v[:n] for k, v in inputs.items()}, DT, repeats=max(repeats, 5))
+    except host.HostError:
+        return None
+    return {"c_host_us_per_doStep": r["ns_per_doStep"] / 1e3, "c_host_us_per_step": r["ns_per_step_with_io"] / 1e3,
+            "c_host_median_us_per_doStep": r["median_ns_per_doStep"] / 1e3,
+            "c_host_median_us_per_step": r["median_ns_per_step_with_io"] / 1e3}
+
+
+def _ensure(fmu_dir: Path, backend: str) -> Path | None:
+    """``fmu_dir/backend`` with the benchmarked FMUs, built there if missing (None: the backend
+    cannot build them on this machine)."""
+    from . import packaging
+    from .pipeline import build
+
+    folder = fmu_dir / backend
+    missing = [x for x in (PLANT, *OBSERVERS) if not (folder / f"{x}.fmu").is_file()]
+    if missing:
+        if backend == "c" and any(packaging.resolve_backend("auto", packaging.OBSERVERS.get(x) or
+                                                            packaging.PLANTS[x])[0] != "c" for x in missing):
+            return None
+        build(missing, None, folder, backend)
+    return folder
+
+
 def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3) -> dict:
     fmu_dir = Path(fmu_dir)
-    missing = [x for x in (PLANT, *OBSERVERS) if not (fmu_dir / f"{x}.fmu").is_file()]
-    if missing:
-        from .pipeline import build
-
-        build(missing, None, fmu_dir)
-    bus = _bus_trajectory(fmu_dir)
-    n = min(n, len(bus["vx"]))
-    out: dict = {"n_steps": n, "dt": DT, "fmus": {}}
-    for name in (PLANT, *OBSERVERS):   # first: nothing of this FMU cached in the process yet
-        first, best = _fmu_step_time(fmu_dir / f"{name}.fmu", bus, n, repeats)
-        out["fmus"][name] = {"fmpy_us_per_step": best, "fmpy_us_per_step_first": first}
-    out["fmus"][PLANT]["runtime_us_per_step"] = _plant_runtime_time(bus, n)
+    folders = {b: f for b in BACKENDS if (f := _ensure(fmu_dir, b)) is not None}
+    bus = _bus_trajectory(folders["python"])
+    n = min(n, len(bus["vx"]) - 1)
+    out: dict = {"n_steps": n, "dt": DT, "backends": list(folders), "fmus": {}, "coupled": {}}
+    for backend, folder in folders.items():
+        for name in (PLANT, *OBSERVERS):   # first: nothing of this FMU cached in the process yet
+            first, best = _fmu_step_time(folder / f"{name}.fmu", bus, n, repeats)
+            entry = {"fmpy_us_per_step": best, "fmpy_us_per_step_first": first}
+            entry.update(_c_host_time(folder / f"{name}.fmu", bus, n, repeats) or {})
+            out["fmus"].setdefault(name, {})[backend] = entry
+        out["coupled"][backend] = _coupled(folder, max(1, repeats - 1))
+    out["plant_runtime_us_per_step"] = _plant_runtime_time(bus, n)
     out["numpy_reference"] = _numpy_reference(n)
-    out["coupled"] = _coupled(fmu_dir, max(1, repeats - 1))
-    out["coupled"]["fresh_process_real_time_factor"] = _coupled_in_fresh_process(fmu_dir)
+    out["coupled"]["python"]["fresh_process_real_time_factor"] = _coupled_in_fresh_process(folders["python"])
     return out
 
 
@@ -154,32 +184,51 @@ def _coupled_in_fresh_process(fmu_dir: Path) -> float:
     return float(out.strip().splitlines()[-1])
 
 
+def _us(x: float | None) -> str:
+    return "—" if x is None else f"{x:.3g}" if x < 1 else f"{x:.1f}"
+
+
 def table(r: dict) -> str:
     ref = r["numpy_reference"]
-    lines = [f"µs per step (set inputs + doStep + get outputs through fmpy FMU2Slave), {r['n_steps']} steps, "
-             f"dt = {r['dt'] * 1e3:g} ms; best of the fresh instances (first instance in the process)",
-             "| FMU | µs/step (fmpy) | reference in the same run | ratio |",
-             "|---|---|---|---|"]
-    p = r["fmus"][PLANT]
-    lines.append(f"| {PLANT} | {p['fmpy_us_per_step']:.1f} ({p['fmpy_us_per_step_first']:.1f}) | runtime step "
-                 f"outside the FMU {p['runtime_us_per_step']:.1f} | {p['fmpy_us_per_step'] / p['runtime_us_per_step']:.2f} |")
-    for o in OBSERVERS:
-        f = r["fmus"][o]
-        lines.append(f"| {o} | {f['fmpy_us_per_step']:.1f} ({f['fmpy_us_per_step_first']:.1f}) | numpy affine map "
-                     f"{ref['numpy_affine_map_us']:.2f} (numpy RK4 substeps {ref['numpy_rk4_substeps_us']:.1f}) | "
-                     f"{f['fmpy_us_per_step'] / ref['numpy_affine_map_us']:.1f} |")
-    c = r["coupled"]
-    lines.append("")
-    lines.append(f"coupled {SCENARIO} (CarPlant + {' + '.join(OBSERVERS)}), {c['scenario_seconds']:g} s simulated: "
-                 f"{c['seconds']:.2f} s wall, {c['us_per_step']:.0f} µs per step, "
-                 f"{c['real_time_factor']:.1f}x real time (one run in a fresh process: "
-                 f"{c['fresh_process_real_time_factor']:.1f}x)")
+    backends = r["backends"]
+    lines = [f"µs per communication step, {r['n_steps']} steps of {SCENARIO} signals, dt = {r['dt'] * 1e3:g} ms. "
+             "fmpy: set inputs + doStep + get outputs through fmpy's FMU2Slave, best of the fresh instances (first "
+             "instance in the process). C host: a plain C program, no Python in the loop (a pythonfmu FMU with "
+             "libpython preloaded), best (median) of 5 fresh instances, each timed over about 20 ms of steps: "
+             "fmi2DoStep alone / set + doStep + get.",
+             "| FMU | backend | µs/step via fmpy | µs/doStep in a C host | µs/step in a C host (with I/O) |",
+             "|---|---|---|---|---|"]
+    for name in (PLANT, *OBSERVERS):
+        for b in backends:
+            f = r["fmus"][name][b]
+            lines.append(f"| {name} | {'pythonfmu' if b == 'python' else 'native C'} | {_us(f['fmpy_us_per_step'])} "
+                         f"({_us(f['fmpy_us_per_step_first'])}) | {_us(f.get('c_host_us_per_doStep'))} "
+                         f"({_us(f.get('c_host_median_us_per_doStep'))}) | {_us(f.get('c_host_us_per_step'))} "
+                         f"({_us(f.get('c_host_median_us_per_step'))}) |")
+    if "c" in backends:
+        lines += ["", "| FMU | pythonfmu / native C via fmpy | pythonfmu / native C, doStep in a C host |", "|---|---|---|"]
+        for name in (PLANT, *OBSERVERS):
+            py, c = r["fmus"][name]["python"], r["fmus"][name]["c"]
+            host_ratio = (f"{py['c_host_us_per_doStep'] / c['c_host_us_per_doStep']:.0f}"
+                          if "c_host_us_per_doStep" in py and "c_host_us_per_doStep" in c else "—")
+            lines.append(f"| {name} | {py['fmpy_us_per_step'] / c['fmpy_us_per_step']:.1f} | {host_ratio} |")
+    lines += ["", f"references in the same run: numpy affine map of one observer step {_us(ref['numpy_affine_map_us'])} µs "
+              f"(numpy RK4 substeps {_us(ref['numpy_rk4_substeps_us'])} µs); CarPlant's Python runtime outside the FMU "
+              f"{_us(r['plant_runtime_us_per_step'])} µs", ""]
+    for b in backends:
+        c = r["coupled"][b]
+        fresh = (f" (one run in a fresh process: {c['fresh_process_real_time_factor']:.1f}x)"
+                 if "fresh_process_real_time_factor" in c else "")
+        lines.append(f"coupled {SCENARIO} through fmpy, {'pythonfmu' if b == 'python' else 'native C'} FMUs (CarPlant + "
+                     f"{' + '.join(OBSERVERS)}), {c['scenario_seconds']:g} s simulated: {c['seconds']:.2f} s wall, "
+                     f"{c['us_per_step']:.0f} µs per step, {c['real_time_factor']:.1f}x real time{fresh}")
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="latobs bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--fmu-dir", default="build", help="FMUs to measure (built there if missing)")
+    p.add_argument("--fmu-dir", default="build/bench",
+                   help="FMUs to measure, per backend in FMU_DIR/python and FMU_DIR/c (built there if missing)")
     p.add_argument("--steps", type=int, default=3000)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--json", dest="json_file", help="also write the figures to this JSON file")

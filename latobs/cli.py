@@ -295,7 +295,9 @@ def parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build", help="design and package FMUs (default: every observer and plant)")
     b.add_argument("names", nargs="*")
     b.add_argument("--vehicle", type=_vehicle)
-    b.add_argument("--backend", choices=("python", "c"), default="python")
+    b.add_argument("--backend", choices=("auto", "c", "python"), default="auto",
+                   help="c: native FMUs (a C compiler is needed), python: pythonfmu FMUs, auto (default): "
+                        "c where possible, else python with a message")
     b.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
     b.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
                    help="a machine-readable summary of the FMUs built (name, kind, paper, vehicle, path, "

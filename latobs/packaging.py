@@ -1,4 +1,6 @@
-"""Package FMUs (pythonfmu backend): the runtime (``fmu_src``), one data file, pythonfmu's binaries.
+"""Package FMUs. pythonfmu backend (here): the runtime (``fmu_src``), one data file, pythonfmu's
+binaries; the native C backend is ``latobs.cbackend`` (``package_design``/``package_plant`` take
+the backend).
 
 An FMU is assembled here file by file, not by pythonfmu's ``FmuBuilder``, so that it is
 
@@ -184,14 +186,18 @@ def write_zip(path: Path, files: Mapping[str, bytes], stored: tuple[str, ...] = 
 
 
 def seal_fmu(files: dict[str, bytes], model_identifier: str, model_description: Callable[[str], bytes],
-             guard_variables: list[tuple[int, str, bool]], path: Path) -> list[str]:
+             guard_variables: list[tuple[int, str, bool]], path: Path,
+             native: Callable[[str], dict[str, bytes]] | None = None, native_sources: bytes = b"") -> list[str]:
     """Finish an FMU archive and write it to ``path``; returns fmpy validate's problems.
 
     ``files`` holds everything but the model description (with pythonfmu's library moved to
     ``binaries/linux64/<id>_pythonfmu.so`` when the native guard is to be built);
     ``model_description(guid)`` gives its bytes. The guid is derived from the content (the
     description without guid, the guard's source, every file), the guard is compiled for it with
-    ``guard_variables`` [(value reference, type, settable)], and the zip is reproducible."""
+    ``guard_variables`` [(value reference, type, settable)], and the zip is reproducible.
+    ``native(guid)`` (the native C backend) gives the files that hold the guid (the generated
+    configuration header and the compiled library); ``native_sources`` (what they are made from)
+    stands for them in the hash."""
     from fmpy.validation import validate_fmu
 
     from . import native_guard
@@ -200,10 +206,13 @@ def seal_fmu(files: dict[str, bytes], model_identifier: str, model_description: 
     g = hashlib.sha256(model_description(""))
     if guarded:  # the guard's binary holds the guid; its source stands for it in the hash
         g.update(native_guard.GUARD_SOURCE.read_bytes())
+    g.update(native_sources)
     for name in sorted(files):
         g.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
     guid = _guid(g.hexdigest())
     files["modelDescription.xml"] = model_description(guid)
+    if native is not None:
+        files.update(native(guid))
     if guarded:
         guard = path.with_suffix(".guard.so")
         try:
@@ -279,8 +288,37 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
     return final
 
 
-def package_design(design_path: Path, out_dir: Path) -> Path:
-    """Re-certify a design file and package its observer FMU (never an uncertified one)."""
+BACKENDS = ("c", "python")
+
+
+def resolve_backend(requested: str, kind: FmuKind) -> tuple[str, str | None]:
+    """(backend, why) for building ``kind``: ``requested`` "python" or "c" is taken as is (the C
+    build then fails with the reason if it cannot be done); "auto" is "c" where a C compiler is
+    present and the runtime has a C model, else "python" with ``why`` it fell back."""
+    if requested not in (*BACKENDS, "auto"):
+        raise PackagingError(f"unknown backend {requested!r}; known: auto, {', '.join(BACKENDS)}")
+    if requested != "auto":
+        return requested, None
+    from . import cbackend
+
+    why = cbackend.unavailable_reason(kind.model_module)
+    return ("python", why) if why else ("c", None)
+
+
+def _build(kind: FmuKind, class_name: str, data: dict, out_dir: Path, backend: str) -> Path:
+    if backend == "c":
+        from . import cbackend
+
+        try:
+            return cbackend.build_c_fmu(kind, class_name, data, out_dir)
+        except cbackend.NativeBuildError as exc:
+            raise PackagingError(str(exc)) from exc
+    return build_fmu(kind, class_name, data, out_dir)
+
+
+def package_design(design_path: Path, out_dir: Path, backend: str = "python") -> Path:
+    """Re-certify a design file and package its observer FMU (never an uncertified one) with
+    ``backend`` "python" (pythonfmu) or "c" (native, ``latobs.cbackend``)."""
     from .synthesis import certificate  # scipy: only when packaging a design
 
     data = design_file.read(design_path)
@@ -293,14 +331,14 @@ def package_design(design_path: Path, out_dir: Path) -> Path:
     if kind is None:
         raise PackagingError(f"{design_path}: no FMU model for design {data.get('design')!r} "
                              f"(known: {', '.join(OBSERVERS)})")
-    return build_fmu(kind, data["name"], data, out_dir)
+    return _build(kind, data["name"], data, out_dir, backend)
 
 
-def package_plant(name: str, vehicle: str | None, out_dir: Path) -> Path:
+def package_plant(name: str, vehicle: str | None, out_dir: Path, backend: str = "python") -> Path:
     kind = PLANTS.get(name)
     if kind is None:
         raise PackagingError(f"unknown plant {name!r}; known: {', '.join(PLANTS)}")
     data = plant_data(vehicle or kind.default_vehicle)
     veh = data["vehicle"]["name"]       # a set by name or a TOML file by path: named after its `name`
     class_name = name if veh == kind.default_vehicle else f"{name}_{veh}"
-    return build_fmu(kind, class_name, data, out_dir)
+    return _build(kind, class_name, data, out_dir, backend)

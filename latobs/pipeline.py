@@ -59,13 +59,14 @@ def design_one(name: str, vehicle: str | None, out: Path, quiet: bool = False) -
     return path
 
 
-def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "python") -> list[Path]:
-    """Design + package the named FMUs (default: every observer and plant)."""
+def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "auto") -> list[Path]:
+    """Design + package the named FMUs (default: every observer and plant) with ``backend``:
+    "c" (native, ``latobs.cbackend``), "python" (pythonfmu) or "auto" (C where a C compiler is
+    present and the runtime has a C model, else pythonfmu, saying why)."""
     from . import packaging
 
-    if backend != "python":
-        raise PipelineError(f"backend {backend!r} is not available yet: only the pythonfmu backend "
-                            "('python') is implemented")
+    if backend not in ("auto", *packaging.BACKENDS):
+        raise PipelineError(f"unknown backend {backend!r}; known: auto, {', '.join(packaging.BACKENDS)}")
     names = names or [*designs.DESIGNS, *packaging.PLANTS]
     unknown = [n for n in names if n not in designs.DESIGNS and n not in packaging.PLANTS]
     if unknown:
@@ -73,11 +74,15 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
                             f"{', '.join([*designs.DESIGNS, *packaging.PLANTS])}")
     built = []
     for name in names:
+        kind = packaging.OBSERVERS.get(name) or packaging.PLANTS[name]
+        chosen, why = packaging.resolve_backend(backend, kind)
+        if why:
+            print(f"{name}: pythonfmu backend ({why})")
         if name in designs.DESIGNS:
-            path = packaging.package_design(design_one(name, vehicle, out), out)
+            path = packaging.package_design(design_one(name, vehicle, out), out, chosen)
         else:
-            path = packaging.package_plant(name, vehicle, out)
-        print(f"built {path}")
+            path = packaging.package_plant(name, vehicle, out, chosen)
+        print(f"built {path} ({'native C' if chosen == 'c' else 'pythonfmu'})")
         built.append(path)
     return built
 
@@ -93,6 +98,7 @@ def build_summary(fmus: list[Path]) -> dict:
             "name": FMU name (NAME or NAME_V), "kind": "observer" | "plant",
             "model": catalogue design or plant name, "paper": "000".."003" | null (plants),
             "vehicle": vehicle set name, "path": str, "sha256": hex of the .fmu, "size": bytes,
+            "backend": "c" (native) | "python" (pythonfmu),
             # observers (null for plants), read from NAME.design.json beside the FMU:
             "design_file": str, "design_sha256": hex, "gamma": the design's "gamma",
             "model_error_gamma": its "model_error"."gamma" (paper 000's default designs) | null,
@@ -114,10 +120,12 @@ def build_summary(fmus: list[Path]) -> dict:
     for fmu in map(Path, fmus):
         raw = fmu.read_bytes()
         with zipfile.ZipFile(fmu) as z:
-            members = {n: z.read(n) for n in z.namelist()
+            names = z.namelist()
+            members = {n: z.read(n) for n in names
                        if n.startswith("resources/") and n.endswith((".design.json", ".plant.json"))
                        and n.count("/") == 1}
-        entry = {"name": fmu.stem, "path": str(fmu), "sha256": sha(raw), "size": len(raw)}
+        entry = {"name": fmu.stem, "path": str(fmu), "sha256": sha(raw), "size": len(raw),
+                 "backend": "python" if "resources/slavemodule.txt" in names else "c"}
         inner = members.get(f"resources/{fmu.stem}.design.json")
         if inner is not None:
             design_path = fmu.with_name(f"{fmu.stem}.design.json")
@@ -141,7 +149,7 @@ def build_summary(fmus: list[Path]) -> dict:
                           if fmu.stem == k or fmu.stem.startswith(k + "_")), None)
             entry.update(kind="plant", model=model, paper=None, vehicle=veh.get("name"), design_file=None,
                          design_sha256=None, gamma=None, model_error_gamma=None, certificate=None)
-        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "design_file",
+        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "design_file",
                  "design_sha256", "gamma", "model_error_gamma", "certificate")
         entries.append({k: entry[k] for k in order})
     return {"schema": BUILD_SUMMARY_SCHEMA, "latobs_version": __version__, "fmus": entries}

@@ -23,6 +23,21 @@ from latobs.synthesis import designs
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
 
 
+def _has_c_model(name: str) -> bool:
+    from latobs import cbackend
+
+    kind = packaging.OBSERVERS.get(name) or packaging.PLANTS[name]
+    return cbackend.emitter(kind.model_module) is not None
+
+
+#: the FMUs of the native C backend (those whose runtime has a C model)
+C_NAMES = [n for n in FMU_NAMES if _has_c_model(n)]
+#: (name, backend) of every FMU in both backends, ids "NAME" (pythonfmu) and "NAME[c]" (native C):
+#: the interop checks and the fuzz run on each; ``built_fmus.get(name, backend)`` gives the FMU
+FMU_VARIANTS = ([pytest.param((n, "python"), id=n) for n in FMU_NAMES]
+                + [pytest.param((n, "c"), id=f"{n}[c]") for n in C_NAMES])
+
+
 class SessionBuild:
     """Every FMU of ``latobs build`` (default vehicles), designed and packaged on first use.
 
@@ -31,12 +46,15 @@ class SessionBuild:
     ``path(name)``    the FMU, built into ``out`` by the packaging step (observers from their
                       design file ``out/NAME.design.json``, re-certified by ``package_design``)
     ``all()``         {name: path} of every FMU in :data:`FMU_NAMES`
+    ``c_path(name)``  the same FMU built by the native C backend into ``out/c`` (skips the test
+                      when this machine cannot build it: no C compiler, or no C model yet)
     """
 
     def __init__(self, out: Path):
         self.out = Path(out)
         self._designs: dict[str, dict] = {}
         self._paths: dict[str, Path] = {}
+        self._c_paths: dict[str, Path] = {}
 
     def design(self, name: str) -> dict:
         if name not in packaging.OBSERVERS:
@@ -61,6 +79,29 @@ class SessionBuild:
 
     def all(self) -> dict[str, Path]:
         return {name: self.path(name) for name in FMU_NAMES}
+
+    def get(self, name: str, backend: str = "python") -> Path:
+        """The FMU ``name`` of ``backend`` ("python" or "c")."""
+        return self.c_path(name) if backend == "c" else self.path(name)
+
+    def c_path(self, name: str) -> Path:
+        if name not in self._c_paths:
+            from latobs import cbackend
+
+            kind = packaging.OBSERVERS.get(name) or packaging.PLANTS.get(name)
+            if kind is None:
+                raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
+            why = cbackend.unavailable_reason(kind.model_module)
+            if why:
+                pytest.skip(f"{name}: no native C FMU here: {why}")
+            out = self.out / "c"
+            if name in packaging.OBSERVERS:
+                self.path(name)      # designed and certified once; the C build packages the same file
+                path = packaging.package_design(self.out / f"{name}.design.json", out, backend="c")
+            else:
+                path = packaging.package_plant(name, None, out, backend="c")
+            self._c_paths[name] = path
+        return self._c_paths[name]
 
 
 @pytest.fixture(scope="session")

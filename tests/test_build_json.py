@@ -3,13 +3,15 @@ from __future__ import annotations
 
 import hashlib
 import json
+import zipfile
 from pathlib import Path
 
 import pytest
 
 from latobs.cli import main
+from latobs.native_guard import find_compiler
 
-KEYS = ["name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "design_file", "design_sha256",
+KEYS = ["name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "design_file", "design_sha256",
         "gamma", "model_error_gamma", "certificate"]
 
 
@@ -26,6 +28,10 @@ def test_build_json_file(tmp_path, capsys):
         assert list(e) == KEYS
         raw = Path(e["path"]).read_bytes()
         assert e["sha256"] == hashlib.sha256(raw).hexdigest() and e["size"] == len(raw)
+        with zipfile.ZipFile(e["path"]) as z:            # the default backend where a compiler is: native C
+            native = "binaries/linux64/" + e["name"] + ".so" in z.namelist() and "sources/model.h" in z.namelist()
+        assert e["backend"] == ("c" if native else "python")
+        assert e["backend"] == ("c" if find_compiler() else "python")
     assert (obs["name"], obs["kind"], obs["model"], obs["paper"], obs["vehicle"]) == \
         ("SideslipBankObserver", "observer", "SideslipBankObserver", "000", "sedan")
     assert Path(obs["path"]) == out / "SideslipBankObserver.fmu"

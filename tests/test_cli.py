@@ -41,7 +41,7 @@ def test_design_writes_a_certified_file(tmp_path, capsys):
     assert "gamma" in capsys.readouterr().out
 
 
-def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys):
+def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys, monkeypatch):
     assert main(["design", "SideslipBankObserver", "--vehicle", "mbds_250lm", "--out", str(tmp_path)]) == 2
     assert "lacks parameter(s) Ix, hr, Kr, br" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())                 # nothing half-written
@@ -50,8 +50,14 @@ def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys):
     assert not list(tmp_path.glob("*.fmu"))
     assert main(["design", "NoSuchObserver"]) == 2
     assert "unknown design" in capsys.readouterr().err
+    from latobs import cbackend
+    monkeypatch.setattr(cbackend, "find_compiler", lambda: None)     # a machine without a C compiler
     assert main(["build", "CarPlant", "--backend", "c", "--out", str(tmp_path)]) == 2
-    assert "not available yet" in capsys.readouterr().err
+    assert "CarPlant: no C compiler found" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.fmu"))
+    assert main(["build", "CarPlant", "--out", str(tmp_path)]) == 0      # auto: falls back, saying why
+    assert "CarPlant: pythonfmu backend (no C compiler found" in capsys.readouterr().out
+    monkeypatch.undo()
     assert main(["validate", "no-such-scenario", "--out", str(tmp_path)]) == 2
     assert "no-such-scenario" in capsys.readouterr().err
 
@@ -174,7 +180,6 @@ CHEAP_ERRORS = [
     ("vehicle-lacks-parameter", ["design", "SideslipBankObserver", "--vehicle", "mbds_250lm", "--out", "{empty}"],
      "design", ["mbds_250lm", "lacks parameter(s) Ix, hr, Kr, br"]),
     ("unknown-fmu", ["build", "NoSuchPlant", "--out", "{empty}"], "build", ["unknown FMU(s) NoSuchPlant"]),
-    ("backend-c", ["build", "CarPlant", "--backend", "c", "--out", "{empty}"], "build", ["'c'", "not available"]),
     ("backend-bad", ["build", "--backend", "rust"], "build", ["--backend", "'rust'"]),
     ("out-is-a-file", ["design", "SideslipBankObserver", "--out", "{file}"], "design",
      ["--out", "a_file", "not a directory"]),

@@ -48,6 +48,8 @@ from latobs.validation.scenarios import SCENARIOS, get_scenario
 pytestmark = pytest.mark.slow
 RUNNER = Path(__file__).with_name("conformance_runs.py")
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
+from conftest import C_NAMES, FMU_VARIANTS  # noqa: E402  (every FMU, pythonfmu and native C)
+C_PLANTS = [n for n in C_NAMES if n in packaging.PLANTS]
 DT = 0.005                   # s, communication step
 DT_NS = 5_000_000            # the same in libcosim's integer nanoseconds
 DURATION = 2.0               # s of each scenario
@@ -80,9 +82,9 @@ def usual_scenario(name: str):
 # ---------------------------------------------------------------------------------------------
 # model description checks
 # ---------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", FMU_NAMES)
-def test_fmpy_validate_finds_no_problem(built_fmus, name):
-    assert validate_fmu(str(built_fmus.path(name))) == []
+@pytest.mark.parametrize("variant", FMU_VARIANTS)
+def test_fmpy_validate_finds_no_problem(built_fmus, variant):
+    assert validate_fmu(str(built_fmus.get(*variant))) == []
 
 
 def _fmutool() -> str:
@@ -92,9 +94,10 @@ def _fmutool() -> str:
     return found
 
 
-@pytest.mark.parametrize("name", FMU_NAMES)
-def test_fmutool_check_finds_no_error(built_fmus, name):
-    proc = subprocess.run([_fmutool(), "-input", str(built_fmus.path(name)), "-check"], capture_output=True,
+@pytest.mark.parametrize("variant", FMU_VARIANTS)
+def test_fmutool_check_finds_no_error(built_fmus, variant):
+    name = variant[0]
+    proc = subprocess.run([_fmutool(), "-input", str(built_fmus.get(*variant)), "-check"], capture_output=True,
                           text=True, timeout=120)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
@@ -175,12 +178,12 @@ def runs(built_fmus, tmp_path_factory):
     computed on first use: the fmpy runs here, the libcosim runs of one FMU in one fresh process."""
     cache: dict[str, dict] = {}
 
-    def get(name: str) -> dict:
-        if name in cache:
-            return cache[name]
+    def get(name: str, backend: str = "python") -> dict:
+        if (name, backend) in cache:
+            return cache[name, backend]
         sc, vehicle, plant_name = usual_scenario(name)
-        plant = built_fmus.path(plant_name)
-        observers = {} if name == plant_name else {"obs": built_fmus.path(name)}
+        plant = built_fmus.get(plant_name, backend if backend == "python" or plant_name in C_PLANTS else "python")
+        observers = {} if name == plant_name else {"obs": built_fmus.get(name, backend)}
         res = harness.run(sc, plant, observers, dt=DT, vehicle=vehicle)
         n = len(res.time) - 1
         assert res.time[-1] == pytest.approx(DURATION) and list(res.time[:-1]) == [t for t, _ in fmpy_steps(n)]
@@ -205,12 +208,12 @@ def runs(built_fmus, tmp_path_factory):
             specs["alone"] = {"dt": DT, "n": n, "slaves": [plant_slave]}
             refs["alone"] = {"plant": _series(res, harness.PLANT_LABEL, plant_out)}
         lc = dict(zip(specs, run_libcosim(list(specs.values()), tmp_path_factory.mktemp(f"lc_{name}"))))
-        cache[name] = {kind: {"scenario": sc.name, "libcosim": lc[kind],
+        cache[name, backend] = {kind: {"scenario": sc.name, "libcosim": lc[kind],
                               "fmpy_on_libcosim_grid": run_fmpy(spec, libcosim_steps(n)),
                               "fmpy_own_grid": run_fmpy(spec, fmpy_steps(n)) if kind == "alone" else refs[kind],
                               "harness": refs[kind]}
                        for kind, spec in specs.items()}
-        return cache[name]
+        return cache[name, backend]
 
     return get
 
@@ -241,13 +244,15 @@ def _compare(run: dict, label: str):
     assert worst <= TOL, f"{label}: libcosim and fmpy differ by {worst:.3g} of the peak at {at} (tolerance {TOL:g})"
 
 
-@pytest.mark.parametrize("name", FMU_NAMES)
-def test_libcosim_gives_fmpy_results_for_each_fmu_alone(runs, name):
-    run = runs(name)["alone"]
+@pytest.mark.parametrize("variant", FMU_VARIANTS)
+def test_libcosim_gives_fmpy_results_for_each_fmu_alone(runs, variant):
+    name = variant[0]
+    run = runs(*variant)["alone"]
     assert run["fmpy_own_grid"] == run["harness"], f"{name} alone in fmpy differs from its harness run"
     _compare(run, f"{name} alone")
 
 
-@pytest.mark.parametrize("name", list(packaging.OBSERVERS))
-def test_libcosim_gives_fmpy_results_for_each_observer_beside_its_plant(runs, name):
-    _compare(runs(name)["pair"], f"{name} beside {usual_scenario(name)[2]}")
+@pytest.mark.parametrize("variant", [v for v in FMU_VARIANTS if v.values[0][0] in packaging.OBSERVERS])
+def test_libcosim_gives_fmpy_results_for_each_observer_beside_its_plant(runs, variant):
+    name = variant[0]
+    _compare(runs(*variant)["pair"], f"{name} beside {usual_scenario(name)[2]}")

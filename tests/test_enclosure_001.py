@@ -32,14 +32,19 @@ ROLL_ERROR_BOUND = (0.0, 0.0, 36.0, 15.0)   # 1.2 x the largest residual measure
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
+    """The FMUs of latobs build's default backend (native C where a C compiler is present, whose
+    outputs equal the pythonfmu FMUs' bit for bit: tests/test_c_interval_observer.py and
+    tests/test_c_car_plant.py; five times faster per run)."""
     out = tmp_path_factory.mktemp("fmus_001")
+    backend = packaging.resolve_backend("auto", packaging.OBSERVERS["LateralIntervalObserver"])[0]
+    plant_backend = packaging.resolve_backend("auto", packaging.PLANTS["CarPlant"])[0]
     data = designs.run("LateralIntervalObserver")
-    observer = packaging.package_design(design_file.write(data, out), out)
-    plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out)   # no roll: paper 001's model class
-    plant = packaging.package_plant("CarPlant", None, out)
+    observer = packaging.package_design(design_file.write(data, out), out, backend)
+    plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out, plant_backend)  # paper 001's model class
+    plant = packaging.package_plant("CarPlant", None, out, plant_backend)
     robust = designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND)
     robust_dir = out / "robust"
-    observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir)
+    observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir, backend)
     return {"plant_rigid": plant_rigid, "plant": plant, "observer": observer, "observer_robust": observer_robust,
             "box": tuple(data["options"]["box"])}
 

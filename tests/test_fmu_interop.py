@@ -37,9 +37,10 @@ def _runs(importer: str, paths: list[Path]) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def fmus(fmu_dir, tmp_path_factory, design_speed):
+def fmus(fmu_dir, tmp_path_factory, design_speed, built_fmus):
     """The three FMUs, plus a SideslipBankObserver with other gains and one 'from another latobs
-    version' (same class name, same gains, other runtime package and guid)."""
+    version' (same class name, same gains, other runtime package and guid), and the native C
+    builds of the three (same model identifiers and file names as the pythonfmu ones)."""
     other_dir = tmp_path_factory.mktemp("other_gains")
     other = designs.run("SideslipBankObserver", alpha=1.0, radius=60.0)
     other_fmu = packaging.package_design(design_file.write(other, other_dir), other_dir)
@@ -50,8 +51,12 @@ def fmus(fmu_dir, tmp_path_factory, design_speed):
         old_fmu = packaging.package_design(design_file.write(design_speed, old_dir), old_dir)
     finally:
         mp.undo()
-    return {"plant": fmu_dir / "CarPlant.fmu", "speed": fmu_dir / "SideslipBankObserver.fmu",
-            "tire": fmu_dir / "SideslipBankObserverTire.fmu", "other_gains": other_fmu, "old_version": old_fmu}
+    out = {"plant": fmu_dir / "CarPlant.fmu", "speed": fmu_dir / "SideslipBankObserver.fmu",
+           "tire": fmu_dir / "SideslipBankObserverTire.fmu", "other_gains": other_fmu, "old_version": old_fmu}
+    if native_guard.find_compiler() is not None:
+        out.update(c_plant=built_fmus.c_path("CarPlant"), c_speed=built_fmus.c_path("SideslipBankObserver"),
+                   c_tire=built_fmus.c_path("SideslipBankObserverTire"))
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -73,19 +78,31 @@ SEQUENCES = [
     ["plant", "speed", "tire", "plant"],                       # the order of the issue report
     ["tire", "speed", "plant", "tire", "speed"],               # the reverse, and reloads
     ["speed", "other_gains", "old_version", "speed", "plant", "other_gains"],  # same name, other content
+    # native C and pythonfmu FMUs of the same model identifiers side by side, unloaded and reloaded
+    ["c_plant", "speed", "c_speed", "plant", "c_tire", "tire", "c_speed", "c_plant"],
 ]
+#: the libcosim sequences (each a fresh process)
+LIBCOSIM = [SEQUENCES[0], SEQUENCES[1], SEQUENCES[3]]
+
+
+def _available(fmus, seq) -> None:
+    missing = [k for k in seq if k not in fmus]
+    if missing:
+        pytest.skip(f"no native C FMUs here (no C compiler): {', '.join(missing)}")
 
 
 @pytest.mark.parametrize("seq", SEQUENCES, ids=["-".join(s) for s in SEQUENCES])
 def test_any_sequence_of_fmus_in_one_fmpy_process(fmus, references, seq):
+    _available(fmus, seq)
     runs = _runs("fmpy", [fmus[k] for k in seq])
     for k, run in zip(seq, runs):
         _assert_same(run["outputs"], references[k], f"fmpy {'-'.join(seq)}: {k}", tol=0.0)
 
 
-@pytest.mark.parametrize("seq", SEQUENCES[:2], ids=["-".join(s) for s in SEQUENCES[:2]])
+@pytest.mark.parametrize("seq", LIBCOSIM, ids=["-".join(s) for s in LIBCOSIM])
 def test_any_sequence_of_fmus_in_one_libcosim_process(fmus, references, seq):
     """libcosim records after each step (no t0 sample): compared with fmpy's from t1 on."""
+    _available(fmus, seq)
     runs = _runs("libcosim", [fmus[k] for k in seq])
     for k, run in zip(seq, runs):
         _assert_same(run["outputs"], references[k], f"libcosim {'-'.join(seq)}: {k}", shift=1, tol=1e-12)

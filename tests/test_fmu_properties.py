@@ -43,6 +43,7 @@ from latobs import packaging
 pytestmark = pytest.mark.slow
 RUNNER = Path(__file__).with_name("conformance_runs.py")
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
+from conftest import FMU_VARIANTS  # noqa: E402  (every FMU, pythonfmu and native C)
 #: examples per FMU and property; LATOBS_PROPERTY_EXAMPLES=500 for a deeper (local) search
 EXAMPLES = int(os.environ.get("LATOBS_PROPERTY_EXAMPLES", "25"))
 SETTINGS = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
@@ -96,10 +97,11 @@ class Worker:
         self.proc = None
 
 
-@pytest.fixture(scope="module", params=FMU_NAMES)
+@pytest.fixture(scope="module", params=FMU_VARIANTS)
 def worker(request, built_fmus):
-    """The worker of one FMU of the session build, shared by the properties of that FMU."""
-    w = Worker(built_fmus.path(request.param))
+    """The worker of one FMU of the session build (pythonfmu or native C), shared by the properties
+    of that FMU."""
+    w = Worker(built_fmus.get(*request.param))
     yield w
     w.close()
 
@@ -265,8 +267,9 @@ def _steady_run(w: Worker, h: float, duration: float) -> dict:
 
 
 @pytest.mark.parametrize("worker", [
-    pytest.param(n, marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=UNBOUNDED_AT_LONG_STEPS[n]))
-    if n in UNBOUNDED_AT_LONG_STEPS else n for n in FMU_NAMES], indirect=True)
+    pytest.param(v.values[0], id=v.id, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
+                                                               reason=UNBOUNDED_AT_LONG_STEPS[v.values[0][0]]))
+    if v.values[0][0] in UNBOUNDED_AT_LONG_STEPS else v for v in FMU_VARIANTS], indirect=True)
 def test_outputs_stay_bounded_at_long_communication_steps(worker):
     """Constant realistic inputs for 10 s: at a 0.1 s step (the top of the range above) every step is
     either accepted with outputs within 10 times (plus 1) of the largest seen at 10 ms, or refused."""

@@ -38,6 +38,7 @@ Observer designs
 from __future__ import annotations
 
 import ctypes
+import itertools
 import os
 import shutil
 import tempfile
@@ -168,6 +169,21 @@ def _unit_of(v) -> str | None:
     return u or None
 
 
+_INSTANCES: dict[int, "FmuInstance"] = {}   # componentEnvironment id -> live instance
+_ENV_IDS = itertools.count(1)
+
+
+def _dispatch_log(env, instance_name, status, category, message):
+    """The one logger of every FmuInstance (see FmuInstance.instantiate): to the instance whose id
+    is ``env``; a message of an instance already closed is dropped."""
+    f = _INSTANCES.get(env or 0)
+    if f is not None:
+        f._log(env, instance_name, status, category, message)
+
+
+_DISPATCH_LOG = fmi2CallbackLoggerTYPE(_dispatch_log)   # module-level: lives as long as the process
+
+
 class FmuInstance:
     """An extracted FMU: model description, slave, prebuilt value-reference arrays, logger.
 
@@ -222,11 +238,18 @@ class FmuInstance:
 
     def instantiate(self):
         self.callbacks = fmi2CallbackFunctions()
-        self._logger_ref = fmi2CallbackLoggerTYPE(self._log)  # keep alive while the FMU lives
-        self.callbacks.logger = self._logger_ref
+        # fmpy's native logger proxy (it formats the printf-style variadic messages) keeps ONE
+        # process-wide pointer to the last logger registered: every FMU's messages reach the
+        # logger of the last instance, and a freed one crashes the host at the next message. So
+        # the logger is one process-wide dispatcher, never freed, that routes each message to its
+        # instance by componentEnvironment, an id per instance.
+        self._env = next(_ENV_IDS)
+        _INSTANCES[self._env] = self
+        self.callbacks.componentEnvironment = self._env
+        self.callbacks.logger = _DISPATCH_LOG
         self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:  # formats the printf-style variadic messages before they reach _log
+        try:
             from fmpy.logging import addLoggerProxy
 
             addLoggerProxy(ctypes.byref(self.callbacks))
@@ -354,6 +377,7 @@ class FmuInstance:
             except Exception:
                 pass
         self.slave = None
+        _INSTANCES.pop(getattr(self, "_env", None), None)
         if self._owned_dir:
             shutil.rmtree(self.unzipdir, ignore_errors=True)
 
@@ -461,13 +485,18 @@ class CoSimulation:
     observer_parameters {label: {parameter name: value}} likewise for observers
     vehicle            vehicle name or Vehicle, used by the scenario for its amplitudes
     progress           show a tqdm progress bar
+    fast               the step loop on preallocated buffers (:func:`_fast_loop`, default), or False:
+                       the plain loop through fmpy's ``FMU2Slave`` wrappers (identical results, the
+                       reference of the fast one)
     """
 
     def __init__(self, scenario: Scenario | str, plant_fmu: str | os.PathLike,
                  observer_fmus: Mapping[str, str | os.PathLike] | None = None, dt: float = 0.005,
                  noise: NoiseSpec | Mapping | None = None, seed: int = 0,
                  plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
-                 progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None):
+                 progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None,
+                 fast: bool = True):
+        self.fast = bool(fast)
         self.scenario = get_scenario(scenario)
         self.plant_path = Path(plant_fmu)
         self.observer_paths = {str(k): Path(v) for k, v in (observer_fmus or {}).items()}
@@ -618,7 +647,9 @@ class CoSimulation:
             from tqdm import tqdm
 
             steps = tqdm(steps, desc=f"{sc.name}", unit="step", leave=False)
-        for k in steps:
+        fast = self.fast and _fast_loop(steps, t, dt, plant, plant_in, scen, observers, obs_in, noise_arr, bus,
+                                        measured, obs_rec)
+        for k in (() if fast else steps):
             tk = float(t[k])
             call(plant, "setting inputs", k, plant.set_inputs, {x: scen[x][k] for x in plant_in})
             for lab, f in observers.items():
@@ -660,8 +691,145 @@ def run(scenario: Scenario | str, plant_fmu: str | os.PathLike,
         observer_fmus: Mapping[str, str | os.PathLike] | None = None, dt: float = 0.005,
         noise: NoiseSpec | Mapping | None = None, seed: int = 0,
         plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
-        progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None) -> SimResult:
+        progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None,
+        fast: bool = True) -> SimResult:
     """Co-simulate ``plant_fmu`` and ``observer_fmus`` on ``scenario``; see :class:`CoSimulation`."""
     return CoSimulation(scenario, plant_fmu, observer_fmus, dt=dt, noise=noise, seed=seed,
                         plant_parameters=plant_parameters, vehicle=vehicle, progress=progress,
-                        observer_parameters=observer_parameters).run()
+                        observer_parameters=observer_parameters, fast=fast).run()
+
+
+# ------------------------------------------------------------------------------------------------
+# the fast master: fmpy's loaded libraries, called on preallocated buffers
+# ------------------------------------------------------------------------------------------------
+_GETSET = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+_DOSTEP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
+
+
+class _FastIO:
+    """One FMU's fmi2SetReal/DoStep/GetReal/GetInteger of the library fmpy loaded, called with
+    raw addresses (rows of numpy arrays) instead of fmpy's checked wrappers: the same calls, without
+    the per-call Python conversions, which dominate a step of a native FMU."""
+
+    def __init__(self, f: FmuInstance):
+        dll = f.slave.dll
+        self.f = f
+        self.c = f.slave.component
+        self.set_real = _GETSET(("fmi2SetReal", dll))
+        self.get_real = _GETSET(("fmi2GetReal", dll))
+        self.get_integer = _GETSET(("fmi2GetInteger", dll))
+        self.do_step = _DOSTEP(("fmi2DoStep", dll))
+        reals = [v for v in f.outputs if v.type == "Real"]
+        ints = [v for v in f.outputs if v.type in ("Integer", "Enumeration")]
+        self.out_names, self.int_names = [v.name for v in reals], [v.name for v in ints]
+        self.out_vr = np.array([v.valueReference for v in reals], dtype=np.uint32)
+        self.int_vr = np.array([v.valueReference for v in ints], dtype=np.uint32)
+
+    @staticmethod
+    def usable(plant: FmuInstance, observers: Mapping[str, FmuInstance], obs_in) -> bool:
+        """Real inputs, Real/Integer outputs, observers wired to Real plant outputs or scenario
+        signals only (what latobs' FMUs have); else the plain loop."""
+        fmus = (plant, *observers.values())
+        plant_ints = {v.name for v in plant.outputs if v.type != "Real"}
+        return (all(v.type == "Real" for f in fmus for v in f.inputs)
+                and not any(v.type == "Boolean" for f in fmus for v in f.outputs)
+                and not any(x in plant_ints for names in obs_in.values() for x in names))
+
+    def fail(self, what: str, tk: float):
+        """A call returned more than fmi2Warning: the plain loop's error (fmpy's status is in the log)."""
+        raise CoSimulationError(f"{self.f.describe()} failed in {what} at t = {tk:.6g} s. Last log messages: "
+                                f"{self.f.log_tail()}")
+
+
+def _rows(a: np.ndarray) -> tuple[int, int]:
+    """(address of row 0, bytes per row) of a C-contiguous 2-D array."""
+    return a.ctypes.data, a.strides[0]
+
+
+def _fast_loop(steps, t, dt, plant, plant_in, scen, observers, obs_in, noise_arr, bus, measured, obs_rec) -> bool:
+    """The loop of ``CoSimulation._simulate`` on preallocated buffers, with the same calls in the
+    same order and the same arithmetic (a measured value is the bus value plus its noise sample),
+    so bit-identical results (``tests/test_validation.py`` checks it): every FMU's inputs and
+    outputs live in float64 (Integer outputs: int32) matrices, one row per communication point,
+    passed to the FMU by address; the plant's inputs are the scenario's matrix, an observer's input
+    columns are its scenario signals (measured, computed once) and, filled after each step from
+    the plant's output row, its plant outputs. Returns False, having called nothing, where it does
+    not apply (:meth:`_FastIO.usable`)."""
+    if not _FastIO.usable(plant, observers, obs_in):
+        return False
+    n = len(t)
+    p = _FastIO(plant)
+    p_in = np.ascontiguousarray(np.column_stack([np.asarray(scen[x], dtype=float) for x in plant_in]))
+    p_out = np.zeros((n, len(p.out_names)))
+    p_int = np.zeros((n, max(1, len(p.int_names))), dtype=np.int32)
+    p_in_vr = np.array([plant.vars[x].valueReference for x in plant_in], dtype=np.uint32)
+    p_out[0] = [bus[x][0] for x in p.out_names]
+    p_int[0, :len(p.int_names)] = [bus[x][0] for x in p.int_names]
+    col = {x: j for j, x in enumerate(p.out_names)}
+    obs = []
+    for lab, f in observers.items():
+        o = _FastIO(f)
+        names = obs_in[lab]
+        o_in = np.zeros((n, len(names)))
+        from_plant = [(c, col[x]) for c, x in enumerate(names) if x in col]
+        for c, x in enumerate(names):
+            if x not in col:                                   # a scenario signal: measured once
+                o_in[:, c] = bus[x] + noise_arr[x] if x in noise_arr else bus[x]
+            o_in[0, c] = measured[x][0]
+        cols = np.array([c for c, _ in from_plant], dtype=np.intp)
+        src = np.array([j for _, j in from_plant], dtype=np.intp)
+        noise = (np.column_stack([noise_arr[names[c]] if names[c] in noise_arr else np.zeros(n) for c in cols])
+                 if len(cols) else np.zeros((n, 0)))
+        o_out = np.zeros((n, len(o.out_names)))
+        o_int = np.zeros((n, max(1, len(o.int_names))), dtype=np.int32)
+        for j, x in enumerate(o.out_names):
+            o_out[0, j] = obs_rec[lab][x][0]
+        for j, x in enumerate(o.int_names):
+            o_int[0, j] = obs_rec[lab][x][0]
+        in_vr = np.array([f.vars[x].valueReference for x in names], dtype=np.uint32)
+        obs.append((lab, o, names, o_in, cols, src, noise, o_out, o_int, in_vr))
+
+    pc, p_set, p_step, p_get, p_geti = p.c, p.set_real, p.do_step, p.get_real, p.get_integer
+    pin_a, pin_s = _rows(p_in)
+    pout_a, pout_s = _rows(p_out)
+    pint_a, pint_s = _rows(p_int)
+    npin, npout, npint = len(plant_in), len(p.out_names), len(p.int_names)
+    pin_vr, pout_vr, pint_vr = p_in_vr.ctypes.data, p.out_vr.ctypes.data, p.int_vr.ctypes.data
+    fast_obs = [(o.c, o.set_real, o.do_step, o.get_real, o.get_integer, *_rows(o_in), len(names), in_vr.ctypes.data,
+                 *_rows(o_out), len(o.out_names), o.out_vr.ctypes.data, *_rows(o_int), len(o.int_names),
+                 o.int_vr.ctypes.data, o_in, cols, src, noise, o)
+                for lab, o, names, o_in, cols, src, noise, o_out, o_int, in_vr in obs]
+    for k in steps:
+        tk = float(t[k])
+        k1 = k + 1
+        if p_set(pc, pin_vr, npin, pin_a + k * pin_s) > 1:
+            p.fail("setting inputs", tk)
+        for (c, set_, _s, _g, _gi, ia, is_, ni, ivr, *_rest, o) in fast_obs:
+            if set_(c, ivr, ni, ia + k * is_) > 1:
+                o.fail("setting inputs", tk)
+        if p_step(pc, tk, dt, 1) > 1:
+            p.fail("doStep", tk)
+        for (c, _set, step, *_rest, o) in fast_obs:
+            if step(c, tk, dt, 1) > 1:
+                o.fail("doStep", tk)
+        if p_get(pc, pout_vr, npout, pout_a + k1 * pout_s) > 1 or (
+                npint and p_geti(pc, pint_vr, npint, pint_a + k1 * pint_s) > 1):
+            p.fail("getting outputs", t[k1])
+        for (c, _set, _step, get, geti, _ia, _is, _ni, _ivr, oa, os_, no, ovr, ia2, is2, nint, ivr2,
+             o_in, cols, src, noise, o) in fast_obs:
+            if len(cols):
+                o_in[k1, cols] = p_out[k1, src] + noise[k1] if noise.shape[1] else p_out[k1, src]
+            if get(c, ovr, no, oa + k1 * os_) > 1 or (nint and geti(c, ivr2, nint, ia2 + k1 * is2) > 1):
+                o.fail("getting outputs", t[k1])
+    for j, x in enumerate(p.out_names):
+        bus[x][:] = p_out[:, j]
+    for j, x in enumerate(p.int_names):
+        bus[x][:] = p_int[:, j]
+    for x in measured:
+        measured[x][:] = bus[x] + noise_arr[x] if x in noise_arr else bus[x]
+    for lab, o, names, o_in, cols, src, noise, o_out, o_int, in_vr in obs:
+        for j, x in enumerate(o.out_names):
+            obs_rec[lab][x][:] = o_out[:, j]
+        for j, x in enumerate(o.int_names):
+            obs_rec[lab][x][:] = o_int[:, j]
+    return True

@@ -675,7 +675,8 @@ class RandomManoeuvre(Scenario):
         vx = v0 + (v1 - v0) * _cosine_blend(t / self.duration)
         shape = sum(wi * np.sin(2 * np.pi * f * t + ph) for wi, f, ph in zip(w, freqs, phases))
         shape = shape * _cosine_blend(t / 0.5)          # start from straight driving
-        gain = np.array([steer_for_ay(vehicle, float(v), self.max_ay) for v in vx])
+        veh = _vehicle(vehicle)                          # loaded once, not once per sample
+        gain = np.array([steer_for_ay(veh, float(v), self.max_ay) for v in vx])
         return {"delta": gain * shape, "vx": vx, "bank_angle": np.zeros_like(t)}
 
     def _derived(self, vehicle):

@@ -1,0 +1,1134 @@
+/*
+ * interval_observer.c - paper 001's switched interval observer (Ifqir, Ichalal, Ait-Oufroukh,
+ * Mammar, ACC 2020), eq. (23), with guaranteed bounds between the communication points; the native
+ * twin of fmu_src/interval_observer.py (read its module docstring first: this file implements the
+ * same steps, in the same floating-point order, so that both give the same bounds). C99, libm.
+ *
+ * Model (eq. 9, ERRATA 001): x = [vy (m/s), r (rad/s), x3 = ay (m/s^2), x4 (rad/s^2)],
+ *     x' = (A0 + vx A1 + dA) x + vx (B1 + dB1) delta,  y = [r, ay] = C x,
+ * dA, dB1 in the elementwise bounds of the stiffness box (eq. 18). Mode j (eq. 44: speed bands)
+ * has the gains N, E, J, H, P = I - E C of eq. (23)/(30)/(33) (model_data.h, IV_*).
+ *
+ * Co-simulation (the runtime's ``step``; the observer runs ONE STEP BEHIND the published box):
+ *  1. measurement intersection of the published box with [y - nu, y + nu]; an empty one (beyond
+ *     IV_CONSISTENCY_TOL) sets consistent = 0 and restarts the bounds (one warning per episode);
+ *  2. correction of the previous step (eq. 23 exactly discretised with exp(N s) >= 0: ``correct``);
+ *  3. mode of vx (eq. 44; nearest mode outside the grid, one warning per excursion); |vx| < vx_hold
+ *     freezes everything (outputs held, one warning per entry, a restart at the resumption);
+ *  4. a priori enclosure T of x over the step (``enclose``, else the comparison bound
+ *     ``comparison_enclosure``, one warning per episode; substeps when h rho(|A|) > IV_SUBSTEP_RHO_H);
+ *  5. the predicted box at t + h (``predict``), published; its correction waits for y(t + h);
+ *  6. outputs: vy, beta = atan(vy / vx), r, and the axle forces by eq. (8) inverted (eq. 45, with
+ *     the lower bound of Fyr from the UPPER bound of x4: ERRATA 001).
+ * The step maps (Phi, Gam, Gam1, Gam2) of (mode, h) are the runtime's ``phi_gamma``: from the
+ * emitter for the default step IV_H0, otherwise computed here by the same algorithm; the
+ * correction's coefficients derived from them are cached per mode (one step size at a time).
+ * A step whose step maps are not finite (h or |vx| near the double range) or that would need more
+ * than MAX_SUBSTEPS enclosure substeps (h > ~1000 s) is refused with an error, the state
+ * unchanged; there the Python runtime raises (OverflowError) or runs for minutes.
+ *
+ * Model exchange: the paper's continuous-time observer eq. (23) itself,
+ *     xi_up' = N xi_up + J y + H delta + Omega_up,   xi_lo' = N xi_lo + J y + H delta + Omega_lo,
+ * states xi_lo, xi_up (bounds of xi = P x of the active mode), x in [xi_lo + E y, xi_up + E y]
+ * (+-|E| nu), Omega by eq. (24) from the omega bounds of eq. (25) over that box (the speed mismatch
+ * at the measured vx, the input part exactly, the structured stiffness part: the same bounds as the
+ * co-simulation's). It has no measurement intersection, so no consistency test (consistent = 1) and
+ * no restart but at the resumption from a freeze, and no one-step delay. The discrete state changes
+ * only in model_me_event_update: a mode switch re-bases xi := hull of P_new x over the box (eq. 20;
+ * the bounds of x stay continuous, ERRATA 001), a freeze holds the bounds. Event indicators (of the
+ * current discrete state: mode j, frozen or not):
+ *     z0 = vx - (edges[j] - ME_HYST)   (j > 0, else 1)    band j left downward
+ *     z1 = edges[j + 1] - vx           (j < last, else 1) band j left upward
+ *     z2 = |vx| - (vx_hold - ME_HYST) running, vx_hold - |vx| frozen: freeze / resume
+ *     z3 = vx - (edges[0] - ME_HYST), z4 = edges[last] + ME_HYST - vx: the design grid (warning)
+ * The co-simulation's thresholds, moved ME_HYST = 1e-6 m/s outward on the sides its rule includes
+ * (an event located exactly on a threshold must switch; a constant vx on one must not).
+ */
+#include <math.h>
+#include <string.h>
+
+#include "model.h"
+#include "model_data.h"
+
+#define NX 4                       /* states */
+#define NB (2 * NX)                /* a box: [lower0..3, upper0..3] */
+#define NY 2                       /* measured states */
+#define N_MODES IV_N_MODES
+#define N_MAPS 4                   /* Phi, Gam, Gam1, Gam2 */
+#define MAX_SUBSTEPS 100000        /* enclosure substeps of one step (h rho / IV_SUBSTEP_RHO_H) */
+#define ME_HYST 1e-6               /* m/s, see model_me_event_indicators */
+
+static const int MEAS[NY] = {1, 2};        /* y = [r, ay] = [x2, x3] (the runtime checks model.C) */
+static const int UNMEAS[NY] = {0, 3};
+#define ROW_AY 2                   /* rows of the stiffness part (x3', x4'), eq. (9) */
+#define ROW_YAW_ACC 3
+
+/* The correction of one (mode, h) (the runtime's ``_source_correct`` coefficients): with
+ * W1 = Gam1/h, W0 = Gam - W1, W2 = |h Gam1/2 - Gam2|, W3 = 2 W2/h (all >= 0) */
+typedef struct {
+    double h;                      /* s; 0: empty */
+    int nsub;                      /* enclosure substeps of hs = h / nsub */
+    double hs;
+    double phi[NX][NX];            /* exp(N h) */
+    double w0j[NX][NY], aw0j[NX][NY], w1j[NX][NY], aw1j[NX][NY];   /* W0 J, |W0 J|, W1 J, |W1 J| */
+    double w2j_neg[NX][NY];        /* -W2 J on the smooth measured rows (else 0) */
+    double w2aj[NX][NY];           /* W2 |J| on the smooth measured rows (else 0) */
+    double w3aj2[NX][NY];          /* 2 W3 |J| on the other measured rows (else 0) */
+    double gp[NX][NX], gap[NX][NX], g1p[NX][NX], g1ap[NX][NX];      /* Gam P, Gam |P|, Gam1 P, Gam1 |P| */
+    double gh[NX];                 /* Gam H */
+} Core;
+
+/* the step awaiting its correction (the runtime's ``_pending``) */
+typedef struct {
+    int mode;
+    double h, vx, d;               /* s, m/s, rad */
+    double X[NB];                  /* the box at its start */
+    double xi[NB];                 /* the xi bounds at its start (+-inf: none) */
+    double Fb[NB];                 /* the hull of F over T */
+} Pending;
+
+/* everything a step may change (restored when a step is refused) */
+typedef struct {
+    double box[NB];                /* the published bounds of x */
+    double xi[NB];                 /* xi bounds at the current time ... */
+    int xi_mode;                   /* ... for the P of this mode (-1: none) */
+    int has_pending;
+    Pending p;
+    double vx_pub;                 /* m/s, the speed of the published beta bounds */
+    int mode;                      /* 0-based */
+    int consistent;
+    int started, holding, outside, inconsistent, fallback_episode;
+    double me_xi[NB];              /* model exchange: [xi_lo; xi_up] of eq. (23) */
+} State;
+
+struct Model {
+    double vx_hold;                /* m/s */
+    State s;
+    Core core[N_MODES];            /* cache, one step size per mode */
+};
+
+size_t model_size(void)
+{
+    return sizeof(Model);
+}
+
+/* ------------------------------------------------------------------ helpers */
+/* Python's min(a, b) and max(a, b) (the first argument unless the second is strictly beyond) */
+static double py_min(double a, double b)
+{
+    return b < a ? b : a;
+}
+
+static double py_max(double a, double b)
+{
+    return b > a ? b : a;
+}
+
+/* s + sum_j c[j] x[j] over the NONZERO c[j], left to right: the sums the runtime generates
+ * (``_lin``/``_sum`` skip zero coefficients and chain the terms onto the running sum) */
+static double acc(double s, const double *c, const double *x, int n)
+{
+    for (int j = 0; j < n; j++)
+        if (c[j] != 0.0) s += c[j] * x[j];
+    return s;
+}
+
+/* s + sum_j |c[j]| x[j] over the nonzero c[j] */
+static double acc_abs(double s, const double *c, const double *x, int n)
+{
+    for (int j = 0; j < n; j++)
+        if (c[j] != 0.0) s += fabs(c[j]) * x[j];
+    return s;
+}
+
+static int all_finite(const double *x, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+/* midpoint and radius of a box */
+static void mid_rad(const double *X, double c[NX], double r[NX])
+{
+    for (int j = 0; j < NX; j++) {
+        c[j] = (X[j] + X[NX + j]) * 0.5;
+        r[j] = (X[NX + j] - X[j]) * 0.5;
+    }
+}
+
+static void measurements(const double *u, double y[NY])
+{
+    y[0] = u[IN_yaw_rate];
+    y[1] = u[IN_ay];
+}
+
+static int row_nonzero(const double *row)
+{
+    for (int j = 0; j < NX; j++)
+        if (row[j] != 0.0) return 1;
+    return 0;
+}
+
+/* A0 and A1 without the diagonal of the damped rows (``_damped_rows``: integrated exactly) */
+static double a0u(int i, int j)
+{
+    return (i == j && IV_DAMPED[i]) ? 0.0 : IV_A0[i][j];
+}
+
+static double a1u(int i, int j)
+{
+    return (i == j && IV_DAMPED[i]) ? 0.0 : IV_A1[i][j];
+}
+
+/* -d_i(vx) = -(A0_ii + vx A1_ii): the known decay rate of a damped row (1/s) */
+static double decay(int i, double vx)
+{
+    return -(IV_A0[i][i] + vx * IV_A1[i][i]);
+}
+
+/* ------------------------------------------------------------------ Lemma 3 and the stiffness part */
+/* [al, au] * [l, u] (``_product_terms``, "hull"): the exact interval product, by the signs of the
+ * constant factor; symmetric (up to rounding): +-a max(|l|, |u|) */
+static void product_hull(double al, double au, double l, double u, double *lo, double *hi)
+{
+    if (al == au) {
+        *lo = al >= 0.0 ? al * l : al * u;
+        *hi = al >= 0.0 ? al * u : al * l;
+    } else if (al >= 0.0) {
+        *lo = l >= 0.0 ? l * al : l * au;
+        *hi = u >= 0.0 ? u * au : u * al;
+    } else if (au <= 0.0) {
+        *lo = u >= 0.0 ? u * al : u * au;
+        *hi = l >= 0.0 ? l * au : l * al;
+    } else if (fabs(al + au) <= 1e-9 * py_max(-al, au)) {
+        double a = py_max(-al, au), mag = u > -l ? u : -l;
+        *lo = -a * mag;
+        *hi = a * mag;
+    } else {
+        *lo = py_min(l * au, u * al);
+        *hi = py_max(l * al, u * au);
+    }
+}
+
+/* An asymmetric stiffness box: the structured rows [rl, ru] intersected with the elementwise bound
+ * [dA][x] + vd [dB1] (exact interval products entry by entry); both contain the true value. */
+static void intersect_elementwise(const double *l, const double *u, int with_input, double vd,
+                                  double rl[2], double ru[2])
+{
+    for (int k = 0; k < 2; k++) {
+        int i = ROW_AY + k;
+        double el = 0.0, eu = 0.0, pl, pu;
+        for (int j = 0; j < NX; j++) {
+            if (IV_DA_LO[i][j] == 0.0 && IV_DA_UP[i][j] == 0.0) continue;
+            product_hull(IV_DA_LO[i][j], IV_DA_UP[i][j], l[j], u[j], &pl, &pu);
+            el += pl;
+            eu += pu;
+        }
+        double bl = IV_DB1_LO[i], bu = IV_DB1_UP[i];
+        if (with_input && (bl != 0.0 || bu != 0.0)) {
+            el += vd * (vd >= 0.0 ? bl : bu);
+            eu += vd * (vd >= 0.0 ? bu : bl);
+        }
+        double sl = rl[k], su = ru[k];
+        if (el > sl) sl = el;
+        if (eu < su) su = eu;
+        if (sl > su) {              /* rounding only: both contain the value */
+            double t = sl;
+            sl = su;
+            su = t;
+        }
+        rl[k] = sl;
+        ru[k] = su;
+    }
+}
+
+/* Adds to lo/hi (rows x3', x4') the bound of the stiffness part dA(dc) x + vx dB1(dc) delta over x in
+ * [l, u] and the stiffness box, by its structure (``_emit_structured``): with the slip angles of
+ * eq. (4) multiplied out, uf = vx af = vx delta - x1 - lf x2, ur = vx ar = -x1 + lr x2,
+ *     dA x + vx dB1 delta = [0, 0, (p + q)/(m sigma), (lf p - lr q)/(Iz sigma)], p = dcf uf, q = dcr ur,
+ * by interval arithmetic (exact: p and q are independent). with_input = 0: dA x alone. */
+static void stiffness(const double *l, const double *u, int with_input, double vd, double *lo, double *hi)
+{
+    double ufl = (with_input ? vd - u[0] : -u[0]) - IV_LF * u[1];
+    double ufu = (with_input ? vd - l[0] : -l[0]) - IV_LF * l[1];
+    double url = IV_LR * l[1] - u[0];
+    double uru = IV_LR * u[1] - l[0];
+    double pl, pu, ql, qu;
+    product_hull(IV_DCF[0], IV_DCF[1], ufl, ufu, &pl, &pu);
+    product_hull(IV_DCR[0], IV_DCR[1], url, uru, &ql, &qu);
+    double rl[2] = {IV_K3 * (pl + ql), IV_K4F * pl - IV_K4R * qu};
+    double ru[2] = {IV_K3 * (pu + qu), IV_K4F * pu - IV_K4R * ql};
+    if (!IV_STIFF_SYMMETRIC) intersect_elementwise(l, u, with_input, vd, rl, ru);
+    for (int k = 0; k < 2; k++) {
+        lo[ROW_AY + k] += rl[k];
+        hi[ROW_AY + k] += ru[k];
+    }
+}
+
+/* ------------------------------------------------------------------ the model's right-hand side */
+/* G (``_source_G``): the hull [Fg[0..3], Fg[4..7]] of A(vx, c) x + B(vx, c) delta over x in the box
+ * X and c in the stiffness box, WITHOUT the diagonal terms of the damped rows; the point matrix
+ * A0 + vx A1 by eq. (20) in midpoint-radius form, plus the disturbance bound w. */
+static void G(double vx, double d, const double X[NB], double Fg[NB])
+{
+    double avx = vx >= 0.0 ? vx : -vx, vd = vx * d, c[NX], r[NX];
+    mid_rad(X, c, r);
+    for (int i = 0; i < NX; i++) {
+        double m = 0.0, m1 = 0.0, w = 0.0, w1 = 0.0;
+        int has1 = 0, hasr1 = 0;
+        for (int j = 0; j < NX; j++) {
+            double a0 = a0u(i, j), a1 = a1u(i, j);
+            if (a0 != 0.0) m += a0 * c[j];
+            if (a1 != 0.0) {
+                m1 += a1 * c[j];
+                has1 = 1;
+            }
+            if (a0 != 0.0 && a1 == 0.0) w += fabs(a0) * r[j];
+            if (a0 == 0.0 && a1 != 0.0) {
+                w1 += fabs(a1) * r[j];
+                hasr1 = 1;
+            }
+        }
+        if (has1) m += vx * m1;
+        if (hasr1) w += avx * w1;
+        for (int j = 0; j < NX; j++)
+            if (a0u(i, j) != 0.0 && a1u(i, j) != 0.0) w += fabs(a0u(i, j) + vx * a1u(i, j)) * r[j];
+        if (IV_B1[i] != 0.0) m += vd * IV_B1[i];
+        if (IV_W[i] != 0.0) w += IV_W[i];
+        Fg[i] = m - w;
+        Fg[NX + i] = m + w;
+    }
+    stiffness(X, X + NX, 1, vd, Fg, Fg + NX);
+}
+
+/* F (the runtime's ``F``): G plus the damped rows' diagonal terms d_i(vx) [x_i] */
+static void F_hull(double vx, double d, const double X[NB], double F[NB])
+{
+    G(vx, d, X, F);
+    for (int i = 0; i < NX; i++) {
+        if (!IV_DAMPED[i]) continue;
+        double t = IV_A0[i][i] + vx * IV_A1[i][i];
+        F[i] += t >= 0.0 ? t * X[i] : t * X[NX + i];
+        F[NX + i] += t >= 0.0 ? t * X[NX + i] : t * X[i];
+    }
+}
+
+/* ------------------------------------------------------------------ step maps */
+/* (Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, ...) for a Metzler N with N + eta I >= 0
+ * (the runtime's ``phi_gamma``, nb = order + 1 blocks): exp of the nonnegative block matrix
+ * [[N + eta I, I, ..], [0, eta I, I, ..], ..] h by scaling (||X||_inf <= 1/2), Horner's Taylor
+ * series of degree 16 and squaring, times exp(-eta h). 0, or -1 if the norm is not finite or an
+ * entry is negative (the runtime raises). */
+static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX])
+{
+    enum { MM = N_MAPS * NX };
+    int mm = nb * NX;
+    double M[MM][MM], E[MM][MM], P[MM][MM];
+    memset(M, 0, sizeof M);
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) M[i][j] = (N[i][j] + (i == j ? eta : 0.0)) * h;
+    for (int b = 1; b < nb; b++)
+        for (int i = 0; i < NX; i++) {
+            M[(b - 1) * NX + i][b * NX + i] = h;
+            M[b * NX + i][b * NX + i] = eta * h;
+        }
+    double norm = 0.0;
+    for (int i = 0; i < mm; i++) {
+        double row = 0.0;
+        for (int j = 0; j < mm; j++) {
+            if (!(M[i][j] >= 0.0)) return -1;
+            row += M[i][j];
+        }
+        norm = py_max(norm, row);
+    }
+    if (!(norm <= 1e300)) return -1;
+    int s = norm > 0.5 ? (int)ceil(log2(norm / 0.5)) : 0;
+    if (s < 0) s = 0;
+    double scale = ldexp(1.0, -s);
+    for (int i = 0; i < mm; i++)
+        for (int j = 0; j < mm; j++) {
+            M[i][j] *= scale;
+            E[i][j] = i == j ? 1.0 : 0.0;
+        }
+    for (int k = 16; k > 0; k--) {          /* Horner: I + X/1 (I + X/2 (... (I + X/16))) */
+        for (int i = 0; i < mm; i++)
+            for (int j = 0; j < mm; j++) {
+                double t = 0.0;
+                for (int q = 0; q < mm; q++) t += M[i][q] * E[q][j];
+                P[i][j] = t;
+            }
+        for (int i = 0; i < mm; i++)
+            for (int j = 0; j < mm; j++) E[i][j] = (i == j ? 1.0 : 0.0) + P[i][j] / k;
+    }
+    for (int q = 0; q < s; q++) {
+        for (int i = 0; i < mm; i++)
+            for (int j = 0; j < mm; j++) {
+                double t = 0.0;
+                for (int k = 0; k < mm; k++) t += E[i][k] * E[k][j];
+                P[i][j] = t;
+            }
+        memcpy(E, P, sizeof E);
+    }
+    double damp = exp(-eta * h);
+    for (int b = 0; b < nb; b++)
+        for (int i = 0; i < NX; i++)
+            for (int j = 0; j < NX; j++) out[b][i][j] = E[i][b * NX + j] * damp;
+    return 0;
+}
+
+/* C = A B for A (NX x NX) and B (NX x NY), sums from the left (the runtime's ``_matmul``) */
+static void mul_nxy(const double A[NX][NX], const double B[NX][NY], double C[NX][NY])
+{
+    for (int i = 0; i < NX; i++)
+        for (int c = 0; c < NY; c++) {
+            double t = 0.0;
+            for (int k = 0; k < NX; k++) t += A[i][k] * B[k][c];
+            C[i][c] = t;
+        }
+}
+
+static void mul_nxx(const double A[NX][NX], const double B[NX][NX], double C[NX][NX])
+{
+    for (int i = 0; i < NX; i++)
+        for (int c = 0; c < NX; c++) {
+            double t = 0.0;
+            for (int k = 0; k < NX; k++) t += A[i][k] * B[k][c];
+            C[i][c] = t;
+        }
+}
+
+/* the correction coefficients of (mode, h) from its maps (``_source_correct``) */
+static void core_fill(Core *k, int mode, double h, const double maps[N_MAPS][NX][NX])
+{
+    const double (*Gam)[NX] = maps[1], (*Gam1)[NX] = maps[2], (*Gam2)[NX] = maps[3];
+    const double (*J)[NY] = IV_J[mode], (*P)[NX] = IV_P[mode];
+    double W0[NX][NX], W1[NX][NX], W2[NX][NX], W3[NX][NX], aJ[NX][NY], aP[NX][NX];
+    double W0J[NX][NY], W1J[NX][NY], W2J[NX][NY], W2aJ[NX][NY], W3aJ[NX][NY];
+    for (int i = 0; i < NX; i++) {
+        for (int j = 0; j < NX; j++) {
+            W1[i][j] = Gam1[i][j] / h;
+            W0[i][j] = Gam[i][j] - W1[i][j];
+            W2[i][j] = fabs(h * Gam1[i][j] / 2 - Gam2[i][j]);
+            W3[i][j] = 2 * W2[i][j] / h;
+            aP[i][j] = fabs(P[i][j]);
+        }
+        for (int c = 0; c < NY; c++) aJ[i][c] = fabs(J[i][c]);
+    }
+    mul_nxy(W0, J, W0J);
+    mul_nxy(W1, J, W1J);
+    mul_nxy(W2, J, W2J);
+    mul_nxy(W2, aJ, W2aJ);
+    mul_nxy(W3, aJ, W3aJ);
+    for (int i = 0; i < NX; i++) {
+        for (int c = 0; c < NY; c++) {
+            int smooth = IV_SMOOTH[MEAS[c]];
+            k->w0j[i][c] = W0J[i][c];
+            k->aw0j[i][c] = fabs(W0J[i][c]);
+            k->w1j[i][c] = W1J[i][c];
+            k->aw1j[i][c] = fabs(W1J[i][c]);
+            k->w2j_neg[i][c] = smooth ? -W2J[i][c] : 0.0;
+            k->w2aj[i][c] = smooth ? W2aJ[i][c] : 0.0;
+            k->w3aj2[i][c] = smooth ? 0.0 : 2.0 * W3aJ[i][c];
+        }
+        double t = 0.0;
+        for (int j = 0; j < NX; j++) t += Gam[i][j] * IV_H[mode][j];
+        k->gh[i] = t;
+    }
+    memcpy(k->phi, maps[0], sizeof k->phi);
+    mul_nxx(Gam, P, k->gp);
+    mul_nxx(Gam, aP, k->gap);
+    mul_nxx(Gam1, P, k->g1p);
+    mul_nxx(Gam1, aP, k->g1ap);
+}
+
+/* The correction of (mode, h) (the runtime's ``_core``): cached; the enclosure's substeps hs = h /
+ * nsub with hs rho(|A|) <= IV_SUBSTEP_RHO_H at the band's top speed. NULL (an error logged) if
+ * its maps are not finite or it needs more than MAX_SUBSTEPS substeps. */
+static const Core *core_for(Model *m, int mode, double h, const Log *log)
+{
+    Core *k = &m->core[mode];
+    double maps[N_MAPS][NX][NX], nsub = ceil(h * IV_RHO[mode] / IV_SUBSTEP_RHO_H - 1e-9);
+    if (k->h == h) return k;
+    if (!(nsub <= MAX_SUBSTEPS)) {
+        log_event(log, LOG_ERROR, "step refused: h = %g s would need %g enclosure substeps (at most %d)", h, nsub,
+                  MAX_SUBSTEPS);
+        return NULL;
+    }
+    if (h == IV_H0) {
+        memcpy(maps, IV_MAPS_H0[mode], sizeof maps);
+    } else if (phi_gamma(IV_N[mode], h, IV_ETA[mode], N_MAPS, maps) != 0) {
+        log_event(log, LOG_ERROR, "step refused: no finite step map of mode %d for h = %g s", mode + 1, h);
+        return NULL;
+    }
+    core_fill(k, mode, h, maps);
+    k->nsub = nsub > 1.0 ? (int)nsub : 1;
+    k->hs = h / k->nsub;
+    k->h = h;
+    return k;
+}
+
+/* ------------------------------------------------------------------ a priori enclosure (step 4) */
+/* T(S) (``_emit_extents``): the enclosure of x over a substep hs from the box X and G's values Fg
+ * over S: a damped row with a = -d_i > 0 by the convex combination x_i(s) = x_i(0) +
+ * theta(s) (gbar/a - x_i(0)), th = -expm1(-a hs)/a; otherwise x_i(s) in x_i(0) + [0, hs] F_i(S). */
+static void extents(double hs, const double a[NX], const double th[NX], const double X[NB],
+                    const double Fg[NB], const double S[NB], double T[NB])
+{
+    for (int i = 0; i < NX; i++) {
+        double l = X[i], u = X[NX + i], gl = Fg[i], gu = Fg[NX + i], t;
+        if (IV_DAMPED[i] && a[i] > 0.0) {
+            t = gl - a[i] * l;
+            T[i] = t < 0.0 ? l + th[i] * t : l;
+            t = gu - a[i] * u;
+            T[NX + i] = t > 0.0 ? u + th[i] * t : u;
+        } else if (IV_DAMPED[i]) {
+            t = gl - a[i] * S[i];
+            T[i] = t < 0.0 ? l + hs * t : l;
+            t = gu - a[i] * S[NX + i];
+            T[NX + i] = t > 0.0 ? u + hs * t : u;
+        } else {
+            T[i] = gl < 0.0 ? l + hs * gl : l;
+            T[NX + i] = gu > 0.0 ? u + hs * gu : u;
+        }
+    }
+}
+
+/* The a priori enclosure T of x over [0, hs] from the box X (``_source_enclose``): S is accepted
+ * when T(S) lies in S (then x(s) is in T(S) for all s), starting from X extended by
+ * IV_ENCLOSURE_GROW times the extents of T(X), then by that factor times the never-shrinking
+ * extents of the last T(S); one refining pass T(T). 0, or -1 after IV_ENCLOSURE_TRIES tries. */
+static int enclose(double hs, double vx, double d, const double X[NB], double T[NB])
+{
+    double a[NX] = {0.0}, th[NX] = {0.0}, Fg[NB], S[NB], e[NB];
+    for (int i = 0; i < NX; i++) {
+        if (!IV_DAMPED[i]) continue;
+        a[i] = decay(i, vx);
+        th[i] = a[i] > 0.0 ? -expm1(-a[i] * hs) / a[i] : hs;
+    }
+    G(vx, d, X, Fg);
+    extents(hs, a, th, X, Fg, X, T);
+    for (int i = 0; i < NB; i++) e[i] = T[i] - X[i];
+    double grow = IV_ENCLOSURE_GROW;
+    for (int k = 0; k < IV_ENCLOSURE_TRIES; k++) {
+        int inside = 1;
+        for (int i = 0; i < NB; i++) S[i] = X[i] + grow * e[i];
+        G(vx, d, S, Fg);
+        extents(hs, a, th, X, Fg, S, T);
+        for (int i = 0; i < NX; i++) inside = inside && T[i] >= S[i] && T[NX + i] <= S[NX + i];
+        if (inside) {                 /* x(s) in T for all s, hence in T(T), a subset */
+            G(vx, d, T, Fg);
+            memcpy(S, T, sizeof S);
+            extents(hs, a, th, X, Fg, S, T);
+            return 0;
+        }
+        for (int i = 0; i < NX; i++) {    /* the extents never shrink */
+            double t = T[i] - X[i];
+            if (t < e[i]) e[i] = t;
+            t = T[NX + i] - X[NX + i];
+            if (t > e[NX + i]) e[NX + i] = t;
+        }
+        if (IV_ENCLOSURE_MULT != 1.0) grow = IV_ENCLOSURE_MULT * grow;
+    }
+    return -1;
+}
+
+/* Metzler majorant of A(vx, c) over the stiffness box (the runtime's ``_majorant``): the largest
+ * diagonal entries and the largest |off-diagonal| entries */
+static void majorant(double vx, double M[NX][NX])
+{
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) {
+            double a = IV_A0[i][j] + vx * IV_A1[i][j];
+            double lo = a + IV_DA_LO[i][j], hi = a + IV_DA_UP[i][j];
+            M[i][j] = i == j ? hi : py_max(fabs(lo), fabs(hi));
+        }
+}
+
+/* Fallback enclosure for any hs (``_comparison_enclosure``): |x(s) - x_k| <= Gamma(M, hs) g with M
+ * the Metzler majorant and g = max |F(X)| (comparison principle), intersected with
+ * X + [0, hs] F(S). 0, or -1 if Gamma(M, hs) is not finite. */
+static int comparison_enclosure(double hs, double vx, double d, const double X[NB], double T[NB])
+{
+    double f[NB], g[NX], M[NX][NX], maps[2][NX][NX], S[NB], shift = 0.0;
+    F_hull(vx, d, X, f);
+    for (int i = 0; i < NX; i++) g[i] = py_max(fabs(f[i]), fabs(f[NX + i]));
+    majorant(vx, M);
+    double top = -M[0][0];
+    for (int i = 1; i < NX; i++) top = py_max(top, -M[i][i]);
+    shift = py_max(0.0, top);
+    if (phi_gamma(M, hs, shift, 2, maps) != 0) return -1;
+    for (int i = 0; i < NX; i++) {
+        double R = 0.0;
+        for (int j = 0; j < NX; j++) R += maps[1][i][j] * g[j];
+        S[i] = X[i] - R;
+        S[NX + i] = X[NX + i] + R;
+    }
+    F_hull(vx, d, S, f);
+    for (int i = 0; i < NX; i++) {
+        T[i] = py_max(S[i], X[i] + py_min(0.0, hs * f[i]));
+        T[NX + i] = py_min(S[NX + i], X[NX + i] + py_max(0.0, hs * f[NX + i]));
+    }
+    return 0;
+}
+
+/* The prediction (``_source_predict``): out = [Fbar (8), B (8)], Fbar the hull of F over T and B the
+ * box of x(t + h) from the box X of x(t): a damped row with a > 0 exactly (convex combination),
+ * the others x(h) in x(0) + h Fbar; intersected with T. */
+static void predict(double h, double vx, double d, const double X[NB], const double T[NB], double out[2 * NB])
+{
+    double *fl = out, *fu = out + NX, *bl = out + NB, *bu = out + NB + NX;
+    G(vx, d, T, out);
+    for (int i = 0; i < NX; i++) {
+        double l = X[i], u = X[NX + i];
+        if (IV_DAMPED[i] && decay(i, vx) > 0.0) {
+            double a = decay(i, vx), th = -expm1(-a * h) / a;
+            bl[i] = l + th * (fl[i] - a * l);
+            bu[i] = u + th * (fu[i] - a * u);
+            fl[i] -= a * T[NX + i];
+            fu[i] -= a * T[i];
+        } else {
+            if (IV_DAMPED[i]) {
+                double a = decay(i, vx);
+                fl[i] -= a * T[i];
+                fu[i] -= a * T[NX + i];
+            }
+            bl[i] = l + h * fl[i];
+            bu[i] = u + h * fu[i];
+        }
+        if (bl[i] < T[i]) bl[i] = T[i];
+        if (bu[i] > T[NX + i]) bu[i] = T[NX + i];
+    }
+}
+
+/* ------------------------------------------------------------------ eq. (23) over a step (step 2) */
+/* midpoint oc and radius orad of omega = (vx - vx_j) A1 x + the stiffness part over the box
+ * [lo, hi] (midpoint c, radius r), plus, with_input, the input part (vx - vx_j) B1 delta (exact)
+ * and the disturbance bound (``_emit_omega``; eq. 25 via Lemma 3) */
+static void omega(int mode, double vx, double d, const double *lo, const double *hi, const double c[NX],
+                  const double r[NX], int with_input, double oc[NX], double orad[NX])
+{
+    double dv = vx - IV_MODE_VX[mode], adv = dv >= 0.0 ? dv : -dv, dvd = dv * d, vd = vx * d;
+    double sl[NX] = {0.0}, su[NX] = {0.0};
+    stiffness(lo, hi, with_input, vd, sl, su);
+    for (int i = 0; i < NX; i++) {
+        double mid = 0.0, rad = 0.0;
+        if (row_nonzero(IV_A1[i])) {
+            mid += dv * acc(0.0, IV_A1[i], c, NX);
+            rad += adv * acc_abs(0.0, IV_A1[i], r, NX);
+        }
+        if (with_input && IV_B1[i] != 0.0) mid += dvd * IV_B1[i];
+        if (with_input && IV_W[i] != 0.0) rad += IV_W[i];
+        if (i == ROW_AY || i == ROW_YAW_ACC) {
+            mid += (sl[i] + su[i]) * 0.5;
+            rad += (su[i] - sl[i]) * 0.5;
+        }
+        oc[i] = mid;
+        orad[i] = rad;
+    }
+}
+
+/* [a, b] := [a, b] intersected with the hull of P x over the box of midpoint c, radius r (eq. 20);
+ * the hull alone where they do not meet ([-inf, inf]: no xi) */
+static void rebase(const double P[NX][NX], const double c[NX], const double r[NX], double xi[NB])
+{
+    for (int i = 0; i < NX; i++) {
+        double p = acc(0.0, P[i], c, NX), q = acc_abs(0.0, P[i], r, NX), t;
+        t = p - q;
+        if (t > xi[i]) xi[i] = t;
+        t = p + q;
+        if (t < xi[NX + i]) xi[NX + i] = t;
+        if (xi[i] > xi[NX + i]) {
+            xi[i] = p - q;
+            xi[NX + i] = p + q;
+        }
+    }
+}
+
+/* The correction of the pending step [t - h', t] once y(t) is known (``_source_correct``): xi(t) =
+ * Phi xi + int_0^h' exp(N (h' - s)) (J y(s) + H delta + P omega(s)) ds, bounded term by term with
+ * nonnegative kernels (order preserving); y(s) the interpolation of its samples (weights W0, W1)
+ * plus a remainder (W2 with [y''] on the smooth rows, W3 otherwise); omega over the box at the
+ * start (Gam) and its growth over Fbar (Gam1); Omega by eq. (24). Then the box at t, x = xi + E y,
+ * intersected with the current box B and, on the measured rows, with [ylo, yhi]. out = [box; xi]. */
+static void correct(const Core *k, const Pending *p, const double ylo[NY], const double yhi[NY],
+                    const double B[NB], double out[2 * NB])
+{
+    const int mode = p->mode;
+    const double *l = p->X, vx = p->vx, d = p->d;
+    double xi[NB], c[NX], r[NX], xc[NX], xr[NX], fc[NX], fr[NX], yc[NY], yr[NY], c0[NY], r0[NY];
+    double dc[NY] = {0.0}, dr[NY] = {0.0}, frm[NY], oc0[NX], or0[NX], oc1[NX], or1[NX];
+    mid_rad(l, c, r);
+    memcpy(xi, p->xi, sizeof xi);
+    rebase(IV_P[mode], c, r, xi);
+    mid_rad(xi, xc, xr);
+    mid_rad(p->Fb, fc, fr);
+    for (int q = 0; q < NY; q++) {
+        int j = MEAS[q];
+        yc[q] = (ylo[q] + yhi[q]) * 0.5;
+        yr[q] = (yhi[q] - ylo[q]) * 0.5;
+        c0[q] = c[j];
+        r0[q] = r[j];
+        frm[q] = fr[j];
+        if (!IV_SMOOTH[j]) continue;
+        /* [y''] of a smooth row: its linear form (A0 + vx A1)[j, :] over Fbar */
+        dc[q] = acc(0.0, IV_A0[j], fc, NX);
+        if (row_nonzero(IV_A1[j])) dc[q] += vx * acc(0.0, IV_A1[j], fc, NX);
+        for (int i = 0; i < NX; i++)
+            if (IV_A1[j][i] == 0.0 && IV_A0[j][i] != 0.0) dr[q] += fabs(IV_A0[j][i]) * fr[i];
+        for (int i = 0; i < NX; i++)
+            if (IV_A1[j][i] != 0.0) dr[q] += fabs(IV_A0[j][i] + vx * IV_A1[j][i]) * fr[i];
+    }
+    omega(mode, vx, d, l, l + NX, c, r, 1, oc0, or0);
+    omega(mode, vx, d, p->Fb, p->Fb + NX, fc, fr, 0, oc1, or1);
+    for (int i = 0; i < NX; i++) {
+        double nc = acc(0.0, k->phi[i], xc, NX), nr = acc(0.0, k->phi[i], xr, NX);
+        nc = acc(nc, k->w0j[i], c0, NY);
+        nc = acc(nc, k->w1j[i], yc, NY);
+        nc = acc(nc, k->w2j_neg[i], dc, NY);
+        nc = acc(nc, k->gp[i], oc0, NX);
+        nc = acc(nc, k->g1p[i], oc1, NX);
+        if (k->gh[i] != 0.0) nc += k->gh[i] * d;
+        nr = acc(nr, k->aw0j[i], r0, NY);
+        nr = acc(nr, k->aw1j[i], yr, NY);
+        nr = acc(nr, k->w2aj[i], dr, NY);
+        nr = acc(nr, k->w3aj2[i], frm, NY);
+        nr = acc(nr, k->gap[i], or0, NX);
+        nr = acc(nr, k->g1ap[i], or1, NX);
+        /* the box at t: x = xi + E y(t), intersected with B */
+        double bc = acc(nc, IV_E[mode][i], yc, NY), br = acc_abs(nr, IV_E[mode][i], yr, NY);
+        double xl = bc - br, xu = bc + br;
+        if (xl < B[i]) xl = B[i];
+        if (xu > B[NX + i]) xu = B[NX + i];
+        if (xl > xu) xl = B[i], xu = B[NX + i];
+        out[i] = xl;
+        out[NX + i] = xu;
+        out[NB + i] = nc - nr;
+        out[NB + NX + i] = nc + nr;
+    }
+    for (int q = 0; q < NY; q++) {       /* the measured states: with their measurement */
+        int j = MEAS[q];
+        if (out[j] < ylo[q]) out[j] = ylo[q];
+        if (out[NX + j] > yhi[q]) out[NX + j] = yhi[q];
+        if (out[j] > out[NX + j]) out[j] = ylo[q], out[NX + j] = yhi[q];
+    }
+}
+
+/* ------------------------------------------------------------------ modes, restarts, outputs */
+/* Eq. (44): mode i on [edges[i], edges[i + 1]); outside the grid the nearest mode (one warning
+ * per excursion) */
+static int band(State *s, double vx, const Log *log)
+{
+    if (IV_EDGES[0] <= vx && vx <= IV_EDGES[N_MODES]) {
+        s->outside = 0;
+    } else {
+        if (!s->outside)
+            log_event(log, LOG_WARNING, "vx = %.4g m/s outside the design grid [%.4g, %.4g] m/s: the nearest mode "
+                      "is used (the speed mismatch is bounded exactly, the bounds widen)",
+                      vx, IV_EDGES[0], IV_EDGES[N_MODES]);
+        s->outside = 1;
+    }
+    int i = -1;                                /* bisect_right(edges, vx) - 1 */
+    while (i < N_MODES && IV_EDGES[i + 1] <= vx) i++;
+    return i < 0 ? 0 : (i < N_MODES - 1 ? i : N_MODES - 1);
+}
+
+/* The initial box: measured states y +- nu, the others +-x0_halfwidth (hull with the current bounds
+ * if keep); no xi, no pending correction (the runtime's ``_restart``) */
+static void restart(State *s, const double y[NY], int keep)
+{
+    for (int q = 0; q < NY; q++) {
+        s->box[MEAS[q]] = y[q] - IV_NU[q];
+        s->box[NX + MEAS[q]] = y[q] + IV_NU[q];
+        int j = UNMEAS[q];
+        double lo = -IV_X0_HALFWIDTH[j], hi = IV_X0_HALFWIDTH[j];
+        if (keep) {
+            lo = py_min(lo, s->box[j]);
+            hi = py_max(hi, s->box[NX + j]);
+        }
+        s->box[j] = lo;
+        s->box[NX + j] = hi;
+    }
+    s->xi_mode = -1;
+    s->has_pending = 0;
+}
+
+/* me_xi := the hull of P x over the box X (eq. 20), P of the active mode (model exchange) */
+static void me_rebase(State *s, const double X[NB])
+{
+    double c[NX], r[NX];
+    mid_rad(X, c, r);
+    for (int i = 0; i < NX; i++) {
+        s->me_xi[i] = -INFINITY;
+        s->me_xi[NX + i] = INFINITY;
+    }
+    rebase(IV_P[s->mode], c, r, s->me_xi);
+}
+
+/* |vx| < vx_hold (or vx = 0): the observer is frozen */
+static int frozen(double vx, double hold)
+{
+    return (-hold < vx && vx < hold) || vx == 0.0;
+}
+
+/* the runtime's ``initialize``: the initial box; the mode of the initial speed unless frozen */
+static void start(Model *m, const double *u, const Log *log)
+{
+    State *s = &m->s;
+    double y[NY], vx = u[IN_vx];
+    measurements(u, y);
+    restart(s, y, 0);
+    if (fabs(vx) >= m->vx_hold && fabs(vx) > 0.0) {
+        s->mode = band(s, vx, log);
+        s->vx_pub = vx;
+    }
+    s->started = 1;
+    s->consistent = 1;
+    me_rebase(s, s->box);
+}
+
+/* The runtime's ``_publish``: vy; beta = atan(vy / vx) (monotone in vy, decreasing when reversing);
+ * r; the axle forces Fyf = (m lr x3 + Iz x4)/L, Fyr = (m lf x3 - Iz x4)/L (eq. 8 inverted, eq. 45)
+ * by interval arithmetic: the lower bound of Fyr takes the UPPER bound of x4 (ERRATA 001). */
+static void outputs_of(const double X[NB], double vx, int mode, int consistent, double *y, int *yi)
+{
+    const double *l = X, *u = X + NX;
+    double L = IV_LF + IV_LR, a = IV_M * IV_LR / L, b = IV_IZ / L, c = IV_M * IV_LF / L;
+    y[OUT_vy_lower] = l[0];
+    y[OUT_vy_upper] = u[0];
+    y[OUT_beta_lower] = vx > 0.0 ? atan(l[0] / vx) : atan(u[0] / vx);
+    y[OUT_beta_upper] = vx > 0.0 ? atan(u[0] / vx) : atan(l[0] / vx);
+    y[OUT_yaw_rate_lower] = l[1];
+    y[OUT_yaw_rate_upper] = u[1];
+    y[OUT_Fyf_lower] = a * l[2] + b * l[3];
+    y[OUT_Fyf_upper] = a * u[2] + b * u[3];
+    y[OUT_Fyr_lower] = c * l[2] - b * u[3];
+    y[OUT_Fyr_upper] = c * u[2] - b * l[3];
+    yi[INT_mode] = mode + 1;
+    yi[INT_consistent] = consistent;
+}
+
+/* ------------------------------------------------------------------ co-simulation step */
+/* Step 1: the published box of the measured states intersected with [y - nu, y + nu] (DEPARTURE:
+ * a tightening; both sets contain x). 0 if it is empty beyond IV_CONSISTENCY_TOL (1 + |y|). */
+static int intersect_measurement(State *s, const double y[NY])
+{
+    int consistent = 1;
+    for (int q = 0; q < NY; q++) {
+        int j = MEAS[q];
+        double lo = s->box[j], hi = s->box[NX + j], ml = y[q] - IV_NU[q], mu = y[q] + IV_NU[q];
+        if (ml > lo) lo = ml;
+        if (mu < hi) hi = mu;
+        if (lo > hi) {
+            if (lo - hi <= IV_CONSISTENCY_TOL * (1.0 + fabs(y[q]))) {   /* rounding: the gap itself */
+                double t = lo;
+                lo = hi;
+                hi = t;
+            } else {
+                consistent = 0;
+            }
+        }
+        s->box[j] = lo;
+        s->box[NX + j] = hi;
+    }
+    return consistent;
+}
+
+static const char NON_FINITE[] = "bounds became non-finite: restarted from the measurement and x0_halfwidth";
+
+/* Step 2: the correction of the pending step now that y(t) is known. 0, or -1 (no step map). */
+static int correct_pending(Model *m, const double y[NY], const Log *log)
+{
+    State *s = &m->s;
+    const Core *k = core_for(m, s->p.mode, s->p.h, log);
+    double ylo[NY], yhi[NY], out[2 * NB];
+    if (k == NULL) return -1;
+    for (int q = 0; q < NY; q++) {
+        ylo[q] = s->box[MEAS[q]];
+        yhi[q] = s->box[NX + MEAS[q]];
+    }
+    correct(k, &s->p, ylo, yhi, s->box, out);
+    if (all_finite(out, 2 * NB)) {
+        memcpy(s->box, out, sizeof s->box);
+        memcpy(s->xi, out + NB, sizeof s->xi);
+        s->xi_mode = s->p.mode;
+    } else {
+        log_event(log, LOG_WARNING, NON_FINITE);
+        restart(s, y, 0);
+    }
+    return 0;
+}
+
+/* the a priori enclosure T over a (sub)step hs, by the comparison bound if ``enclose`` fails
+ * (*fallback = 1). 0, or -1 (no finite comparison bound). */
+static int enclosure(double hs, double vx, double d, const double X[NB], double T[NB], int *fallback,
+                     const Log *log)
+{
+    if (enclose(hs, vx, d, X, T) == 0) return 0;
+    *fallback = 1;
+    if (comparison_enclosure(hs, vx, d, X, T) == 0) return 0;
+    log_event(log, LOG_ERROR, "step refused: no finite a priori enclosure (hs = %g s, vx = %g m/s)", hs, vx);
+    return -1;
+}
+
+/* Steps 4 and 5: the enclosure T over [t, t + h] (from k->nsub substeps for long steps), out =
+ * [Fbar; predicted box] of ``predict``, and the box B at t + h. 0, or -1. */
+static int prediction(const Core *k, double h, double vx, double d, const double X[NB], double T[NB],
+                      double out[2 * NB], double B[NB], int *fallback, const Log *log)
+{
+    if (k->nsub == 1) {
+        if (enclosure(h, vx, d, X, T, fallback, log) != 0) return -1;
+        predict(h, vx, d, X, T, out);
+        memcpy(B, out + NB, NB * sizeof *B);
+        return 0;
+    }
+    double Xm[NB], Tm[NB], o[2 * NB];
+    memcpy(Xm, X, sizeof Xm);
+    for (int n = 0; n < k->nsub; n++) {
+        if (enclosure(k->hs, vx, d, Xm, Tm, fallback, log) != 0) return -1;
+        predict(k->hs, vx, d, Xm, Tm, o);
+        memcpy(Xm, o + NB, sizeof Xm);
+        for (int i = 0; i < NX; i++) {
+            T[i] = n == 0 ? Tm[i] : py_min(T[i], Tm[i]);
+            T[NX + i] = n == 0 ? Tm[NX + i] : py_max(T[NX + i], Tm[NX + i]);
+        }
+    }
+    predict(h, vx, d, X, T, out);
+    for (int i = 0; i < NX; i++) {
+        B[i] = py_max(out[NB + i], Xm[i]);
+        B[NX + i] = py_min(out[NB + NX + i], Xm[NX + i]);
+    }
+    return 0;
+}
+
+/* the runtime's ``step`` (see the top of this file); -1 refused (the caller restores the state) */
+static int step(Model *m, double h, const double *u, const Log *log)
+{
+    State *s = &m->s;
+    double vx = u[IN_vx], d = u[IN_delta], hold = m->vx_hold, y[NY];
+    if (!s->started) start(m, u, log);
+    measurements(u, y);
+    if (frozen(vx, hold)) {
+        if (!s->holding)
+            log_event(log, LOG_WARNING, "|vx| = %.3g m/s < vx_hold = %g m/s: interval observer frozen, bounds held",
+                      fabs(vx), hold);
+        s->holding = 1;
+        s->has_pending = 0;
+        return 0;
+    }
+    if (s->holding) {
+        log_event(log, LOG_WARNING, "vx = %.3g m/s: interval observer resumes; the bounds restart from the "
+                  "measurement and x0_halfwidth", vx);
+        s->holding = 0;
+        restart(s, y, 0);
+    }
+    /* 1. measurement intersection */
+    s->consistent = intersect_measurement(s, y);
+    if (!s->consistent) {
+        if (!s->inconsistent)
+            log_event(log, LOG_WARNING, "measurement (yaw_rate = %.4g rad/s, ay = %.4g m/s2) outside the bounds: "
+                      "the model does not hold (stiffness outside the box, saturated tires?); bounds restarted "
+                      "from the measurement and x0_halfwidth, consistent = 0", y[0], y[1]);
+        s->inconsistent = 1;
+        restart(s, y, 1);
+    } else {
+        s->inconsistent = 0;
+    }
+    /* 2. the correction of the previous step */
+    if (s->has_pending && correct_pending(m, y, log) != 0) return -1;
+    /* 3. the mode of this step */
+    int mode = s->mode = band(s, vx, log);
+    const Core *k = core_for(m, mode, h, log);
+    if (k == NULL) return -1;
+    /* 4.-5. the enclosure over [t, t + h] and the prediction at t + h */
+    double X[NB], T[NB], out[2 * NB], B[NB];
+    int fallback = 0;
+    memcpy(X, s->box, sizeof X);
+    if (prediction(k, h, vx, d, X, T, out, B, &fallback, log) != 0) return -1;
+    if (fallback && !s->fallback_episode)
+        log_event(log, LOG_WARNING, "a priori enclosure not found in %d tries (h = %g s, vx = %.4g m/s): "
+                  "comparison bound used, wider", IV_ENCLOSURE_TRIES, h, vx);
+    s->fallback_episode = fallback;
+    if (!all_finite(out, 2 * NB)) {
+        log_event(log, LOG_WARNING, NON_FINITE);
+        restart(s, y, 0);
+    } else {
+        Pending *p = &s->p;
+        p->mode = mode;
+        p->h = h;
+        p->vx = vx;
+        p->d = d;
+        memcpy(p->X, X, sizeof X);
+        memcpy(p->Fb, out, sizeof p->Fb);
+        for (int i = 0; i < NX; i++) {
+            p->xi[i] = s->xi_mode == mode ? s->xi[i] : -INFINITY;
+            p->xi[NX + i] = s->xi_mode == mode ? s->xi[NX + i] : INFINITY;
+        }
+        s->has_pending = 1;
+        memcpy(s->box, B, sizeof B);
+    }
+    s->vx_pub = vx;
+    return 0;
+}
+
+/* ------------------------------------------------------------------ model.h */
+int model_setup(Model *m, const double *p, const Log *log)
+{
+    double hold = p[PAR_vx_hold];
+    if (!(isfinite(hold) && hold >= 0.0)) {
+        log_event(log, LOG_ERROR, "parameter vx_hold must be finite and >= 0 m/s, got %g", hold);
+        return -1;
+    }
+    memset(m, 0, sizeof *m);
+    m->vx_hold = hold;
+    m->s.xi_mode = -1;
+    m->s.consistent = 1;
+    m->s.vx_pub = py_max(hold, 1e-3);
+    return 0;
+}
+
+void model_initialize(Model *m, const double *u, const Log *log)
+{
+    start(m, u, log);
+}
+
+int model_do_step(Model *m, double h, const double *u, const Log *log)
+{
+    State saved = m->s;
+    if (step(m, h, u, log) == 0) return 0;
+    m->s = saved;
+    return -1;
+}
+
+void model_outputs(const Model *m, double *y, int *yi)
+{
+    outputs_of(m->s.box, m->s.vx_pub, m->s.mode, m->s.consistent, y, yi);
+}
+
+/* ------------------------------------------------------------------ model exchange: eq. (23) */
+#if N_STATES > 0
+#if N_STATES != NB || N_EVENT_INDICATORS != 5
+#error "interval_observer.c: the states are [xi_lo; xi_up], five event indicators"
+#endif
+
+void model_me_get_states(const Model *m, double *x)
+{
+    memcpy(x, m->s.me_xi, sizeof m->s.me_xi);
+}
+
+void model_me_set_states(Model *m, const double *x)
+{
+    memcpy(m->s.me_xi, x, sizeof m->s.me_xi);
+}
+
+void model_me_nominals(const Model *m, double *nominal)
+{
+    (void)m;
+    for (int i = 0; i < NB; i++) nominal[i] = 1.0;
+}
+
+/* the box of x = xi + E y: [xi_lo + E y - |E| nu, xi_up + E y + |E| nu] */
+static void me_box(const State *s, const double y[NY], double X[NB])
+{
+    for (int i = 0; i < NX; i++) {
+        double ey = acc(0.0, IV_E[s->mode][i], y, NY), en = acc_abs(0.0, IV_E[s->mode][i], IV_NU, NY);
+        X[i] = s->me_xi[i] + ey - en;
+        X[NX + i] = s->me_xi[NX + i] + ey + en;
+    }
+}
+
+/* eq. (23): xi_up' = N xi_up + J y + H delta + Omega_up (lower alike; N Metzler keeps them ordered,
+ * Lemma 2), Omega by eq. (24) = P oc +- |P| orad from the omega bounds over the box (eq. 25), J y
+ * +- |J| nu; 0 while frozen */
+void model_me_derivatives(const Model *m, const double *u, double *dx)
+{
+    const State *s = &m->s;
+    const int mode = s->mode;
+    double y[NY], X[NB], c[NX], r[NX], oc[NX], orad[NX], d = u[IN_delta];
+    if (!s->started || s->holding) {
+        memset(dx, 0, NB * sizeof *dx);
+        return;
+    }
+    measurements(u, y);
+    me_box(s, y, X);
+    mid_rad(X, c, r);
+    omega(mode, u[IN_vx], d, X, X + NX, c, r, 1, oc, orad);
+    for (int i = 0; i < NX; i++) {
+        double base = acc(0.0, IV_J[mode][i], y, NY) + IV_H[mode][i] * d + acc(0.0, IV_P[mode][i], oc, NX);
+        double rad = acc_abs(0.0, IV_J[mode][i], IV_NU, NY) + acc_abs(0.0, IV_P[mode][i], orad, NX);
+        dx[i] = acc(0.0, IV_N[mode][i], s->me_xi, NX) + base - rad;
+        dx[NX + i] = acc(0.0, IV_N[mode][i], s->me_xi + NX, NX) + base + rad;
+    }
+}
+
+/* The indicators of the current discrete state (a zero crossing of one = "switch now"; it is the
+ * signed distance of vx to a threshold, positive on the current side; the state switches when it
+ * is <= 0, so that an event located exactly on a threshold switches too). Where the co-simulation's
+ * rule includes the threshold in the set being left (a band's lower edge, the grid's ends, the
+ * running state at |vx| = vx_hold), the threshold is moved ME_HYST beyond it. */
+void model_me_event_indicators(const Model *m, const double *u, double *z)
+{
+    const State *s = &m->s;
+    double vx = u[IN_vx], hold = m->vx_hold;
+    int j = s->mode;
+    z[0] = j > 0 ? vx - (IV_EDGES[j] - ME_HYST) : 1.0;                  /* leave band j downward */
+    z[1] = j < N_MODES - 1 ? IV_EDGES[j + 1] - vx : 1.0;                /* leave band j upward */
+    z[2] = s->holding ? hold - fabs(vx) : fabs(vx) - (hold - ME_HYST);   /* resume / freeze */
+    z[3] = vx - (IV_EDGES[0] - ME_HYST);                                /* leave the design grid */
+    z[4] = IV_EDGES[N_MODES] + ME_HYST - vx;
+}
+
+/* The discrete state at an event (model_me_event_indicators): start; freeze (the bounds of x held,
+ * beta at the freeze speed +-vx_hold); resume (a restart like at initialisation); mode switch (eq.
+ * 44, the half-open bands; xi re-based on the new P, eq. 20); the out-of-grid warning. */
+int model_me_event_update(Model *m, double t, const double *u, const Log *log)
+{
+    State *s = &m->s;
+    double vx = u[IN_vx], hold = m->vx_hold, y[NY], X[NB];
+    int changed = 0;
+    (void)t;
+    measurements(u, y);
+    if (!s->started) {
+        start(m, u, log);
+        changed = 1;
+    }
+    if (!s->holding && fabs(vx) <= hold - ME_HYST) {
+        log_event(log, LOG_WARNING, "|vx| = %.3g m/s < vx_hold = %g m/s: interval observer frozen, bounds held",
+                  fabs(vx), hold);
+        me_box(s, y, s->box);
+        s->vx_pub = copysign(hold, vx);
+        s->holding = 1;
+    }
+    if (s->holding) {
+        if (frozen(vx, hold)) return changed;
+        log_event(log, LOG_WARNING, "vx = %.3g m/s: interval observer resumes; the bounds restart from the "
+                  "measurement and x0_halfwidth", vx);
+        s->holding = 0;
+        restart(s, y, 0);
+        s->mode = band(s, vx, log);
+        me_rebase(s, s->box);
+        return 1;
+    }
+    int j = s->mode, mode = band(s, vx, log);
+    if (!((j > 0 && vx <= IV_EDGES[j] - ME_HYST) || (j < N_MODES - 1 && vx >= IV_EDGES[j + 1]))) return changed;
+    me_box(s, y, X);
+    s->mode = mode;
+    me_rebase(s, X);
+    return 1;
+}
+
+/* the outputs of the box xi + E y at the current inputs (the held box while frozen); no measurement
+ * intersection in eq. (23), hence no consistency test: consistent = 1 */
+void model_me_outputs(const Model *m, const double *u, double *y, int *yi)
+{
+    const State *s = &m->s;
+    double ym[NY], X[NB];
+    if (!s->started || s->holding) {
+        outputs_of(s->box, s->vx_pub, s->mode, 1, y, yi);
+        return;
+    }
+    measurements(u, ym);
+    me_box(s, ym, X);
+    outputs_of(X, u[IN_vx], s->mode, 1, y, yi);
+}
+#endif

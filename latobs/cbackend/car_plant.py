@@ -1,0 +1,71 @@
+"""Emitter of the native CarPlant (``fmu_src/c/car_plant.c``): the vehicle as static const data.
+
+The plant data file (``latobs.packaging.plant_data``: ``{"vehicle": Vehicle.as_dict()}``) becomes
+``model_data.h``: the vehicle's parameters (SI), validated exactly as the Python runtime validates
+them (``CarPlantModel._vehicle_values``: a ValueError names the culprit), the gravity constant and
+the runtime's limits (clamps, substep bound), all read from ``fmu_src/car_plant.py`` so that both
+backends share one definition. The FMU parameters (mu, scale_f, scale_r, sigma, linear_tires) are
+run-time values: ``car_plant.c`` derives its constants from them in ``model_setup`` as
+``CarPlantModel.__init__`` does.
+
+ModelExchange: the Python runtime's eight states, then ``x_vx_lag``, the lag state through which
+the model-exchange FMU differentiates its vx input (FMI 2.0 gives it no input derivative; see
+``car_plant.c``), and one event indicator per warning condition of the runtime.
+"""
+from __future__ import annotations
+
+from ..fmu_src.car_plant import G, CarPlantModel
+from ..fmu_src.spec import Var
+from .emit import CModel, c_define, c_double
+
+SOURCE = "car_plant.c"
+
+#: the vehicle parameters car_plant.c reads (mu and sigma are FMU parameters: their defaults, the
+#: vehicle's values, are the parameters' start values), with their units
+VEHICLE_FIELDS = {"m": "kg", "Iz": "kg m^2", "Ix": "kg m^2", "lf": "m", "lr": "m", "hr": "m", "Kr": "N m/rad",
+                  "br": "N m s/rad", "Cf": "N/rad", "Cr": "N/rad", "track": "m", "h_rc": "m", "roll_share_f": "1",
+                  "mf_C": "1", "mf_E": "1"}
+
+#: CarPlantModel's limits (class constants), as CP_<NAME> macros
+LIMITS = ("H_MAX", "VX_MAX", "V_SLIP_MIN", "V_RELAX_MIN", "AX_MAX", "DELTA_MAX", "BANK_MAX", "ALPHA_SPIN",
+          "SCALE_IN_MIN", "SCALE_IN_MAX")
+
+STATES = (
+    Var("x_vy", "m/s", "lateral velocity at the roll axis below the CG (state of output vy)"),
+    Var("x_yaw_rate", "rad/s", "yaw rate (state of output yaw_rate)"),
+    Var("x_roll_angle", "rad", "roll angle, > 0 leaning right (state of output roll_angle)"),
+    Var("x_roll_rate", "rad/s", "roll rate (state of output roll_rate)"),
+    Var("x_Fy_fl", "N", "front left tire lateral force, wheel frame (relaxation, E7; constant and unused "
+        "with algebraic tires, sigma <= 0)"),
+    Var("x_Fy_fr", "N", "front right tire lateral force, wheel frame (relaxation, E7; constant and unused "
+        "with algebraic tires, sigma <= 0)"),
+    Var("x_Fy_rl", "N", "rear left tire lateral force, wheel frame (relaxation, E7; constant and unused "
+        "with algebraic tires, sigma <= 0)"),
+    Var("x_Fy_rr", "N", "rear right tire lateral force, wheel frame (relaxation, E7; constant and unused "
+        "with algebraic tires, sigma <= 0)"),
+    Var("x_vx_lag", "m/s", "vx through a first-order lag of 5 ms: ax = (vx - x_vx_lag) / 5 ms is the "
+        "longitudinal acceleration of the load transfer (E5) in model exchange"),
+)
+
+#: car_plant.c's event indicators: vx < 0, vx > VX_MAX, vx < V_SLIP_MIN, |delta| > DELTA_MAX,
+#: |bank_angle| > BANK_MAX, each stiffness input outside its range, |ax| > AX_MAX, |alpha_r| > ALPHA_SPIN
+N_EVENT_INDICATORS = 9
+
+
+def emit(data: dict) -> CModel:
+    """``model_data.h`` of the CarPlant FMU for the plant data file ``data``; a ValueError names
+    the vehicle parameter that the Python runtime would refuse."""
+    values = CarPlantModel._vehicle_values(data)
+    name = str(data["vehicle"].get("name", "?"))
+    label = repr(name).replace("*/", "* /")   # inside a C comment
+    lines = [f"/* CarPlant of vehicle {label}: its parameters (SI) and the runtime's constants, "
+             "from fmu_src/car_plant.py */\n",
+             c_define("CP_G", float(G)).rstrip("\n") + " /* m/s^2 */\n"]
+    lines += [c_define(f"CP_{k}", float(getattr(CarPlantModel, k))) for k in LIMITS]
+    lines.append("\ntypedef struct {\n")
+    lines += [f"    double {k}; /* {unit} */\n" for k, unit in VEHICLE_FIELDS.items()]
+    lines.append("} CarVehicle;\n\n")
+    lines.append("static const CarVehicle CP_VEHICLE = {\n")
+    lines += [f"    .{k} = {c_double(values[k])},\n" for k in VEHICLE_FIELDS]
+    lines.append("};\n")
+    return CModel(header="".join(lines), states=STATES, n_event_indicators=N_EVENT_INDICATORS)
