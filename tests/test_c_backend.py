@@ -338,3 +338,48 @@ def test_reset_and_the_fmu_state_restore_a_run_exactly(observer, tmp_path):
     assert _run(md, fmu, 100, 100) == tail
     fmu.freeFMUState(state)
     fmu.freeInstance()
+
+
+def test_model_exchange_calls_out_of_order_or_with_wrong_sizes_are_fmi2error(observer, tmp_path):
+    """The layer's ModelExchange state machine: derivatives before initialisation, a state vector
+    of the wrong size or with a NaN, a discrete update outside event mode, a co-simulation call on
+    a ModelExchange instance: fmi2Error with the call named, and the instance still works."""
+    from ctypes import c_double, c_void_p
+
+    from fmpy.fmi2 import FMU2Model
+
+    md = read_model_description(str(observer))
+    n = len(md.derivatives)
+    m = FMU2Model(guid=md.guid, unzipDirectory=extract(str(observer), unzipdir=str(tmp_path / "me")),
+                  modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
+    log = Logged()
+    m.instantiate(callbacks=_callbacks(log))
+    x, dx = (c_double * n)(), (c_double * n)()
+    assert _status(lambda: m.getDerivatives(dx, n)) == 3
+    assert "never initialised" in log.errors()[-1] or "fmi2GetDerivatives" in log.errors()[-1]
+    m.setupExperiment(startTime=0.0)
+    m.enterInitializationMode()
+    m.setReal([_vr(md, k) for k in INPUTS], list(INPUTS.values()))
+    m.exitInitializationMode()
+    m.newDiscreteStates()
+    m.enterContinuousTimeMode()
+    assert _status(lambda: m.newDiscreteStates()) == 3                     # not in event mode
+    assert "fmi2NewDiscreteStates" in log.errors()[-1]
+    assert _status(lambda: m.setContinuousStates(x, n - 1)) == 3
+    assert f"this FMU has {n}" in log.errors()[-1]
+    m.getContinuousStates(x, n)
+    bad = (c_double * n)(*x)
+    bad[0] = math.nan
+    assert _status(lambda: m.setContinuousStates(bad, n)) == 3
+    m.getDerivatives(dx, n)                                                 # the state was kept
+    before = list(dx)
+    m.setContinuousStates(x, n)
+    m.getDerivatives(dx, n)
+    assert list(dx) == before and all(math.isfinite(v) for v in before)
+    m.setReal([_vr(md, "yaw_rate")], [math.nan])
+    assert _status(lambda: m.getDerivatives(dx, n)) == 3 and "yaw_rate" in log.errors()[-1]
+    do_step = m.dll.fmi2DoStep                                              # a co-simulation call
+    assert do_step(c_void_p(m.component), c_double(0.0), c_double(0.005), 1) == 3
+    assert "CoSimulation" in log.errors()[-1]
+    m.terminate()
+    m.freeInstance()
