@@ -322,7 +322,7 @@ def lemma5(poly: Polytope, central, order: int = 1, region=LHP, stability_region
     status, seconds = lmi.solve(prob)
     if not lmi.solved(status) or xv.value is None:
         raise DesignError(f"Lemma 5 (eq. 28), order {order}, {len(poly.vertices)} vertices of the "
-                          f"{poly.box.name} box: no solution (Clarabel: {status})")
+                          f"{poly.box.name} box: no solution ({lmi.label()}: {status})")
     x, y = np.asarray(xv.value, float), np.asarray(yv.value, float)
     if normalise and x[-1] != 0:
         y, x = y / x[-1], x / x[-1]
@@ -820,6 +820,7 @@ class VehicleDesign:
     options: DesignOptions
     modes: list
     seconds: float
+    solver: str = lmi.DEFAULT    # the LMI solver used (lmi.using), recorded in the design dict
 
 
 #: Estimator pole candidates of the central polynomial, as multiples of the nominal plant's
@@ -885,7 +886,7 @@ def design_for_vehicle(vehicle: Vehicle, opts: DesignOptions) -> VehicleDesign:
             modes.append(_design_mode(box, opts))
         except DesignError as e:
             raise DesignError(f"{opts.name}, mode {i + 1} (v in [{band[0]:g}, {band[1]:g}] m/s): {e}") from e
-    return VehicleDesign(vehicle, opts, modes, time.perf_counter() - t0)
+    return VehicleDesign(vehicle, opts, modes, time.perf_counter() - t0, lmi.current())
 
 
 def _asc(p) -> list[float]:
@@ -939,7 +940,7 @@ def to_design_dict(vd: VehicleDesign) -> dict:
         "modes": modes,
         "gamma": max(m["gamma_vertex"] for m in modes),
         "gamma_grid": max(m["gamma_grid"] for m in modes),
-        "solver": {"name": "CLARABEL", "status": ",".join(sorted({m["solver_status"] for m in modes})),
+        "solver": {"name": vd.solver, "status": ",".join(sorted({m["solver_status"] for m in modes})),
                    "seconds": float(sum(m["solver_seconds"] for m in modes)), "total_seconds": float(vd.seconds)},
         "runtime": {},
     }

@@ -114,7 +114,7 @@ def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list
 
 
 def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
-    """Solve Theorem 1 (LMIs 34-36) with cvxpy/Clarabel. Raises DesignError naming the LMI."""
+    """Solve Theorem 1 (LMIs 34-36) with cvxpy (lmi: Clarabel by default). Raises DesignError naming the LMI."""
     import cvxpy as cp  # design time only
 
     opts.validate()
@@ -147,7 +147,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
     prob = cp.Problem(cp.Minimize(g), base + lmi35 + lmi36)
     status, seconds = lmi.solve(prob)
     if not lmi.solved(status) or q.value is None:
-        raise DesignError(f"design {opts.name}: no solution (Clarabel: {status}) of Theorem 1 (LMIs 34-36, "
+        raise DesignError(f"design {opts.name}: no solution ({lmi.label()}: {status}) of Theorem 1 (LMIs 34-36, "
                           f"eps = {opts.epsilon:g}, eta = {opts.eta:g}) over {len(speeds)} speed modes; "
                           + _diagnose(base, lmi35, lmi36))
     qv = np.asarray(q.value, float)
@@ -167,7 +167,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         modes.append({"A": A, "B": B, "E": E, "K": K, "P": P, "N": N, "J": K + N @ E, "H": P @ B})
     return Design(options=opts, vehicle=vehicle, values=v, edges=edges, speeds=speeds, cf_box=cf_box,
                   cr_box=cr_box, q=qv, gamma=float(g.value) / tau, modes=modes,
-                  solver={"name": "CLARABEL", "status": str(status), "seconds": round(seconds, 4),
+                  solver={"name": lmi.current(), "status": str(status), "seconds": round(seconds, 4),
                           "lmis": len(base) + len(lmi35) + len(lmi36), "time_scale_per_s": tau})
 
 

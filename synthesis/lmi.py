@@ -1,7 +1,32 @@
-"""cvxpy + Clarabel, the way every design module solves its LMIs (design time only)."""
+"""cvxpy + an SDP solver, the way every design module solves its LMIs (design time only).
+
+The solver is Clarabel unless a caller chooses another for a block of code::
+
+    with lmi.using("SCS"):
+        data = designs.run("SideslipBankObserver")     # every LMI of this design solved by SCS
+
+Every design module solves through :func:`solve` and records the solver actually used
+(:func:`current`) in its design dict (``solver.name``). ``latobs bench`` uses this to time each
+design with Clarabel and with SCS side by side; packaged designs are Clarabel's.
+
+Solvers (:data:`SOLVERS`):
+
+* ``CLARABEL`` (default): interior point, its default settings; if it ends in a numerical failure
+  the problem is solved again with :data:`FALLBACK_SETTINGS` (ERRATA 002).
+* ``SCS``: first-order (ADMM), with :data:`SCS_SETTINGS`: eps_abs = eps_rel = 1e-9, so that its
+  answer is comparable with an interior-point one (SCS's default 1e-4 leaves LMI residuals that
+  the independent certificate's strict margins can refuse), and max_iters = 100 000 (SCS's own
+  default): a solve that has not converged by then stops there, reported as
+  ``optimal_inaccurate``/``user_limit`` by cvxpy (about a minute on this project's largest LMI
+  problems on one core). No fallback: SCS has no numerical-failure retry here.
+"""
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import time
+from dataclasses import dataclass, field
+from typing import Iterator
 
 
 #: Clarabel settings of the fallback solve (ERRATA 002: "If Clarabel stops on a numerical error,
@@ -9,38 +34,113 @@ import time
 FALLBACK_SETTINGS = {"equilibrate_enable": False, "chordal_decomposition_enable": False}
 #: Statuses after which the fallback is tried (a numerical failure, not a clean verdict).
 _RETRY = ("solver_error", "infeasible_inaccurate", "unbounded_inaccurate", "user_limit")
+#: SCS's settings (see the module docstring): tight tolerances (SCS's defaults are 1e-4), and
+#: SCS's default iteration cap, which bounds a solve's time.
+SCS_SETTINGS = {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 100_000}
+#: Known solvers: cvxpy name -> settings of the first attempt.
+SOLVERS = {"CLARABEL": {}, "SCS": SCS_SETTINGS}
+#: Names for messages.
+LABELS = {"CLARABEL": "Clarabel", "SCS": "SCS"}
+DEFAULT = "CLARABEL"
+
+
+@dataclass
+class Usage:
+    """What :func:`using` yields: the solver chosen, its settings, and every :func:`solve` call
+    made in the block (``calls``: [(status, seconds)], seconds of wall time, fallback included)."""
+
+    name: str
+    settings: dict
+    calls: list = field(default_factory=list)
+
+    @property
+    def seconds(self) -> float:
+        """s, wall time of every solve in the block."""
+        return float(sum(s for _, s in self.calls))
+
+
+# (solver name, settings of its first attempt, the Usage of the innermost `using` block or None);
+# a ContextVar, so threads and tasks each see theirs
+_CHOICE: contextvars.ContextVar[tuple[str, dict, Usage | None]] = contextvars.ContextVar(
+    "latobs_lmi_solver", default=(DEFAULT, {}, None))
+
+
+def _check(name: str) -> str:
+    key = str(name).upper()
+    if key not in SOLVERS:
+        raise ValueError(f"unknown LMI solver {name!r}; known: {', '.join(SOLVERS)}")
+    return key
+
+
+@contextlib.contextmanager
+def using(name: str, **settings) -> Iterator[Usage]:
+    """Solve every LMI in the ``with`` block with solver ``name`` (``"CLARABEL"`` or ``"SCS"``,
+    case-insensitive); ``settings`` override that solver's :data:`SOLVERS` settings (e.g.
+    ``max_iters=20_000`` to cap SCS). Unknown name: ValueError naming it. Yields a
+    :class:`Usage` that records the block's solves."""
+    key = _check(name)
+    usage = Usage(key, {**SOLVERS[key], **settings})
+    token = _CHOICE.set((key, dict(usage.settings), usage))
+    try:
+        yield usage
+    finally:
+        _CHOICE.reset(token)
+
+
+def current() -> str:
+    """The cvxpy name of the solver :func:`solve` uses here ("CLARABEL" by default)."""
+    return _CHOICE.get()[0]
+
+
+def settings() -> dict:
+    """The settings of the current solver's first attempt (a copy)."""
+    return dict(_CHOICE.get()[1])
+
+
+def label() -> str:
+    """The current solver's name for messages ("Clarabel", "SCS")."""
+    return LABELS[current()]
 
 
 def _attempt(prob, settings: dict) -> str:
+    """One solve with the current solver, its settings overridden by ``settings``; the status."""
     import warnings
 
     import cvxpy as cp
 
+    name, base, _ = _CHOICE.get()
     try:
         with warnings.catch_warnings():
             # "Solution may be inaccurate": the status says so (optimal_inaccurate), and every
             # design is certified independently of the solver's claim anyway
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            prob.solve(solver=cp.CLARABEL, **settings)
+            prob.solve(solver=name, **{**base, **settings})
         return str(prob.status)
     except cp.error.SolverError:
         return "solver_error"
 
 
 def solve(prob, info: dict | None = None) -> tuple[str, float]:
-    """Solve a cvxpy problem with Clarabel: (status, seconds); a solver failure is a status.
+    """Solve a cvxpy problem with the current solver (:func:`using`; Clarabel by default):
+    (status, seconds); a solver failure is a status.
 
-    If Clarabel's default settings end in a numerical failure (``_RETRY``), the problem is solved
-    again with :data:`FALLBACK_SETTINGS`; the returned status is that of the fallback.
-    ``info`` (optional dict) receives ``attempts``: [(settings, status), ...].
+    With Clarabel, if the default settings end in a numerical failure (``_RETRY``), the problem is
+    solved again with :data:`FALLBACK_SETTINGS`; the returned status is that of the fallback.
+    ``info`` (optional dict) receives ``solver`` (the name) and ``attempts``:
+    [(settings, status), ...] (settings: those overriding the solver's own, {} for the first).
     """
     t0 = time.perf_counter()
     attempts = [({}, _attempt(prob, {}))]
-    if attempts[-1][1] in _RETRY:
+    if current() == "CLARABEL" and attempts[-1][1] in _RETRY:
         attempts.append((dict(FALLBACK_SETTINGS), _attempt(prob, FALLBACK_SETTINGS)))
+    seconds = time.perf_counter() - t0
+    usage = _CHOICE.get()[2]
+    if usage is not None:
+        usage.calls.append((attempts[-1][1], seconds))
     if info is not None:
+        info["solver"] = current()
         info["attempts"] = attempts
-    return attempts[-1][1], time.perf_counter() - t0
+    return attempts[-1][1], seconds
 
 
 def solved(status: str) -> bool:

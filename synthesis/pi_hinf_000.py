@@ -312,7 +312,7 @@ def robust_output_matrix(La: np.ndarray) -> np.ndarray:
 
 def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
     """Solve Theorem 2 + pole region (+ the model-error channel) on a common P with
-    cvxpy/Clarabel. Raises DesignError naming the LMI family and the mode/vertex at fault."""
+    cvxpy (lmi: Clarabel by default). Raises DesignError naming the LMI family and the mode/vertex at fault."""
     import cvxpy as cp  # design time only
 
     opts.validate()
@@ -378,7 +378,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
     prob = cp.Problem(cp.Minimize(objective), cons)
     status, seconds = lmi.solve(prob)
     if not lmi.solved(status) or P.value is None:
-        raise DesignError(f"design {opts.name}: no solution (Clarabel: {status}) of Theorem 2 + pole region"
+        raise DesignError(f"design {opts.name}: no solution ({lmi.label()}: {status}) of Theorem 2 + pole region"
                           f"{' + model-error channel' if opts.robust else ''} on a common P over "
                           f"{len(vertices)} mode/speed vertices; " + _diagnose(base, families, opts))
     Pb = P.value
@@ -391,13 +391,13 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
                   gamma=float(math.sqrt(max(g.value, 0.0))),
                   gamma_robust=float(math.sqrt(max(g2.value, 0.0))) if opts.robust else None,
                   E=E,
-                  solver={"name": "CLARABEL", "status": str(status), "seconds": round(seconds, 4),
+                  solver={"name": lmi.current(), "status": str(status), "seconds": round(seconds, 4),
                           "lmis": 1 + sum(len(c) for c in families.values()), "time_scale_per_s": tau,
                           "state_scaling": np.diag(S).tolist(), "vertices": [v[1] for v in vertices]})
 
 
 def _diagnose(base: list, families: dict, opts: DesignOptions) -> str:
-    """Name the LMI family that is infeasible on its own (feasibility problems, Clarabel)."""
+    """Name the LMI family that is infeasible on its own (feasibility problems, the current lmi solver)."""
     def feasible(cons) -> bool:
         return lmi.feasible(base + cons)
 

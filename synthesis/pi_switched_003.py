@@ -393,7 +393,7 @@ def lmi_22(P, alpha_bar, printed: bool = False):
 
 
 def solve_mode(mm: ModeModel, opts: DesignOptions) -> ModeDesign:
-    """Solve (20)-(23) (+ the optional pole region) for one mode with cvxpy/Clarabel."""
+    """Solve (20)-(23) (+ the optional pole region) for one mode with cvxpy (lmi: Clarabel by default)."""
     import cvxpy as cp  # design time only
 
     conditions = check_conditions(mm, opts.rank_tol, opts.name)
@@ -424,7 +424,7 @@ def solve_mode(mm: ModeModel, opts: DesignOptions) -> ModeDesign:
     prob = cp.Problem(cp.Minimize(opts.beta * ab + (1 - opts.beta) * gb), cons)
     status, seconds = lmi.solve(prob)
     if not lmi.solved(status) or P.value is None or U.value is None:
-        raise DesignError(f"design {opts.name}: {mm.where}: no solution of LMIs (20)-(23) (Clarabel: {status}); "
+        raise DesignError(f"design {opts.name}: {mm.where}: no solution of LMIs (20)-(23) ({lmi.label()}: {status}); "
                           + _diagnose(fam))
     Pn, Un = _sym(P.value), U.value
     Ln = -np.linalg.solve(Pn, Un)                         # L = -P^-1 U (ERRATA 003), normalised
@@ -450,7 +450,7 @@ def design(vehicle: Vehicle, opts: DesignOptions, model: Callable | None = None)
     source = "latobs.synthesis.motorcycle_model.reduced_model" if model is None else \
         f"{getattr(model, '__module__', '?')}.{getattr(model, '__qualname__', repr(model))}"
     statuses = sorted({s.status for s in sols})
-    solver = {"name": "CLARABEL", "status": statuses[0] if len(statuses) == 1 else ",".join(statuses),
+    solver = {"name": lmi.current(), "status": statuses[0] if len(statuses) == 1 else ",".join(statuses),
               "seconds": round(sum(s.seconds for s in sols), 4),
               "per_mode": [{"mode": mm.index, "status": s.status, "seconds": round(s.seconds, 4)}
                            for mm, s in zip(modes, sols)]}
