@@ -1,4 +1,5 @@
-"""Command line ``latobs`` (CONTRACT.md): list, design, build, validate, replay, demo."""
+"""Command line ``latobs`` (CONTRACT.md): list, design, build, validate, replay, campaign, bench, demo,
+export-ssp."""
 from __future__ import annotations
 
 import argparse
@@ -123,6 +124,21 @@ def _cmd_bench(args) -> int:
     from .bench import main as bench_main
 
     return bench_main(args.bench_args)
+
+
+def _cmd_campaign(args) -> int:
+    from .campaign import rerun, run_campaign
+
+    if args.rerun is not None:
+        rerun(args.campaign, args.rerun, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
+              tag=args.tag, plots=not args.no_plots)
+        return 0
+    if args.scheduler is not None and args.workers is not None:
+        raise CliError("--workers sizes the local cluster; with --scheduler the scheduler's workers run the campaign")
+    run_campaign(args.campaign, observers=args.observer, runs=args.runs, out=Path(args.out),
+                 fmu_dir=Path(args.fmu_dir), scheduler=args.scheduler, workers=args.workers, seed=args.seed,
+                 tag=args.tag, fresh=args.fresh, plots=not args.no_plots, progress=not args.no_progress)
+    return 0
 
 
 def _cmd_demo(args) -> int:
@@ -275,11 +291,39 @@ def _out_file(text: str) -> str:
 def _check_bench_args(argv: list[str]) -> None:
     """The values of `latobs bench`'s options (bench parses them itself: latobs.bench.main),
     checked here so that a bad one is one line, not a traceback."""
+    from .bench import BACKENDS
+    from .synthesis import designs
+
+    def names(known, what: str):
+        def check(text: str) -> str:
+            given = [x.strip() for x in text.split(",") if x.strip()]
+            bad = [x for x in given if x not in known]
+            if bad or not given:
+                raise argparse.ArgumentTypeError(f"unknown {what} {', '.join(map(repr, bad)) or '(none given)'}; "
+                                                 f"known: {', '.join(known)}")
+            return text
+        return check
+
+    def seconds(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text!r}")
+        return value
+
     p = _Parser(prog="latobs bench", add_help=False)
     p.add_argument("--fmu-dir", type=_fmu_dir)
     p.add_argument("--steps", type=_positive_int)
     p.add_argument("--repeats", type=_positive_int)
     p.add_argument("--json", type=_out_file)
+    p.add_argument("--backends", type=names(BACKENDS, "backend(s)"))
+    p.add_argument("--designs", type=names(list(designs.DESIGNS), "design(s)"))
+    p.add_argument("--scs-max-iters", type=_positive_int)
+    p.add_argument("--lmi-timeout", type=seconds)
+    for flag in ("--skip-build", "--skip-lmi", "--skip-fmus", "--skip-coupled", "--skip-scaling"):
+        p.add_argument(flag, action="store_true")
     p.parse_known_args(argv)
 
 
@@ -336,6 +380,29 @@ def parser() -> argparse.ArgumentParser:
                         add_help=False)
     bn.add_argument("bench_args", nargs=argparse.REMAINDER, help="see `latobs bench --help`")
     bn.set_defaults(func=_cmd_bench)
+    c = sub.add_parser("campaign", help="Monte Carlo campaign of a scenario or a campaign file on Dask "
+                                        "(runs.parquet, summary, report.md)")
+    c.add_argument("campaign", metavar="SCENARIO",
+                   help="a registered scenario (with the distributions of its observers' robustness campaign), "
+                        "a shipped campaign (robustness-000..003, mbds-bootstrap) or a campaign .toml file")
+    c.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable; default: "
+                                                                      "the campaign's)")
+    c.add_argument("--runs", type=_positive_int, default=None, metavar="N",
+                   help="number of runs (default: the campaign's); more than before extends a campaign")
+    c.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="a running dask-scheduler, e.g. tcp://127.0.0.1:8786 (default: a local cluster)")
+    c.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+                   help="processes of the local cluster (default: the number of cores)")
+    c.add_argument("--seed", type=_seed, default=None, help="campaign seed (default: the campaign's)")
+    c.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, help="writes OUT/campaign_NAME[_TAG]/")
+    c.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
+    c.add_argument("--tag", default="", type=_tag, help="suffix of the output folder")
+    c.add_argument("--rerun", type=_seed, default=None, metavar="SEED",
+                   help="run the one run of this seed alone, with the full validation output and plots")
+    c.add_argument("--fresh", action="store_true", help="discard the runs already in the output folder")
+    c.add_argument("--no-plots", action="store_true", help="no PNG figures")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    c.set_defaults(func=_cmd_campaign)
     m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
     m.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
     m.set_defaults(func=_cmd_demo)
@@ -369,7 +436,7 @@ USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.synthesis.params", "VehicleParameterError"),
                ("latobs.validation.scenarios", "UnknownScenarioError"),
                ("latobs.validation.harness", "WiringError"), ("latobs.validation.harness", "CoSimulationError"),
-               ("latobs.validation.replay", "ReplayError"))
+               ("latobs.validation.replay", "ReplayError"), ("latobs.validation.campaign", "CampaignError"))
 #: (module, function) whose KeyError means "unknown name" (the message names it and the known ones).
 USER_KEY_ERRORS = (("latobs.synthesis.designs", "get"), ("latobs.synthesis.designs", "parse_artefact"))
 

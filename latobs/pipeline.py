@@ -166,6 +166,28 @@ def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
     return {n: fmu_dir / f"{n}.fmu" for n in names}
 
 
+def ensure_plant(plant: str, vehicle: str | None, fmu_dir: Path) -> Path:
+    """Path of the plant FMU ``plant`` for ``vehicle`` (a name or a TOML file; None: the plant's
+    default vehicle) in ``fmu_dir``, built if missing: ``PLANT.fmu`` for the default vehicle,
+    ``PLANT_VEHICLE.fmu`` otherwise."""
+    from . import packaging
+
+    kind = packaging.PLANTS[plant]
+    vehicle = vehicle or kind.default_vehicle
+    if str(vehicle).endswith(".toml"):   # a TOML file by path: its FMU is named after its `name`
+        from .synthesis.params import load_vehicle
+
+        vehicle_name = load_vehicle(vehicle).name
+    else:
+        vehicle_name = vehicle
+    name = plant if vehicle_name == kind.default_vehicle else f"{plant}_{vehicle_name}"
+    path = fmu_dir / f"{name}.fmu"
+    if not path.is_file():
+        print(f"building missing FMU: {name}")
+        build([plant], vehicle, fmu_dir)
+    return path
+
+
 def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_dir: Path,
                    plant_parameters: dict | None = None, noise: bool = False, seed: int = 0,
                    tag: str = "", quiet: bool = False, plots: bool = True,
@@ -183,19 +205,8 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     observers = observers or [n for n, e in designs.DESIGNS.items()
                               if (e.paper == "000" if sc.plant == "CarPlant" else e.plant == sc.plant)]
     fmus = ensure_fmus(observers, fmu_dir)
-    kind = packaging.PLANTS[sc.plant]
-    plant_vehicle = plant_vehicle or kind.default_vehicle
-    if str(plant_vehicle).endswith(".toml"):   # a TOML file by path: its FMU is named after its `name`
-        from .synthesis.params import load_vehicle
-
-        plant_vehicle_name = load_vehicle(plant_vehicle).name
-    else:
-        plant_vehicle_name = plant_vehicle
-    plant_name = sc.plant if plant_vehicle_name == kind.default_vehicle else f"{sc.plant}_{plant_vehicle_name}"
-    plant = fmu_dir / f"{plant_name}.fmu"
-    if not plant.is_file():
-        print(f"building missing FMU: {plant_name}")
-        build([sc.plant], plant_vehicle, fmu_dir)
+    plant_vehicle = plant_vehicle or packaging.PLANTS[sc.plant].default_vehicle
+    plant = ensure_plant(sc.plant, plant_vehicle, fmu_dir)
     out_dir = out / (f"{scenario}_{tag}" if tag else scenario)
     _, metrics, paths = validate(sc, plant, {n: fmus[n] for n in observers}, out_dir, vehicle=plant_vehicle,
                                  plant_parameters=plant_parameters or {},

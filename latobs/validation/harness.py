@@ -488,6 +488,9 @@ class CoSimulation:
     fast               the step loop on preallocated buffers (:func:`_fast_loop`, default), or False:
                        the plain loop through fmpy's ``FMU2Slave`` wrappers (identical results, the
                        reference of the fast one)
+    unzipped           {FMU path: folder it is already extracted to}: those FMUs are not extracted
+                       again (a campaign's worker extracts each FMU once, not once per run); the
+                       caller owns the folders
     """
 
     def __init__(self, scenario: Scenario | str, plant_fmu: str | os.PathLike,
@@ -495,8 +498,9 @@ class CoSimulation:
                  noise: NoiseSpec | Mapping | None = None, seed: int = 0,
                  plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
                  progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None,
-                 fast: bool = True):
+                 fast: bool = True, unzipped: Mapping[str | os.PathLike, str] | None = None):
         self.fast = bool(fast)
+        self.unzipped = {Path(k).resolve(): str(v) for k, v in (unzipped or {}).items()}
         self.scenario = get_scenario(scenario)
         self.plant_path = Path(plant_fmu)
         self.observer_paths = {str(k): Path(v) for k, v in (observer_fmus or {}).items()}
@@ -525,7 +529,7 @@ class CoSimulation:
         fmus: list[FmuInstance] = []
         try:
             # extract each distinct FMU file once
-            unzipped: dict[Path, str] = {}
+            unzipped: dict[Path, str] = dict(self.unzipped)
             for p in [self.plant_path, *self.observer_paths.values()]:
                 key = p.resolve()
                 if key not in unzipped:
@@ -692,11 +696,11 @@ def run(scenario: Scenario | str, plant_fmu: str | os.PathLike,
         noise: NoiseSpec | Mapping | None = None, seed: int = 0,
         plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
         progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None,
-        fast: bool = True) -> SimResult:
+        fast: bool = True, unzipped: Mapping[str | os.PathLike, str] | None = None) -> SimResult:
     """Co-simulate ``plant_fmu`` and ``observer_fmus`` on ``scenario``; see :class:`CoSimulation`."""
     return CoSimulation(scenario, plant_fmu, observer_fmus, dt=dt, noise=noise, seed=seed,
                         plant_parameters=plant_parameters, vehicle=vehicle, progress=progress,
-                        observer_parameters=observer_parameters, fast=fast).run()
+                        observer_parameters=observer_parameters, fast=fast, unzipped=unzipped).run()
 
 
 # ------------------------------------------------------------------------------------------------

@@ -199,9 +199,10 @@ class ReplayRun:
 
 
 def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: str | None = None,
-          source: Any = "the record") -> ReplayRun:
+          source: Any = "the record", unzipdir: str | None = None) -> ReplayRun:
     """Drive the FMU at ``fmu_path`` with the columns of ``data`` (``t`` and one column per FMU
-    input; see the module docstring for the timing). ``source`` names the data in errors."""
+    input; see the module docstring for the timing). ``source`` names the data in errors.
+    ``unzipdir``: the folder the FMU is already extracted to (kept), else a temporary one."""
     from .harness import FmuInstance, WiringError, _unit_of, observer_design
 
     fmu_path = Path(fmu_path)
@@ -214,7 +215,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
     cols = {k: np.asarray(v, dtype=float) for k, v in data.items() if k != "t"}
     label = label or fmu_path.stem
     try:
-        f = FmuInstance(label, fmu_path)
+        f = FmuInstance(label, fmu_path, unzipdir)
     except WiringError as exc:
         raise ReplayError(str(exc)) from None
     except Exception as exc:  # not a zip, not an FMU

@@ -1,0 +1,176 @@
+"""The Markdown report of a Monte Carlo campaign (:mod:`latobs.validation.campaign`), with its
+histograms and scatter plots (matplotlib, Agg canvas).
+
+``report.md`` in the campaign folder: the declared distributions; runs, failures and timing; the
+percentiles of every metric (and the 95 % bootstrap interval of its mean); the enclosure of every
+interval; the worst runs of every headline metric with their seeds and the command that re-runs
+each alone; and per observer ``figures/hist_LABEL.png`` (the distribution of each headline metric
+over the runs) and per headline metric ``figures/scatter_LABEL.X.rms.png`` (it against each drawn
+quantity, one point per run).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..atomic import atomic_write_text
+from .campaign import Campaign, headlines
+
+
+SCATTER_COLUMNS = 6   # panels per row of a scatter figure
+
+
+def _g(x: Any) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    if isinstance(x, str):
+        return x
+    return f"{x:.4g}"
+
+
+def _label_of(column: str) -> str:
+    return column.split(".", 1)[0]
+
+
+def _numeric_params(rows: list[Mapping[str, Any]]) -> list[str]:
+    """Drawn quantities that vary over the runs and are numbers (the scatter plots' x axes)."""
+    names: dict[str, None] = {}
+    for r in rows:
+        for k, v in r["params"].items():
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and k != "scenario.seed":
+                names.setdefault(k, None)
+    return [k for k in names if len({r["params"].get(k) for r in rows}) > 1]
+
+
+def _metric_table(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    lines = ["| metric | runs | p5 | p50 | p95 | p99 | max | mean [95 % CI] |", "|---|---|---|---|---|---|---|---|"]
+    for col, s in stats.items():
+        if not s.get("n"):
+            lines.append(f"| `{col}` | 0 | | | | | | |")
+            continue
+        ci = s["mean_ci95"]
+        lines.append(f"| `{col}` | {s['n']} | {_g(s['p5'])} | {_g(s['p50'])} | {_g(s['p95'])} | {_g(s['p99'])} | "
+                     f"{_g(s['max'])} | {_g(s['mean'])} [{_g(ci[0])}, {_g(ci[1])}] |")
+    return lines
+
+
+def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> str:
+    t = summary.get("timing", {})
+    out = [f"# Campaign `{c.name}`", "", c.description, "",
+           f"- kind: {c.kind}; " + (f"scenario `{c.scenario}` on the plant for vehicle `{c.plant_vehicle}`"
+                                    if c.kind == "cosim" else f"record `{c.replay['csv']}`, segments of "
+                                    f"{c.replay['segment_s']:g} s from the {c.replay['part']} part(s)"),
+           f"- observers: {', '.join(f'`{o}`' for o in c.observers)}",
+           f"- runs: {summary['runs']} ({summary['ok']} ok, {summary['failed']} failed); campaign seed {c.seed}; "
+           f"run k's seed is SeedSequence([{c.seed}, k]) (`latobs.validation.campaign.run_seed`)",
+           f"- definition: `{c.source}`"]
+    for t in summary.get("invocations", [t]):
+        if t.get("execution_s"):
+            out.append(f"- invocation finished {t.get('finished', '')}: {t['runs_this_invocation']} runs, "
+                       f"{t['runs_on_dask']} of them in {t['execution_s']:.1f} s on {t['workers']} Dask worker(s) "
+                       f"({t['scheduler']} scheduler), {t['runs_per_s']:.2f} runs/s; cluster start "
+                       f"{t['cluster_start_s']:.1f} s")
+    out += ["", "## Declared distributions", "", "| quantity | distribution |", "|---|---|"]
+    for table, dists in (("scenario", c.scenario_fields), ("plant", c.plant), ("signals", c.signals)):
+        for k, dist in sorted(dists.items()):
+            out.append(f"| `{table}.{k}` | {dist.describe()} |")
+    for s, (std, bias) in sorted(c.noise.items()):
+        out.append(f"| `noise.{s}` | std {std.describe()}, bias {bias.describe()} |")
+    if c.kind == "replay":
+        out.append(f"| segment | start uniform in the part, part with probability ∝ its room; "
+                   f"{c.replay['segment_s']:g} s |")
+    out += ["", "## Metrics over the runs", "",
+            "After each run's settle time; SI units (rad, rad/s, m/s, N). `X.rms`, `X.max_abs`: estimate error; "
+            "`X.violations`: samples where the truth is outside the interval; `X.mean_width`: its mean width.", ""]
+    out += _metric_table(summary["metrics"])
+    for part, stats in summary.get("by_part", {}).items():
+        out += ["", f"### {part} part of the record ({'t < split' if part == 'train' else 't >= split'})", ""]
+        out += _metric_table(stats)
+    if summary["enclosure"]:
+        out += ["", "## Enclosure of the intervals", "", "| interval | runs with a violation | violating samples |",
+                "|---|---|---|"]
+        for base, e in summary["enclosure"].items():
+            out.append(f"| `{base}` | {e['runs_with_violations']} of {e['runs']} | {e['violating_samples']} |")
+    out += ["", "## Worst runs", "", f"Re-run one alone (full validation output and plots): "
+            f"`{summary.get('rerun_command', 'latobs campaign ' + c.name + ' --rerun SEED')}`", ""]
+    drawn_names = c.drawn_names()
+    for col, worst in summary["worst"].items():
+        if not worst:
+            continue
+        out += [f"**`{col}`**", "", "| run | seed | value | drawn quantities |", "|---|---|---|---|"]
+        for w in worst:
+            drawn = ", ".join(f"{k} {_g(w['params'][k])}" for k in drawn_names if k in w["params"]
+                              and k != "scenario.seed")
+            out.append(f"| {w['run']} | `--rerun {w['seed']}` | {_g(w['value'])} | {drawn} |")
+        out.append("")
+    if summary["failures"]:
+        out += ["## Failed runs", "", "| run | seed | error |", "|---|---|---|"]
+        out += [f"| {f['run']} | {f['seed']} | {str(f['error']).splitlines()[0][:200]} |" for f in summary["failures"]]
+        out.append("")
+    if figures:
+        out += ["## Figures", ""]
+        out += [f"![{p.stem}](figures/{p.name})" for p in figures]
+    return "\n".join(out) + "\n"
+
+
+def figures(folder: Path, rows: list[Mapping[str, Any]]) -> list[Path]:
+    """Per observer: histograms of its headline metrics, and scatter plots of them against the
+    drawn quantities. Returns the PNG paths."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from ..atomic import atomic_path
+
+    ok = [r for r in rows if r["status"] == "ok"]
+    cols = headlines(ok)
+    params = _numeric_params(ok)
+    paths = []
+    for label in dict.fromkeys(_label_of(c) for c in cols):
+        mine = [c for c in cols if _label_of(c) == label]
+        vals = {c: np.array([np.nan if r["metrics"].get(c) is None else r["metrics"][c] for r in ok]) for c in mine}
+        fig = Figure(figsize=(4.0 * len(mine), 3.2))
+        for i, c in enumerate(mine):
+            ax = fig.add_subplot(1, len(mine), i + 1)
+            x = vals[c][np.isfinite(vals[c])]
+            ax.hist(x, bins=min(40, max(5, int(math.sqrt(max(x.size, 1))))), color="tab:blue", alpha=0.8)
+            ax.set_xlabel(c.split(".", 1)[1])
+            ax.set_ylabel("runs")
+            ax.grid(alpha=0.3)
+        fig.suptitle(f"{label}: {len(ok)} runs")
+        fig.tight_layout()
+        paths.append(_save(fig, folder / "figures" / f"hist_{label}.png", FigureCanvasAgg, atomic_path))
+        for c in mine if params else ():
+            ncol = min(SCATTER_COLUMNS, len(params))
+            nrow = -(-len(params) // ncol)
+            fig = Figure(figsize=(2.7 * ncol, 2.3 * nrow + 0.4))
+            for j, p in enumerate(params):
+                ax = fig.add_subplot(nrow, ncol, j + 1)
+                px = np.array([np.nan if r["params"].get(p) is None else r["params"][p] for r in ok], dtype=float)
+                ax.scatter(px, vals[c], s=4, alpha=0.5)
+                ax.set_xlabel(p, fontsize=8)
+                if j % ncol == 0:
+                    ax.set_ylabel(c.split(".", 1)[1], fontsize=8)
+                ax.locator_params(nbins=4)
+                ax.tick_params(labelsize=7)
+                ax.grid(alpha=0.3)
+            fig.suptitle(f"{c} against each drawn quantity, one point per run")
+            fig.tight_layout()
+            paths.append(_save(fig, folder / "figures" / f"scatter_{c}.png", FigureCanvasAgg, atomic_path))
+    return paths
+
+
+def _save(fig, path: Path, canvas, atomic_path) -> Path:
+    canvas(fig)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, format="png", dpi=80)
+    return path
+
+
+def write(folder: Path, c: Campaign, summary: Mapping[str, Any], rows: list[Mapping[str, Any]],
+          plots: bool = True) -> Path:
+    """Write ``folder/report.md`` (and its figures unless ``plots`` is false); returns its path."""
+    figs = figures(Path(folder), rows) if plots else []
+    return atomic_write_text(Path(folder) / "report.md", markdown(c, summary, figs))

@@ -1,0 +1,334 @@
+"""Monte Carlo campaigns (latobs.validation.campaign, latobs.campaign): definitions, draws,
+journal, summary; a campaign on a local Dask cluster that resumes and re-runs a run alone; and a
+campaign on a running dask-scheduler that loses a worker mid-way."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from latobs.validation import campaign as cp
+from latobs.validation.campaign import CampaignError
+from latobs.validation.scenarios import get_scenario
+
+SHIPPED = sorted(p.stem for p in Path(cp.__file__).parents[1].joinpath("campaigns").glob("*.toml"))
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "c.toml"
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+BASE = 'name = "t"\nkind = "cosim"\nscenario = "bank-braking"\nobservers = ["SideslipBankObserver"]\nruns = 4\nseed = 1\n'
+
+
+# --------------------------------------------------------------------------------------------
+# definitions
+# --------------------------------------------------------------------------------------------
+def test_the_shipped_campaigns_load_and_cover_every_paper_and_the_real_data():
+    assert {"robustness-000", "robustness-001", "robustness-002", "robustness-003", "mbds-bootstrap"} <= set(SHIPPED)
+    from latobs.campaign import resolve, shipped
+
+    for name, path in shipped().items():
+        c = cp.load(path)
+        assert c.name == name and c.runs >= 100 and c.observers
+        r = resolve(name)                       # observers are known designs, plant vehicle resolved
+        assert r.kind == "replay" or r.plant_vehicle
+    assert cp.load(shipped()["mbds-bootstrap"]).kind == "replay"
+
+
+@pytest.mark.parametrize("extra, culprit", [
+    ("colour = 1\n", "colour"),
+    ("[plant]\nmu = { uniform = [1.0, 0.5] }\n", "[plant] mu"),
+    ("[plant]\nmu = { gamma = [1.0, 0.5] }\n", "[plant] mu"),
+    ("[plant]\nmu = 'wet'\n", "[plant] mu"),
+    ("[signals]\nyaw_scale = 1.1\n", "yaw_scale"),
+    ("[scenario_fields]\nspeeed = 3.0\n", "speeed"),
+    ("[noise.yaw_rate]\nstd = { normal = [0.0, 0.01] }\n", "[noise.yaw_rate] std"),
+    ("[noise.yaw_rate]\nsdt = 0.1\n", "[noise.yaw_rate]"),
+    ("[replay]\ncsv = 'mbds'\n", "[replay]"),
+])
+def test_a_bad_definition_is_refused_naming_the_culprit(tmp_path, extra, culprit):
+    with pytest.raises(CampaignError) as e:
+        cp.load(_write(tmp_path, BASE + extra))
+    assert culprit in str(e.value) and "c.toml" in str(e.value)
+
+
+def test_bad_top_level_values_are_refused(tmp_path):
+    for bad, culprit in (("runs = 0", "runs"), ('kind = "batch"', "kind"), ('scenario = "nope"', "nope"),
+                         ('name = "a/b"', "name"), ("dt = -1.0", "dt")):
+        text = "\n".join(line for line in BASE.splitlines() if not line.startswith(bad.split(" ")[0] + " ")) + "\n"
+        with pytest.raises(CampaignError, match=culprit):
+            cp.load(_write(tmp_path, text + bad + "\n"))
+    with pytest.raises(CampaignError, match="not valid TOML"):
+        cp.load(_write(tmp_path, "name = \n"))
+
+
+def test_a_scenario_alone_takes_the_robustness_distributions_of_its_observers_paper():
+    from latobs.campaign import resolve
+
+    c = resolve("double-lane-change", runs=7)
+    t = resolve("robustness-000")
+    assert c.scenario == "double-lane-change" and c.runs == 7 and c.plant == t.plant and c.noise == t.noise
+    assert c.observers == ("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
+                           "SideslipBankObserverTirePaper")          # those of `latobs validate`
+    assert c.scenario_fields == {}                                  # the scenario's own duration
+    with pytest.raises(CampaignError, match="MotorcyclePlant"):
+        resolve("motorcycle-lane-change", observers=["SideslipBankObserver"])
+    with pytest.raises(CampaignError, match="unknown campaign or scenario"):
+        resolve("no-such-thing")
+
+
+# --------------------------------------------------------------------------------------------
+# draws
+# --------------------------------------------------------------------------------------------
+def test_run_seeds_are_distinct_and_independent_of_the_number_of_runs():
+    seeds = [cp.run_seed(2026, k) for k in range(5000)]
+    assert len(set(seeds)) == len(seeds)
+    assert cp.run_seed(2026, 17) == seeds[17] and cp.run_seed(2027, 17) != seeds[17]
+
+
+def test_draws_are_reproducible_and_follow_the_declared_distributions(tmp_path):
+    c = cp.load(_write(tmp_path, BASE + """
+[plant]
+mu = { uniform = [0.6, 1.0] }
+scale_f = { loguniform = [0.5, 2.0] }
+scale_r = { choice = [0.8, 1.2] }
+[signals]
+bank_offset = { normal = [0.0, 0.02], clip = [-0.01, 0.01] }
+steer_scale = 1.5
+[noise.yaw_rate]
+std = { uniform = [0.001, 0.002] }
+bias = { normal = [0.003, 0.001] }
+"""))
+    draws = [cp.draw(c, cp.run_seed(c.seed, k)) for k in range(4000)]
+    assert draws[5] == cp.draw(c, cp.run_seed(c.seed, 5))
+    col = {k: np.array([d[k] for d in draws]) for k in draws[0]}
+    assert 0.6 <= col["plant.mu"].min() and col["plant.mu"].max() <= 1.0
+    assert abs(col["plant.mu"].mean() - 0.8) < 0.01
+    assert abs(np.log(col["plant.scale_f"]).mean()) < 0.03          # log-uniform on [1/2, 2]: mean log 0
+    assert set(col["plant.scale_r"]) == {0.8, 1.2}
+    assert col["signals.bank_offset"].min() == -0.01 and col["signals.bank_offset"].max() == 0.01
+    assert np.all(col["signals.steer_scale"] == 1.5)
+    assert abs(col["noise.yaw_rate.bias"].mean() - 0.003) < 1e-4 and abs(col["noise.yaw_rate.bias"].std() - 0.001) < 1e-4
+    assert c.drawn_names() == ["plant.mu", "plant.scale_f", "plant.scale_r", "signals.bank_offset",
+                               "noise.yaw_rate.std", "noise.yaw_rate.bias"]
+
+
+def test_random_manoeuvre_runs_get_the_run_seed_as_the_scenario_seed():
+    from latobs.campaign import resolve
+
+    c = resolve("robustness-001")
+    p = cp.draw(c, 12345)
+    assert p["scenario.seed"] == 12345 and cp.scenario_of(c, p).base.seed == 12345
+
+
+def test_replay_segments_lie_wholly_in_one_part_of_the_record():
+    from latobs.campaign import resolve
+
+    c = resolve("mbds-bootstrap")
+    parts = set()
+    for k in range(300):
+        p = cp.draw(c, cp.run_seed(1, k), record_length=600.0, split=425.0)
+        t0, part = p["segment.t_start_s"], p["segment.part"]
+        parts.add(part)
+        assert (t0 >= 0 and t0 + 30.0 <= 425.0) if part == "train" else (t0 >= 425.0 and t0 + 30.0 <= 600.0)
+    assert parts == {"train", "test"}
+
+
+def test_a_perturbed_scenario_scales_and_offsets_the_plant_inputs_and_nothing_else():
+    base = get_scenario("bank-braking", duration=10.0)
+    t = base.time_grid(0.01)
+    ref = base.sampled(t)
+    p = cp.PerturbedScenario.of(base, speed_scale=1.1, steer_scale=0.5, bank_scale=2.0, bank_offset=0.01)
+    got = p.sampled(t)
+    np.testing.assert_array_equal(got["vx"], ref["vx"] * 1.1)
+    np.testing.assert_array_equal(got["delta"], ref["delta"] * 0.5)
+    np.testing.assert_array_equal(got["bank_angle"], ref["bank_angle"] * 2.0 + 0.01)
+    assert (p.name, p.duration, p.settle_time, p.plant) == (base.name, 10.0, base.settle_time, "CarPlant")
+    moto = cp.PerturbedScenario.of(get_scenario("motorcycle-lane-change"), steer_scale=2.0)
+    t = moto.time_grid(0.01)
+    np.testing.assert_array_equal(moto.sampled(t)["rider_torque"], 2.0 * moto.base.sampled(t)["rider_torque"])
+
+
+# --------------------------------------------------------------------------------------------
+# journal and summary
+# --------------------------------------------------------------------------------------------
+def _row(k, value, status="ok"):
+    return {"run": k, "seed": cp.run_seed(0, k), "status": status, "error": None if status == "ok" else "E: x",
+            "params": {"plant.mu": 0.5 + k / 100}, "metrics": {"O.beta.rms": value, "O.vy.violations": float(k % 3 == 0)},
+            "headline": ["O.beta.rms", "O.vy.violations"], "seconds": 0.1, "worker": "w"}
+
+
+def test_the_journal_keeps_whole_rows_once_and_drops_a_torn_last_line(tmp_path):
+    j = cp.Journal(tmp_path / "runs.jsonl")
+    for k in range(3):
+        j.append(_row(k, float(k)))
+    j.append(_row(1, 99.0))                                  # a run delivered twice
+    j.close()
+    with open(j.path, "a") as f:
+        f.write('{"run": 3, "seed": 1, "sta')               # killed mid-write
+    rows = cp.Journal(j.path).read()
+    assert sorted(rows) == [0, 1, 2] and rows[1]["metrics"]["O.beta.rms"] == 1.0
+    j2 = cp.Journal(j.path)
+    j2.append(_row(3, 3.0))                                  # the torn line is ended, the row whole
+    j2.close()
+    assert sorted(cp.Journal(j.path).read()) == [0, 1, 2, 3]
+    lines = j.path.read_text().splitlines()
+    j.path.write_text("\n".join(["garbage", *lines]) + "\n")
+    with pytest.raises(CampaignError, match="line 1"):
+        cp.Journal(j.path).read()
+
+
+def test_the_summary_gives_numpy_percentiles_enclosure_and_the_worst_runs(tmp_path):
+    c = cp.load(_write(tmp_path, BASE))
+    rng = np.random.default_rng(3)
+    values = rng.lognormal(size=200)
+    rows = [_row(k, float(v)) for k, v in enumerate(values)] + [_row(200, 0.0, status="failed")]
+    s = cp.summarize(c, rows)
+    st = s["metrics"]["O.beta.rms"]
+    for p in cp.PERCENTILES:
+        assert st[f"p{p}"] == pytest.approx(np.percentile(values, p), rel=1e-12)
+    assert st["max"] == values.max() and st["n"] == 200 and st["mean_ci95"][0] < values.mean() < st["mean_ci95"][1]
+    assert (s["ok"], s["failed"], s["failures"][0]["run"]) == (200, 1, 200)
+    assert s["enclosure"]["O.vy"]["runs_with_violations"] == len([k for k in range(200) if k % 3 == 0])
+    worst = s["worst"]["O.beta.rms"]
+    assert [w["run"] for w in worst] == list(np.argsort(-values)[: cp.WORST_RUNS])
+    assert worst[0]["seed"] == cp.run_seed(0, worst[0]["run"])
+    t = cp.rows_table(rows)
+    assert t.num_rows == 201 and t.column("O.beta.rms").to_pylist()[:3] == list(values[:3])
+
+
+# --------------------------------------------------------------------------------------------
+# campaigns on Dask
+# --------------------------------------------------------------------------------------------
+def _fmu_folder(built_fmus, tmp_path, names) -> Path:
+    d = tmp_path / "fmus"
+    d.mkdir(exist_ok=True)
+    for n in names:
+        shutil.copy2(built_fmus.c_path(n), d / f"{n}.fmu")
+    return d
+
+
+@pytest.mark.slow
+def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_alone(built_fmus, tmp_path, capsys):
+    """robustness-001 (paper 001 inside its guarantee) on a local cluster of 2 workers: every bound
+    contains the truth in every run; an extended campaign runs only the new runs; a journal cut by
+    a kill is completed with the same rows; a run re-run alone from its seed gives the same metrics."""
+    from latobs import packaging
+    from latobs.campaign import run_campaign, rerun
+
+    fmus = _fmu_folder(built_fmus, tmp_path, ["LateralIntervalObserver"])
+    packaging.package_plant("CarPlant", "sedan_no_roll", fmus, backend="c")
+    out = tmp_path / "out"
+    kw = dict(out=out, fmu_dir=fmus, workers=2, progress=False, plots=False)
+    s = run_campaign("robustness-001", runs=10, **kw)
+    folder = Path(s["folder"])
+    journal = cp.Journal(folder / "runs.jsonl")
+    rows = journal.read()
+    assert sorted(rows) == list(range(10)) and all(r["status"] == "ok" for r in rows.values())
+    for base, e in s["enclosure"].items():                   # the design's guarantee
+        assert e["runs_with_violations"] == 0 and e["runs"] == 10, base
+    widths = [r["metrics"]["LateralIntervalObserver.Fyf.mean_width"] for r in rows.values()]
+    assert all(w > 0 for w in widths)
+    assert len({r["worker"] for r in rows.values()}) >= 2    # spread over the cluster
+
+    s = run_campaign("robustness-001", runs=12, **kw)        # extended: two new runs only
+    assert s["timing"]["runs_this_invocation"] == 2
+    after = cp.Journal(folder / "runs.jsonl").read()
+    assert all(after[k]["metrics"] == rows[k]["metrics"] for k in range(10))
+
+    lines = (folder / "runs.jsonl").read_text().splitlines()   # killed: 3 rows lost, 1 torn
+    (folder / "runs.jsonl").write_text("\n".join(lines[:-3]) + "\n" + lines[-3][:25])
+    s = run_campaign("robustness-001", runs=12, **kw)
+    assert s["timing"]["runs_this_invocation"] == 3 and s["runs"] == 12
+    again = cp.Journal(folder / "runs.jsonl").read()
+    assert {k: r["metrics"] for k, r in again.items()} == {k: r["metrics"] for k, r in after.items()}
+    assert (folder / "report.md").is_file() and (folder / "runs.parquet").is_file()
+
+    seed = again[7]["seed"]
+    row = rerun("robustness-001", seed, out=out, fmu_dir=fmus, plots=False)
+    assert row["identical_to_journal"] and row["journal_run"] == 7
+    assert (folder / f"rerun_{seed}" / "metrics.json").is_file()
+
+    with pytest.raises(CampaignError, match="another campaign"):   # same folder, other definition
+        run_campaign("robustness-001", runs=12, seed=5, **kw)
+
+
+def _start(cmd, log: Path) -> subprocess.Popen:
+    return subprocess.Popen(cmd, stdout=open(log, "w"), stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def _kill(p: subprocess.Popen) -> None:
+    try:
+        os.killpg(p.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    p.wait(timeout=30)
+
+
+@pytest.mark.slow
+def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_fmus, tmp_path):
+    """`latobs campaign --scheduler` against a dask-scheduler and two dask-workers started here;
+    one worker is killed (SIGKILL, nanny and all) mid-campaign. The campaign completes: every run
+    in the journal exactly once, all ok, and the rows equal the same runs computed in this process."""
+    fmus = _fmu_folder(built_fmus, tmp_path, ["CarPlant", "SideslipBankObserver", "SideslipBankObserverTire"])
+    sched_file = tmp_path / "scheduler.json"
+    procs = [_start([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+                     "--no-dashboard", "--scheduler-file", str(sched_file)], tmp_path / "scheduler.log")]
+    try:
+        deadline = time.monotonic() + 60
+        while not sched_file.is_file() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        address = json.loads(sched_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        workers = [_start([sys.executable, "-m", "dask", "worker", "--scheduler-file", str(sched_file),
+                           "--nthreads", "1", "--nworkers", "1", "--no-dashboard", "--name", f"w{i}"],
+                          tmp_path / f"worker{i}.log") for i in range(2)]
+        procs += workers
+        from dask.distributed import Client
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(2, timeout=60)
+        runs = 80
+        out = tmp_path / "out"
+        campaign = _start([sys.executable, "-m", "latobs", "campaign", "robustness-000", "--runs", str(runs),
+                           "--scheduler", address, "--fmu-dir", str(fmus), "--out", str(out), "--no-plots",
+                           "--no-progress"], tmp_path / "campaign.log")
+        procs.append(campaign)
+        journal = out / "campaign_robustness-000" / "runs.jsonl"
+        deadline = time.monotonic() + 120
+        while (not journal.is_file() or journal.read_text().count("\n") < 12) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        done_at_kill = journal.read_text().count("\n")
+        _kill(workers[0])
+        assert done_at_kill < runs // 2, "the campaign was no longer in its middle when the worker was killed"
+        assert campaign.wait(timeout=300) == 0, (tmp_path / "campaign.log").read_text()[-3000:]
+    finally:
+        for p in procs:
+            _kill(p)
+    lines = [json.loads(x) for x in journal.read_text().splitlines()]
+    assert sorted(r["run"] for r in lines) == list(range(runs))          # nothing lost, nothing twice
+    assert all(r["status"] == "ok" for r in lines)
+    summary = json.loads((journal.parent / "summary.json").read_text())
+    assert (summary["runs"], summary["ok"], summary["timing"]["scheduler"]) == (runs, runs, address)
+    by_run = {r["run"]: r for r in lines}
+    # run 0 runs first in the campaign's own process (a wiring check); the rest on the workers
+    assert len({r["worker"] for r in lines[:done_at_kill] if r["run"] != 0}) == 2
+    assert len({r["worker"] for r in lines[done_at_kill + 5:]}) == 1     # the survivor finished it
+
+    from latobs.campaign import fmu_refs, resolve
+
+    c = resolve("robustness-000", runs=runs)
+    refs = fmu_refs(c, fmus)
+    for k in (0, lines[done_at_kill - 1]["run"], lines[-1]["run"]):
+        assert cp.run_case(c, k, cp.run_seed(c.seed, k), refs)["metrics"] == by_run[k]["metrics"], k
