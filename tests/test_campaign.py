@@ -265,7 +265,10 @@ def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_al
 
 
 def _start(cmd, log: Path) -> subprocess.Popen:
-    return subprocess.Popen(cmd, stdout=open(log, "w"), stderr=subprocess.STDOUT, start_new_session=True)
+    """A process of its own session, in the log's folder: not the project's, whose ``latobs/``
+    folder would shadow the installed package (python -m puts the working directory first)."""
+    return subprocess.Popen(cmd, stdout=open(log, "w"), stderr=subprocess.STDOUT, start_new_session=True,
+                            cwd=log.parent)
 
 
 def _kill(p: subprocess.Popen) -> None:
@@ -308,6 +311,7 @@ def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_
         journal = out / "campaign_robustness-000" / "runs.jsonl"
         deadline = time.monotonic() + 120
         while (not journal.is_file() or journal.read_text().count("\n") < 12) and time.monotonic() < deadline:
+            assert campaign.poll() is None, (tmp_path / "campaign.log").read_text()[-3000:]
             time.sleep(0.05)
         done_at_kill = journal.read_text().count("\n")
         _kill(workers[0])
