@@ -339,7 +339,7 @@ def rerun(spec: str, run_seed: int, observers: list[str] | None = None, out: Pat
         from .validation import replay as rp
 
         t = record["t"]
-        params = cp.draw(c, run_seed, record_length=float(t[-1] - t[0]), split=split)
+        params = cp.draw(c, run_seed, record_span=(float(t[0]), float(t[-1])), split=split)
         data = cp.replay_segment(c, params, record, run_seed)
         metrics, written = {}, []
         for o in c.observers:

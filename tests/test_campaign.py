@@ -133,16 +133,21 @@ def test_random_manoeuvre_runs_get_the_run_seed_as_the_scenario_seed():
 
 
 def test_replay_segments_lie_wholly_in_one_part_of_the_record():
+    """On the record's own time axis (the MBDS record runs from t = 150 s to 700 s, split 425 s)."""
     from latobs.campaign import resolve
 
     c = resolve("mbds-bootstrap")
-    parts = set()
-    for k in range(300):
-        p = cp.draw(c, cp.run_seed(1, k), record_length=600.0, split=425.0)
+    counts = {"train": 0, "test": 0}
+    for k in range(2000):
+        p = cp.draw(c, cp.run_seed(1, k), record_span=(150.0, 700.0), split=425.0)
         t0, part = p["segment.t_start_s"], p["segment.part"]
-        parts.add(part)
-        assert (t0 >= 0 and t0 + 30.0 <= 425.0) if part == "train" else (t0 >= 425.0 and t0 + 30.0 <= 600.0)
-    assert parts == {"train", "test"}
+        counts[part] += 1
+        assert (150.0 <= t0 and t0 + 30.0 <= 425.0) if part == "train" else (425.0 <= t0 and t0 + 30.0 <= 700.0)
+    # each part in proportion to its room for a segment: 245 s and 245 s
+    assert abs(counts["train"] / 2000 - 0.5) < 0.05
+    record = {"t": np.arange(15000, 70000) / 100.0, "yaw_rate": np.zeros(55000)}
+    seg = cp.replay_segment(c, {"segment.t_start_s": 430.0}, record, 1)
+    assert seg["t"][0] == 430.0 and seg["t"].size == 3000
 
 
 def test_a_perturbed_scenario_scales_and_offsets_the_plant_inputs_and_nothing_else():

@@ -391,12 +391,12 @@ def run_seed(campaign_seed: int, k: int) -> int:
     return int(np.random.SeedSequence([int(campaign_seed), int(k)]).generate_state(1, dtype=np.uint32)[0])
 
 
-def draw(c: Campaign, seed: int, record_length: float | None = None,
+def draw(c: Campaign, seed: int, record_span: tuple[float, float] | None = None,
          split: float | None = None) -> dict[str, Any]:
     """The run's values of every declared quantity ({"scenario.X", "plant.X", "signals.X",
     "noise.S.std", "noise.S.bias", and for replay "segment.t_start_s", "segment.part"}), fixed ones
     included, drawn from default_rng(seed) in the documented order. Replay needs the record's
-    length (s, from its start) and its split time."""
+    first and last time (s, its own time axis) and its split time (s, on that axis, or None)."""
     rng = np.random.default_rng(seed)
     p: dict[str, Any] = {}
     for k, d in sorted(c.scenario_fields.items()):
@@ -411,17 +411,21 @@ def draw(c: Campaign, seed: int, record_length: float | None = None,
         p[f"noise.{s}.std"] = max(std.draw(rng), 0.0)
         p[f"noise.{s}.bias"] = bias.draw(rng)
     if c.kind == "replay":
-        p.update(_draw_segment(rng, c.replay, record_length, split))
+        p.update(_draw_segment(rng, c.replay, record_span, split))
     return p
 
 
-def _draw_segment(rng, replay: Mapping[str, Any], length: float | None, split: float | None) -> dict[str, Any]:
-    """A segment wholly inside one part of the record (train: t < split, test: t >= split), the
-    part drawn with probability proportional to its room for a segment, the start uniform."""
+def _draw_segment(rng, replay: Mapping[str, Any], span: tuple[float, float] | None,
+                  split: float | None) -> dict[str, Any]:
+    """A segment wholly inside one part of the record (train: t < split, test: t >= split, on the
+    record's time axis), the part drawn with probability proportional to its room for a segment,
+    the start (``segment.t_start_s``, on the record's time axis) uniform in it."""
     seg = float(replay["segment_s"])
-    if length is None:
-        raise CampaignError("a replay draw needs the record's length")
-    bounds = {"train": (0.0, split if split is not None else length), "test": (split, length) if split else None}
+    if span is None:
+        raise CampaignError("a replay draw needs the record's time span")
+    start, end = (float(x) for x in span)
+    inside = split is not None and start < split < end
+    bounds = {"train": (start, split if inside else end), "test": (split, end) if inside else None}
     wanted = ("train", "test") if replay["part"] == "both" else (replay["part"],)
     room = {}
     for part in wanted:
@@ -430,7 +434,7 @@ def _draw_segment(rng, replay: Mapping[str, Any], length: float | None, split: f
             room[part] = (b[0], b[1] - seg)
     if not room:
         raise CampaignError(f"no {seg:g} s segment fits in the {replay['part']} part of the record "
-                            f"({length:g} s, split {split})")
+                            f"(t from {start:g} to {end:g} s, split {split})")
     parts = sorted(room)
     widths = np.array([room[q][1] - room[q][0] + 1e-9 for q in parts])
     part = parts[int(rng.choice(len(parts), p=widths / widths.sum()))]
@@ -626,7 +630,7 @@ def replay_segment(c: Campaign, params: Mapping[str, Any], record: Mapping[str, 
     from .harness import NoiseSpec
 
     t = np.asarray(record["t"], dtype=float)
-    t0 = t[0] + float(params["segment.t_start_s"])
+    t0 = float(params["segment.t_start_s"])
     sel = (t >= t0 - 1e-9) & (t < t0 + float(c.replay["segment_s"]) - 1e-9)
     data = {k: np.asarray(v, dtype=float)[sel] for k, v in record.items()}
     noise = noise_of(params)
@@ -662,7 +666,7 @@ def run_case(c: Campaign, k: int, seed: int, fmus: list[FmuRef], blobs: list[byt
                 row["metrics"], inputs = _cosim_metrics(c, params, seed, fmus, local)
             else:
                 t = np.asarray(record["t"], dtype=float)
-                row["params"] = params = draw(c, seed, record_length=float(t[-1] - t[0]), split=split)
+                row["params"] = params = draw(c, seed, record_span=(float(t[0]), float(t[-1])), split=split)
                 row["metrics"], inputs = _replay_metrics(c, params, seed, fmus, local, record)
             row["headline"] = headline_columns(row["metrics"], inputs)
         except Exception as exc:    # noqa: BLE001 - recorded in the journal, named in the report

@@ -62,7 +62,8 @@ def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> st
     out = [f"# Campaign `{c.name}`", "", c.description, "",
            f"- kind: {c.kind}; " + (f"scenario `{c.scenario}` on the plant for vehicle `{c.plant_vehicle}`"
                                     if c.kind == "cosim" else f"record `{c.replay['csv']}`, segments of "
-                                    f"{c.replay['segment_s']:g} s from the {c.replay['part']} part(s)"),
+                                    f"{c.replay['segment_s']:g} s from "
+                                    + ("both parts" if c.replay["part"] == "both" else f"the {c.replay['part']} part")),
            f"- observers: {', '.join(f'`{o}`' for o in c.observers)}",
            f"- runs: {summary['runs']} ({summary['ok']} ok, {summary['failed']} failed); campaign seed {c.seed}; "
            f"run k's seed is SeedSequence([{c.seed}, k]) (`latobs.validation.campaign.run_seed`)",
@@ -86,6 +87,10 @@ def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> st
             "After each run's settle time; SI units (rad, rad/s, m/s, N). `X.rms`, `X.max_abs`: estimate error; "
             "`X.violations`: samples where the truth is outside the interval; `X.mean_width`: its mean width.", ""]
     out += _metric_table(summary["metrics"])
+    if c.kind == "replay":
+        out += ["", "The segments are drawn from one record and overlap: the bootstrap interval of a mean "
+                "reflects the resampling of this drive, not of drives like it (a part of length L holds about "
+                f"L / {c.replay['segment_s']:g} s independent segments)."]
     for part, stats in summary.get("by_part", {}).items():
         out += ["", f"### {part} part of the record ({'t < split' if part == 'train' else 't >= split'})", ""]
         out += _metric_table(stats)
