@@ -551,13 +551,12 @@ def observer_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
 @dataclass(frozen=True)
 class FmuRef:
     """A built FMU a run uses: its role ("plant" or the observer's name), file name, sha256, and
-    either its local path or its bytes (shipped to a worker that may not see the file)."""
+    its local path (None on a Dask worker, which receives the bytes instead: it may not see the file)."""
 
     role: str
     filename: str
     sha256: str
     path: str | None = None
-    data: bytes | None = field(default=None, repr=False)
 
 
 _WORKER_CACHE: dict[str, tuple[str, str]] = {}   # sha256 -> (FMU path, extracted folder)
@@ -585,14 +584,15 @@ def _local(ref: FmuRef, blob: bytes | None = None) -> tuple[str, str]:
             atexit.register(shutil.rmtree, _CACHE_DIR[0], True)
         folder = Path(_CACHE_DIR[0]) / ref.sha256[:16]
         folder.mkdir(parents=True, exist_ok=True)
-        data = blob if blob is not None else ref.data
-        if data is not None:
-            if hashlib.sha256(data).hexdigest() != ref.sha256:
+        if blob is not None:
+            if hashlib.sha256(blob).hexdigest() != ref.sha256:
                 raise CampaignError(f"FMU {ref.filename}: the bytes received do not match its sha256")
             path = folder / ref.filename
-            path.write_bytes(data)
-        else:
+            path.write_bytes(blob)
+        elif ref.path is not None:
             path = Path(ref.path)
+        else:
+            raise CampaignError(f"FMU {ref.filename}: neither its bytes nor its path were given")
         hit = (str(path), extract(str(path), unzipdir=str(folder / "unzipped")))
         _WORKER_CACHE[ref.sha256] = hit
         return hit
