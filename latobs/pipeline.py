@@ -220,6 +220,18 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     return metrics
 
 
+def observer_inputs(observer: str):
+    """The inputs (name, unit, declared min/max) of observer ``observer``'s FMU, as its model file
+    declares them: known without building the FMU."""
+    from importlib import import_module
+
+    from . import fmu_src, packaging
+    from .validation.replay import InputSpec
+
+    spec = import_module(f"{fmu_src.__name__}.models.{packaging.OBSERVERS[observer].model_module}").SPEC
+    return [InputSpec(v.name, v.unit, v.min, v.max) for v in spec.inputs]
+
+
 def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("build"),
            fmu_dir: Path = Path("build"), split: float | None | str = "auto", plots: bool = True,
            quiet: bool = False) -> dict:
@@ -235,10 +247,12 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
 
     if observer not in designs.DESIGNS:
         raise rp.ReplayError(f"unknown observer {observer!r}; known: {', '.join(designs.DESIGNS)}")
-    veh = load_vehicle(vehicle or designs.DESIGNS[observer].default_vehicle)
     path = rp.resolve_csv(csv)
     data = rp.load_csv(path)                    # a bad file fails before anything is built
     rp.uniform_step(data["t"], path)
+    # the record must carry every input the observer reads, in range, before anything is built
+    rp.check_record(data, observer_inputs(observer), path, observer)
+    veh = load_vehicle(vehicle or designs.DESIGNS[observer].default_vehicle)
     if rp.default_split(path) is not None and veh.name != rp.MBDS_VEHICLE and not quiet:
         print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
               f"{veh.name!r} (use --vehicle {rp.MBDS_VEHICLE} for the dataset's own parameters)")

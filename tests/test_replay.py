@@ -159,7 +159,7 @@ def test_replay_errors_exit_2_naming_the_culprit(cosim_csv, fmu_dir, tmp_path, c
     no_roll_rate = _write_csv(tmp_path / "no_roll_rate.csv", cols)
     assert main(["replay", str(no_roll_rate), *base]) == 2
     err = capsys.readouterr().err
-    assert "input(s) 'roll_rate' have no column" in err and "its columns: t, delta" in err
+    assert "lacks 'roll_rate'" in err and "its columns: t, delta" in err
     assert len(err.strip().splitlines()) == 1
 
     t = sim.time.copy()

@@ -7,13 +7,15 @@ never imported.
 
 CSV file
     ``.csv`` or ``.csv.gz``, a header row of column names, one sample per row, SI units (angles
-    in rad). A column ``t`` (s) is required, strictly increasing with a uniform step (within
-    :data:`UNIFORM_RTOL`, relative); every value must be finite. The columns are named as in the
+    in rad). A column ``t`` (s) is required, strictly increasing with a uniform step (judged on
+    t - t_0, within :data:`UNIFORM_RTOL` relative plus :data:`UNIFORM_ULPS` ulps of the times: Unix
+    timestamps are fine); every value must be finite. The columns are named as in the
     MBDS dataset (:data:`MBDS_CSV`: t, delta, vx, vy, yaw_rate, ay, ax, beta) and as the FMUs'
     variables, so wiring is by name.
 Wiring
-    Each FMU input is the CSV column of the same name (a missing one is a :class:`ReplayError`
-    naming the input and the columns present).
+    Each FMU input is the CSV column of the same name; :func:`check_record` refuses, naming the
+    signals the observer needs, a record without one of them, an angle beyond +-pi rad (degrees)
+    and a value outside an input's declared range, before anything runs.
 Timing (as :mod:`latobs.validation.harness`)
     The communication step is the CSV's time step dt. Initialisation mode gets the first row's
     inputs; the outputs read after it are recorded at t_0. Step k: inputs of row k (held over the
@@ -39,6 +41,7 @@ from __future__ import annotations
 import csv
 import gzip
 import hashlib
+import math
 import os
 from dataclasses import dataclass, field
 from importlib import resources
@@ -58,12 +61,23 @@ MBDS_VEHICLE = "mbds_250lm"
 #: Default split time (s) per file name: the MBDS record is tuned on t < 425 s, tested on the rest.
 DEFAULT_SPLITS = {"mbds_250lm_100hz.csv.gz": 425.0, "mbds_250lm_100hz.csv": 425.0}
 UNIFORM_RTOL = 1e-6   # allowed relative deviation of each time step from the mean step
+UNIFORM_ULPS = 8      # plus this many ulps of max|t|: the rounding of the times as doubles
 ZOOM_S = 20.0         # length of the zoomed figure's window, s
 FORCE_BOUNDS = ("Fyf_lower", "Fyr_lower", "Fyf_upper", "Fyr_upper")
 
 
 class ReplayError(ValueError):
     """A user-facing replay failure (file, column, time step, observer); the message names it."""
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """An FMU input as :func:`check_record` sees it: name, unit, declared range (None: none)."""
+
+    name: str
+    unit: str | None = None
+    min: float | str | None = None
+    max: float | str | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -155,19 +169,68 @@ def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 
 def uniform_step(t: np.ndarray, source: Any = "the record") -> float:
-    """The time step of ``t`` (s): the mean step, when every step is within UNIFORM_RTOL of it."""
+    """The time step of ``t`` (s): the mean step, when the record is uniform.
+
+    Time is judged relative to the first sample (tau = t - t_0): every step tau_k+1 - tau_k must
+    be within ``UNIFORM_RTOL * dt + UNIFORM_ULPS`` ulps of max|t| of the mean step dt. The ulps
+    term is the rounding of the times as doubles: a 50 Hz record in Unix time (t ~ 1.7e9 s, one
+    ulp = 2.4e-7 s) has steps that differ from 0.02 s by a few 1e-7 s although it is uniform.
+    Otherwise a ReplayError names the step that departs most from the usual (median) step, where
+    it is (data rows and times) and by how much.
+    """
     t = np.asarray(t, dtype=float)
     if t.size < 2:
         raise ReplayError(f"{source}: fewer than 2 samples, no time step")
-    dt = float((t[-1] - t[0]) / (t.size - 1))
-    d = np.diff(t)
-    dev = np.abs(d - dt)
-    if np.any(dev > UNIFORM_RTOL * dt):
-        i = int(np.argmax(dev))
-        raise ReplayError(f"{source}: the time step is not uniform: t[{i + 1}] - t[{i}] = {d[i]:.9g} s at "
-                          f"t = {t[i]:.9g} s against a mean step of {dt:.9g} s (allowed relative deviation "
-                          f"{UNIFORM_RTOL:g}); resample the record to a fixed step")
+    tau = t - t[0]
+    dt = float(tau[-1] / (t.size - 1))
+    d = np.diff(tau)
+    tol = UNIFORM_RTOL * dt + UNIFORM_ULPS * float(np.spacing(np.max(np.abs(t))))
+    usual = float(np.median(d))
+    if np.any(np.abs(d - dt) > tol):
+        i = int(np.argmax(np.abs(d - usual)))
+        what = "a gap" if d[i] > usual else "a short step"
+        raise ReplayError(f"{source}: the time step is not uniform: {what} of {d[i]:.6g} s between data rows "
+                          f"{i + 1} and {i + 2} (t = {t[i]:.12g} s and {t[i + 1]:.12g} s, {tau[i]:.9g} s after the "
+                          f"first sample) where the usual step is {usual:.6g} s (allowed deviation {tol:.3g} s); "
+                          "resample the record to a fixed step")
     return dt
+
+
+def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the record",
+                 who: str = "the observer") -> None:
+    """Check that the record ``data`` ({column: array}) can drive an FMU whose inputs are
+    ``inputs`` (objects with ``name``, ``unit`` and optional ``min``/``max``, SI: an FMU's
+    model-description variables or a model file's declared variables), before anything is built or
+    run: every input has its column; an angle input (unit rad) stays within +-pi, else the record is
+    most likely in degrees; every value lies in the input's declared range. A ReplayError names
+    ``who``, the signals it needs, the missing ones, or the column, row and value out of range."""
+    names = [v.name for v in inputs]
+    missing = [x for x in names if x not in data]
+    if missing:
+        raise ReplayError(
+            f"{who} cannot run on {source}: it needs the signals {', '.join(names)} (one column each), and the "
+            f"record lacks {', '.join(repr(m) for m in missing)} (its columns: {', '.join(data)})")
+    for v in inputs:
+        x = np.asarray(data[v.name], dtype=float)
+        unit = getattr(v, "unit", None)
+        if unit == "rad" and x.size and np.max(np.abs(x)) > math.pi:
+            i = int(np.argmax(np.abs(x)))
+            raise ReplayError(f"{source}: column {v.name!r} is an angle in rad, but reaches {x[i]:.6g} at data row "
+                              f"{i + 1} (beyond +-pi): the record looks like degrees; give it in SI units (rad)")
+        lo, hi = getattr(v, "min", None), getattr(v, "max", None)
+        lo = None if lo is None else float(lo)
+        hi = None if hi is None else float(hi)
+        out = np.zeros(x.shape, dtype=bool)
+        if lo is not None:
+            out |= x < lo
+        if hi is not None:
+            out |= x > hi
+        if out.any():
+            i = int(np.argmax(out))
+            shown = f"{x[i]:.6g}" + (f" {unit}" if unit and unit != "1" else "")
+            raise ReplayError(f"{source}: column {v.name!r} = {shown} at data row {i + 1} is outside "
+                              f"the range [{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
+                              f" that {who} declares for input {v.name!r} ({int(out.sum())} row(s) outside)")
 
 
 # --------------------------------------------------------------------------------------------
@@ -222,11 +285,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
         raise ReplayError(f"cannot open FMU {fmu_path}: {exc}") from None
     try:
         in_names = [v.name for v in f.inputs]
-        missing = [x for x in in_names if x not in cols]
-        if missing:
-            raise ReplayError(
-                f"{f.describe()}: input(s) {', '.join(repr(m) for m in missing)} have no column in {source} "
-                f"(its columns: {', '.join(['t', *cols])})")
+        check_record(data, [InputSpec(v.name, _unit_of(v), v.min, v.max) for v in f.inputs], source, f.describe())
         units = {v.name: u for v in f.md.modelVariables if (u := _unit_of(v)) and v.causality in ("input", "output")}
         n = t.size
         rec = {v.name: np.zeros(n, dtype=float if v.type == "Real" else np.int64) for v in f.outputs}
