@@ -118,13 +118,10 @@ def test_missing_parameters_are_named():
         bl.parameter_values({"name": "x", "parameters": {"m": 1.0, "Iz": 1.0, "lf": 1.0, "lr": 1.0}},
                             bl.BICYCLE_PARAMETERS)
     assert bl.parameter_values({"parameters": {"m": {"value": 2.0, "unit": "kg"}}}, ["m"]) == {"m": 2.0}
-    # paper 002's fixed-order designs keep only m, Iz, lf, lr: the vehicle set fills Cf, Cr
-    d = design_summary({"design": "SideslipFixedOrderEstimator", "paper": "002",
-                        "vehicle": {"name": "delibasi", "parameters": {"m": 1500.0, "Iz": 2535.0, "lf": 1.4, "lr": 1.7}}})
-    assert d["filled_from_vehicle_set"] == {"Cf": "delibasi", "Cr": "delibasi"} and d["vehicle"]["kind"] == "car"
-    assert d["vehicle"]["parameters"]["Cf"]["value"] == pytest.approx(load_vehicle("delibasi").value("Cf"))
-    d = design_summary({"vehicle": {"name": "not_a_set", "parameters": {"m": 1500.0}}})
-    assert d["filled_from_vehicle_set"] == {}
+    with pytest.raises(bl.BaselineUnavailable, match=r"needs Cf, Cr, which the design file X.fmu:resources/X.design.json "
+                                                     r"does not carry for vehicle x \(it has Iz, lf, lr, m\)"):
+        bl.parameter_values({"name": "x", "parameters": {"m": 1.0, "Iz": 1.0, "lf": 1.0, "lr": 1.0}},
+                            bl.BICYCLE_PARAMETERS, source="X.fmu:resources/X.design.json")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -208,7 +205,7 @@ def test_bank_braking_reports_baselines(fmu_dir, tmp_path):
     for n in OBSERVERS:                                         # the design file read out of the FMU
         d = res.info["observer_designs"][n]
         assert d["design"] == n and d["paper"] == "000" and d["vehicle"]["name"] == "sedan"
-        assert d["vehicle"]["parameters"]["Cf"]["value"] == 100000.0 and d["filled_from_vehicle_set"] == {}
+        assert d["vehicle"]["parameters"]["Cf"]["value"] == 100000.0
     m = metrics.compute(res)
     for n in OBSERVERS:
         b = m["observers"][n]["baselines"]

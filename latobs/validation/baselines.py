@@ -76,10 +76,13 @@ class BaselineUnavailable(ValueError):
 # --------------------------------------------------------------------------------------------
 # parameters
 # --------------------------------------------------------------------------------------------
-def parameter_values(vehicle: Mapping[str, Any] | None, names, needed_by: str = "the baseline") -> dict[str, float]:
+def parameter_values(vehicle: Mapping[str, Any] | None, names, needed_by: str = "the baseline",
+                     source: str | None = None) -> dict[str, float]:
     """{name: value} of ``names`` from a vehicle dict: a design file's ``vehicle`` entry
-    (``{"name", "parameters": {name: {"value": v, ...} or v}}``) or a flat {name: value}.
-    Raises :class:`BaselineUnavailable` naming every missing or non-finite parameter."""
+    (``{"name", "parameters": {name: {"value": v, ...} or v}}``) or a flat {name: value}; only
+    from it (never from another parameter set of the same name). ``source``: where the dict
+    comes from (a design file), named in the error. Raises :class:`BaselineUnavailable` naming
+    every missing or non-finite parameter."""
     if vehicle is None:
         raise BaselineUnavailable(f"{needed_by} needs the vehicle parameters {', '.join(names)}; none were given")
     params = vehicle.get("parameters", vehicle) if isinstance(vehicle, Mapping) else {}
@@ -98,9 +101,10 @@ def parameter_values(vehicle: Mapping[str, Any] | None, names, needed_by: str = 
             missing.append(n)
     if missing:
         who = vehicle.get("name") if isinstance(vehicle, Mapping) else None
+        where = (f"the design file {source} does not carry for vehicle {who or '(unnamed)'!s}" if source else
+                 f"the vehicle {who or '(unnamed)'!s} parameter set lacks")
         raise BaselineUnavailable(
-            f"{needed_by} needs {', '.join(missing)}, which the vehicle {who or '(unnamed)'!s} parameter set "
-            f"lacks (it has {', '.join(sorted(params)) or 'none'})")
+            f"{needed_by} needs {', '.join(missing)}, which {where} (it has {', '.join(sorted(params)) or 'none'})")
     return out
 
 

@@ -421,14 +421,10 @@ def read_fmu_design(fmu_path: str | os.PathLike) -> tuple[dict, str] | None:
 
 def design_summary(design: Mapping[str, Any], source: str = "") -> dict[str, Any]:
     """What the validation needs of a design file: ``{"design", "name", "paper", "source",
-    "vehicle": {"name", "kind", "parameters": {p: {"value", "unit"}}}, "filled_from_vehicle_set":
-    {p: vehicle set}}``. The vehicle is the design's own ``vehicle`` entry (values as written, SI);
-    a parameter a baseline needs (:data:`latobs.validation.baselines.BICYCLE_PARAMETERS`,
-    ``STEADY_TURN_PARAMETERS``) that the design file leaves out (paper 002's fixed-order designs
-    keep only m, Iz, lf, lr) is taken from the shipped vehicle set of the same name
-    (latobs.synthesis.params) when it has it, and listed in ``filled_from_vehicle_set``."""
-    from .baselines import BICYCLE_PARAMETERS, STEADY_TURN_PARAMETERS
-
+    "vehicle": {"name", "kind", "parameters": {p: {"value", "unit"}}}}``. The vehicle is the
+    design's own ``vehicle`` entry (values as written, SI), the vehicle the user designed for, and
+    nothing else: a parameter it does not carry is missing (the baseline that needs it says so),
+    never taken from a shipped vehicle set that happens to have the same name."""
     veh = design.get("vehicle") or {}
     params: dict[str, dict[str, Any]] = {}
     for k, v in (veh.get("parameters") or {}).items():
@@ -436,26 +432,9 @@ def design_summary(design: Mapping[str, Any], source: str = "") -> dict[str, Any
             params[k] = {"value": v.get("value"), "unit": v.get("unit")}
         else:
             params[k] = {"value": v, "unit": None}
-    filled: dict[str, str] = {}
-    kind = veh.get("kind")
-    name = veh.get("name")
-    if name:
-        try:
-            from ..synthesis.params import load_vehicle
-
-            ref = load_vehicle(str(name))
-        except Exception:  # an unknown set (a design for a TOML file elsewhere): nothing to fill
-            ref = None
-        if ref is not None:
-            kind = kind or ref.kind
-            for k, p in ref.parameters.items():
-                if k not in params and k in (*BICYCLE_PARAMETERS, *STEADY_TURN_PARAMETERS):
-                    params[k] = {"value": p.value, "unit": p.unit}
-                    filled[k] = str(name)
     return {"design": design.get("design"), "name": design.get("name"), "paper": design.get("paper"),
             "source": source,
-            "vehicle": {"name": name, "kind": kind, "parameters": params},
-            "filled_from_vehicle_set": filled}
+            "vehicle": {"name": veh.get("name"), "kind": veh.get("kind"), "parameters": params}}
 
 
 def observer_design(fmu_path: str | os.PathLike) -> dict[str, Any] | None:

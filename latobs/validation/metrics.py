@@ -28,7 +28,9 @@ the entry when a modelDescription declares it). Structure returned by :func:`com
             "zero" | "bicycle" | "steady_turn": {name: {same keys as the observer's entry}},
             "summary": {name: {"statistic": "rms_after_settle", "observer": "estimate"|"interval midpoint",
                                "observer_rms": x, "baselines": {baseline: rms}, "best_baseline": b,
-                               "best_baseline_rms": y, "ratio": x / y, "baseline_as_good": y <= x}},
+                               "best_baseline_rms": y, "ratio": x / y, "baseline_as_good": y <= x,
+                               "baselines_as_good": [every baseline with rms <= x],
+                               "not_computed": {baseline: reason}, "observer_best": bool | None}},
             "skipped": {baseline: reason}, "about": {baseline: {what, inputs, vehicle ...}}
           }
         }
@@ -44,8 +46,11 @@ with the same statistics, for the trivial estimate 0 (``zero``) and for the obse
 baseline: the open-loop linear bicycle driven by the measured delta and vx for a car
 (``bicycle``; parameters of the vehicle the observer was designed for, from
 ``SimResult.info["observer_designs"]``), the steady turn from the measured vx and yaw rate for a
-motorcycle (``steady_turn``). ``summary`` compares the observer's RMS after settle with the best
-baseline's; a baseline that cannot be computed is listed in ``skipped`` with the reason.
+motorcycle (``steady_turn``). ``summary`` compares the observer's RMS after settle with every
+baseline's on the same samples (:func:`baseline_summary`: each baseline as good or better is
+listed); a baseline that cannot be computed is listed in ``skipped`` with the reason and, beside
+each estimate it would have given, in the summary's ``not_computed``: the observer is then not
+said to be the best (``observer_best`` null). The vehicle parameters are the design file's only.
 
 Truth at the point the observer estimates: an estimate ``X_hat`` (or a pair ``X_lower`` /
 ``X_upper``) is scored against the bus signal ``X`` unless :data:`REFERENCE_SIGNALS` maps ``X``
@@ -332,15 +337,22 @@ def baselines_for(time, signals, quantities, design: dict[str, Any] | None = Non
     ``vehicle`` gives the parameters) or a vehicle dict; ``model`` its FMU model name;
     ``sources``: {signal: where it comes from} for the record; ``initial``: the bicycle's
     initial state ("rest" or "steady" at the first sample, :func:`baselines.bicycle`). Returns
-    {"series": {baseline: {X: array}}, "skipped": {baseline: reason}, "about": {baseline: {...}}}."""
+    {"series": {baseline: {X: array}}, "skipped": {baseline: reason}, "about": {baseline: {...}},
+    "unavailable": {baseline: {X: reason}}}: ``unavailable`` lists each quantity a baseline gives
+    (the bicycle's vy, beta ...; the steady turn's forces) that it could not compute here, and why.
+
+    The parameters are those of the design file only (``design``: the vehicle the observer was
+    designed for, as the user gave it); nothing is looked up elsewhere by the vehicle's name."""
     quantities = list(dict.fromkeys(quantities))
     t = np.asarray(time, dtype=float)
     sources = sources or {}
     vehicle = design_vehicle(design)
     vname = (vehicle or {}).get("name")
+    source = design.get("source") if isinstance(design, dict) and isinstance(design.get("vehicle"), dict) else None
     series: dict[str, dict[str, np.ndarray]] = {}
     skipped: dict[str, str] = {}
     about: dict[str, Any] = {}
+    unavailable: dict[str, dict[str, str]] = {}
     if quantities:
         series["zero"] = _bl.zero(t.size, quantities)
         about["zero"] = {"what": "every estimate 0 (beta, vy, bank angle, forces, roll angle, torque ...)"}
@@ -353,12 +365,13 @@ def baselines_for(time, signals, quantities, design: dict[str, Any] | None = Non
             raise _bl.BaselineUnavailable(f"no signal {', '.join(repr(m) for m in miss)} to drive it")
         return [np.asarray(signals[n], dtype=float) for n in names]
 
+    qs = [q for q in quantities if q in (_bl.BICYCLE_OUTPUTS if kind == "car" else
+                                         (*_bl.STEADY_TURN_OUTPUTS, *_bl.STEADY_TURN_MODEL_OUTPUTS))]
     try:
         if kind == "car":
-            qs = [q for q in quantities if q in _bl.BICYCLE_OUTPUTS]
             if not qs:
                 raise _bl.BaselineUnavailable(f"the linear bicycle gives none of {', '.join(quantities) or '(none)'}")
-            params = _bl.parameter_values(vehicle, _bl.BICYCLE_PARAMETERS, "the linear bicycle baseline")
+            params = _bl.parameter_values(vehicle, _bl.BICYCLE_PARAMETERS, "the linear bicycle baseline", source)
             delta, vx = need("delta", "vx")
             y = _bl.bicycle(t, delta, vx, params, initial=initial)
             series[name] = {q: y[q] for q in qs}
@@ -369,15 +382,15 @@ def baselines_for(time, signals, quantities, design: dict[str, Any] | None = Non
                            "inputs": {n: sources.get(n, "signal") for n in ("delta", "vx")},
                            "vehicle": vname, "parameters": params}
         else:
-            qs = [q for q in quantities if q in (*_bl.STEADY_TURN_OUTPUTS, *_bl.STEADY_TURN_MODEL_OUTPUTS)]
             if not qs:
                 raise _bl.BaselineUnavailable(f"the steady turn gives none of {', '.join(quantities) or '(none)'}")
             vx, r = need("vx", "yaw_rate")
             params, note = None, None
             try:
-                params = _bl.parameter_values(vehicle, _bl.STEADY_TURN_PARAMETERS, "the steady-turn forces")
+                params = _bl.parameter_values(vehicle, _bl.STEADY_TURN_PARAMETERS, "the steady-turn forces", source)
             except _bl.BaselineUnavailable as exc:
                 note = f"{exc}: roll angle, rider torque and steering rate only"
+                unavailable[name] = {q: str(exc) for q in qs if q in _bl.STEADY_TURN_MODEL_OUTPUTS}
             y = _bl.steady_turn(vx, r, params)
             series[name] = {q: y[q] for q in qs if q in y}
             about[name] = {"what": "steady turn at the measured vx and yaw rate: roll angle atan(vx r / g), "
@@ -388,21 +401,32 @@ def baselines_for(time, signals, quantities, design: dict[str, Any] | None = Non
                            **({"note": note} if note else {})}
     except _bl.BaselineUnavailable as exc:
         skipped[name] = str(exc)
-    return {"series": series, "skipped": skipped, "about": about}
+        unavailable[name] = {q: str(exc) for q in qs}
+    return {"series": series, "skipped": skipped, "about": about,
+            "unavailable": {b: u for b, u in unavailable.items() if u}}
 
 
 def baseline_summary(observer_rms: float | None, baseline_rms: dict[str, float | None], statistic: str,
-                     observer: str = "estimate") -> dict[str, Any]:
-    """One line of verdict: the observer's error statistic beside the best baseline's; ``ratio`` =
-    observer / best baseline (< 1: the observer is better), ``baseline_as_good`` when a baseline
-    is as good as or better than the observer."""
+                     observer: str = "estimate", not_computed: dict[str, str] | None = None) -> dict[str, Any]:
+    """The verdict on one estimate: the observer's error statistic beside every baseline's, all on
+    the same samples. ``ratio`` = observer / best baseline (< 1: the observer is better);
+    ``baselines_as_good``: EVERY baseline as good as or better than the observer (its statistic
+    <= the observer's; a finite baseline beats an observer whose statistic is not finite, null);
+    ``baseline_as_good``: any such baseline; ``not_computed`` {baseline: reason}: baselines that
+    apply to the estimate but could not be computed; ``observer_best``: True only when every
+    applicable baseline was computed and each is worse than the observer, False when one is as
+    good or better, None (no verdict) otherwise."""
     valid = {b: v for b, v in baseline_rms.items() if v is not None}
     best = min(valid, key=valid.get) if valid else None
     y = valid.get(best) if best else None
     ratio = _f(observer_rms / y) if (observer_rms is not None and y) else None
+    as_good = [b for b, v in valid.items() if observer_rms is None or v <= observer_rms]
+    missing = dict(not_computed or {})
+    verdict = False if as_good else (True if (valid and not missing) else None)
     return {"statistic": statistic, "observer": observer, "observer_rms": observer_rms,
             "baselines": dict(baseline_rms), "best_baseline": best, "best_baseline_rms": y, "ratio": ratio,
-            "baseline_as_good": (y <= observer_rms) if (y is not None and observer_rms is not None) else None}
+            "baselines_as_good": as_good, "baseline_as_good": bool(as_good) if valid else None,
+            "not_computed": missing, "observer_best": verdict}
 
 
 def simulation_baselines(result: SimResult, label: str, quantities) -> dict[str, Any]:
@@ -437,10 +461,12 @@ def _simulation_baselines(result: SimResult, label: str, o: dict[str, Any], afte
             mid = 0.5 * (np.asarray(outs[e["lower"]], dtype=float) + np.asarray(outs[e["upper"]], dtype=float))
             obs_entry, what = estimate_entry(mid, bus[e["truth"]], after, e["truth"], e.get("unit")), \
                 "interval midpoint"
-        stat = "rms_after_settle" if obs_entry.get("rms_after_settle") is not None else "rms"
+        # the same samples for the observer and every baseline: after settling when there are any
+        stat = "rms_after_settle" if np.any(after) else "rms"
         rms = {base: out[base][name][stat] for base in out if name in out[base]}
-        if rms:
-            summary[name] = baseline_summary(obs_entry.get(stat), rms, stat, what)
+        missing = {base: u[q] for base, u in b["unavailable"].items() if q in u}
+        if rms or missing:
+            summary[name] = baseline_summary(obs_entry.get(stat), rms, stat, what, missing)
     out["summary"] = summary
     out["skipped"] = b["skipped"]
     out["about"] = b["about"]

@@ -26,7 +26,8 @@ Scoring (:mod:`latobs.validation.metrics` conventions)
     enclosure_rate, max_violation, mean_width); :data:`metrics.REFERENCE_SIGNALS` applies when
     the file has the mapped column. With force bounds ``Fyf_lower/upper``, ``Fyr_lower/upper``
     and a column ``ay``: ``may_in_force_sum``, the enclosure of m*ay (N) in
-    [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (paper 001 eq. 47), m from the vehicle set.
+    [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (paper 001 eq. 47), m from the design file
+    inside the FMU (else from the vehicle given).
     Every metric is given on the whole record (``all``) and, with a split time T, separately on
     t < T (``before_split``) and t >= T (``after_split``). The MBDS file's default split is 425 s:
     t >= 425 s is its held-out test part, never used for tuning.
@@ -50,6 +51,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import baselines as _baselines
 from . import metrics as _metrics
 
 #: The bundled real-vehicle record (MIT, see the README and LICENSE beside it).
@@ -366,7 +368,8 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
                                                                 estimate}}},
                            "summary": {name: {"segment": SEG, "statistic": "rms", "observer", "observer_rms",
                                               "baselines", "best_baseline", "best_baseline_rms", "ratio",
-                                              "baseline_as_good"}},
+                                              "baseline_as_good", "baselines_as_good", "not_computed",
+                                              "observer_best"}},   # metrics.baseline_summary
                            "skipped": {baseline: reason}, "about": {baseline: {...}}},
              "unscored_outputs": [...], "log_messages": int, "log_excerpt": [first messages]}}}
 
@@ -377,7 +380,8 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
     started from the steady state of the first row; the motorcycle's steady turn ``vx`` and
     ``yaw_rate``), with the parameters of the design file baked into the FMU (``run.design``);
     the summary compares RMS errors on the held-out part (``after_split``) when there is a split,
-    else on the whole record. A baseline without its columns or parameters is in ``skipped``.
+    else on the whole record. A baseline without its columns or parameters is in ``skipped`` and,
+    beside each estimate it would have given, in the summary's ``not_computed`` (no verdict then).
     """
     t = run.time
     cols = run.columns
@@ -479,8 +483,9 @@ def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, n
         else:
             obs_rms, what = ((e.get("midpoint") or {}).get(seg) or {}).get("rms"), "interval midpoint"
         rms = {base: out[base][name][seg]["rms"] for base in out if name in out[base]}
-        if rms:
-            summary[name] = {"segment": seg, **_metrics.baseline_summary(obs_rms, rms, "rms", what)}
+        missing = {base: u[q] for base, u in b["unavailable"].items() if q in u}
+        if rms or missing:
+            summary[name] = {"segment": seg, **_metrics.baseline_summary(obs_rms, rms, "rms", what, missing)}
     out["summary"] = summary
     out["skipped"] = b["skipped"]
     out["about"] = b["about"]
@@ -651,6 +656,10 @@ def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str |
     if split is not None and not np.isfinite(split):
         raise ReplayError(f"split time must be finite, got {split}")
     rr = drive(fmu_path, cols, label=Path(fmu_path).stem, source=path)
+    try:   # the mass the FMU was designed with, when its design file carries it
+        mass = _baselines.parameter_values(_metrics.design_vehicle(rr.design), ["m"])["m"]
+    except _baselines.BaselineUnavailable:
+        pass
     info = {"csv": str(path), "csv_sha256": sha256_file(path) if path.is_file() else None,
             "observer": observer or rr.label}
     m = score(rr, split=split, mass=mass, vehicle=vehicle, info=info)

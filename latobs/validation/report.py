@@ -14,8 +14,10 @@ Baselines (``metrics["observers"][label]["baselines"]``, see :mod:`latobs.valida
 tables show each scored estimate beside the zero estimate and the model baseline (the car's
 open-loop linear bicycle, the motorcycle's steady turn) on the same signals: extra columns (RMS
 after settle) in the markdown tables, extra rows in the text tables and replay tables. The lowest
-RMS of each estimate is marked (**bold** in markdown, ``*`` in text); a ``⚠``/``!`` flags an
-estimate where a baseline is as good as or better than the observer.
+RMS of each estimate is marked (**bold** in markdown, ``*`` in text); a ``⚠``/``!`` flags every
+baseline as good as or better than the observer. A baseline that applies but could not be
+computed is shown as "not computed", with the reason below the table, and the observer is then
+given no verdict (never "observer" as the best).
 """
 from __future__ import annotations
 
@@ -82,13 +84,41 @@ def _all_baselines(metrics: Mapping[str, Any]) -> list[str]:
     return [b for b in BASELINES if b in found] + [b for b in found if b not in BASELINES]
 
 
+def _as_good(summary: Mapping[str, Any] | None) -> list[str]:
+    """Every baseline as good as or better than the observer (a metrics file written before the
+    summary listed them all: its best baseline, when it was as good)."""
+    summary = summary or {}
+    if "baselines_as_good" in summary:
+        return list(summary["baselines_as_good"] or [])
+    return [summary["best_baseline"]] if summary.get("baseline_as_good") and summary.get("best_baseline") else []
+
+
 def _verdict(summary: Mapping[str, Any] | None, warn: str) -> str | None:
-    """"observer" or the best baseline's title, with ``warn`` when a baseline is as good or better."""
-    if not summary or summary.get("best_baseline") is None:
+    """Every baseline as good as or better than the observer, after ``warn``; else "observer" when
+    every baseline that applies was computed, else no verdict (the baselines not computed named)."""
+    if not summary:
         return None
-    if summary.get("baseline_as_good"):
-        return f"{warn} {_baseline_title(summary['best_baseline'])} baseline"
-    return "observer"
+    good = _as_good(summary)
+    if good:
+        return f"{warn} " + " and ".join(_baseline_title(b) for b in good) + f" baseline{'s' if len(good) > 1 else ''}"
+    missing = summary.get("not_computed") or {}
+    if missing:
+        return "no verdict: " + " and ".join(_baseline_title(b) for b in missing) + " baseline not computed"
+    return "observer" if summary.get("best_baseline") is not None else None
+
+
+def _not_computed_notes(metrics: Mapping[str, Any]) -> list[str]:
+    """One line per observer and baseline that could not be computed for some of its estimates:
+    which estimates and why (the reason of the metrics' summary)."""
+    lines = []
+    for lab, o in metrics.get("observers", {}).items():
+        per: dict[tuple[str, str], list[str]] = {}
+        for name, summ in ((o.get("baselines") or {}).get("summary") or {}).items():
+            for b, why in (summ.get("not_computed") or {}).items():
+                per.setdefault((b, why), []).append(name)
+        lines += [f"{lab}: {_baseline_title(b)} baseline not computed for {', '.join(names)}: {why}; no verdict "
+                  "on these estimates" for (b, why), names in per.items()]
+    return lines
 
 
 def _bold(x) -> str:
@@ -105,7 +135,11 @@ def _baseline_cells(o: Mapping[str, Any], name: str, observer_value, bases: list
     vals = {b: ((bl.get(b) or {}).get(name) or {}).get(stat) for b in bases}
     cand = [v for v in (observer_value, *vals.values()) if v is not None]
     best = min(cand) if cand else None
-    cells: list[Any] = [(_bold(v) if (v is not None and v == best) else v) for v in vals.values()]
+    good, missing = _as_good(summ), (summ or {}).get("not_computed") or {}
+    cells: list[Any] = [
+        "not computed" if b in missing else
+        ((_bold(v) if (v is not None and v == best) else _fmt(v)) + (f" {WARN_MD}" if b in good else ""))
+        for b, v in vals.items()]
     return cells + [(summ or {}).get("ratio"), _verdict(summ, WARN_MD)]
 
 
@@ -138,9 +172,12 @@ def replay_rows(metrics: Mapping[str, Any], mark: str | None = None) -> tuple[li
             be = (bl.get(b) or {}).get(name)
             if not be:
                 continue
-            flag = f" {warn}" if (mark and summ.get("best_baseline") == b and summ.get("baseline_as_good")) else ""
+            flag = f" {warn}" if (mark and b in _as_good(summ)) else ""
             rows.append([lab, shown, e.get("truth"), f"RMS error, {_baseline_title(b)} baseline "
                          f"[{e.get('unit') or 'SI'}]{flag}", *[(be.get(s) or {}).get("rms") for s in segs]])
+        for b in summ.get("not_computed") or {}:
+            rows.append([lab, shown, e.get("truth"), f"RMS error, {_baseline_title(b)} baseline: not computed",
+                         *[None for _ in segs]])
         if mark:
             group = [r for r in rows[first_rms_row:] if str(r[3]).startswith("RMS error")]
             for j in range(4, 4 + len(segs)):
@@ -204,6 +241,7 @@ def replay_markdown(metrics: Mapping[str, Any]) -> str:
         parts.append("Scores (estimate − recorded truth, SI units; baselines on the same recorded signals, the "
                      f"lowest RMS error in bold, {WARN_MD} where a baseline is as good as or better than the "
                      "observer):\n\n" + _table(header, rows))
+        parts += [f"- {line}" for line in _not_computed_notes(metrics)]
     return "\n".join(parts)
 
 
@@ -257,6 +295,9 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
                      + ":\n\n" + _table(
             ["observer", "signal", "unit", "enclosure violations", "violations after settle", "mean width",
              "max violation", *(["midpoint: RMS after settle", *bcols] if bases else [])], int_rows))
+    notes = _not_computed_notes(metrics)
+    if notes:
+        parts.append("\n".join(f"- {line}" for line in notes) + "\n")
     if sum_rows:
         parts.append("Per observer (‖β − β̂‖₂ / ‖φr‖₂ is paper 000 eq. (26)):\n\n" + _table(
             ["observer", "‖β−β̂‖₂/‖φr‖₂", "same after settle", "mode occupancy", "mode switches", "log messages"],
@@ -311,8 +352,10 @@ def render(report_dir: str | os.PathLike, sections: Iterable, title: str = "lato
                 bsum = bsum.get("beta_hat") or bsum.get("beta")       # an estimate, else an interval's midpoint
                 best = None
                 if bsum and bsum.get("best_baseline") is not None:
-                    best = (f"{WARN_MD + ' ' if bsum.get('baseline_as_good') else ''}"
+                    best = (f"{WARN_MD + ' ' if _as_good(bsum) else ''}"
                             f"{_baseline_title(bsum['best_baseline'])}: {_fmt(bsum.get('best_baseline_rms'))}")
+                if bsum and bsum.get("not_computed") and not _as_good(bsum):
+                    best = (f"{best}; " if best else "") + _verdict(bsum, WARN_MD)
                 if replay:  # the held-out part when there is one, else the whole record
                     seg = "after_split" if s.metrics.get("split_s") is not None else "all"
                     viol = sum((v.get("all") or {}).get("enclosure_violations") or 0
@@ -372,7 +415,8 @@ def replay_text_table(metrics: Mapping[str, Any]) -> str:
         key = (r[0], r[1])
         shown.append([*(["", ""] if key == last else [str(r[0]), str(r[1])]), str(r[2]), *(_fmt(c) for c in r[3:])])
         last = key
-    return head + "\n" + _columns([header, *shown])
+    notes = _not_computed_notes(metrics)
+    return head + "\n" + _columns([header, *shown]) + "".join(f"\n{line}" for line in notes)
 
 
 def text_table(metrics: Mapping[str, Any]) -> str:
@@ -398,9 +442,11 @@ def text_table(metrics: Mapping[str, Any]) -> str:
             be = (bl.get(b) or {}).get(name)
             if not be:
                 continue
-            flag = f" {WARN_TEXT}" if (summ.get("best_baseline") == b and summ.get("baseline_as_good")) else ""
+            flag = f" {WARN_TEXT}" if b in _as_good(summ) else ""
             group.append(["", f"  {_baseline_title(b)} baseline{flag}", be.get("rms"), be.get("max_abs"),
                           be.get("rms_after_settle"), be.get("max_abs_after_settle")])
+        for b in summ.get("not_computed") or {}:
+            group.append(["", f"  {_baseline_title(b)} baseline: not computed (below)", None, None, None, None])
         vals = [g[4] for g in group if g[4] is not None]
         best = min(vals) if len(group) > 1 and vals else None
         for g in group:
@@ -430,4 +476,5 @@ def text_table(metrics: Mapping[str, Any]) -> str:
     lines.insert(1, "  ".join("-" * w for w in widths))
     foot = (f"\n* lowest RMS settled of an output (observer or baseline); {WARN_TEXT}: a baseline as good as or "
             "better than the observer") if marked else ""
+    foot += "".join(f"\n{line}" for line in _not_computed_notes(metrics))
     return f"scenario {metrics.get('scenario', '?')} (SI units: rad, rad/s, m/s, N)\n" + "\n".join(lines) + foot
