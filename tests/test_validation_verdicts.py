@@ -177,3 +177,39 @@ def test_replay_says_when_the_bicycle_is_not_computed():
     tt = report.text_table(m)
     assert "RMS error, linear bicycle baseline: not computed" in tt and "S.fmu:resources/S.design.json" in tt
     assert "RMS error, linear bicycle baseline: not computed" in report.metrics_markdown(m)
+
+
+@pytest.mark.slow
+def test_replay_for_a_new_car_named_like_a_shipped_set_never_takes_that_sets_parameters(tmp_path):
+    """A vehicle file named "mbds_250lm" (a shipped set's name) with its own stiffnesses and lr: the
+    replay's bicycle baseline runs on the file's parameters, carried by the design file, or is
+    reported as not computed with no verdict; never on the shipped set's Cf, Cr."""
+    import re
+    from importlib import resources
+
+    from latobs import pipeline
+
+    text = (resources.files("latobs.synthesis") / "vehicles" / "mbds_250lm.toml").read_text()
+    own = {"lr": 1.2, "Cf": 90000.0, "Cr": 150000.0}
+    for k, v in own.items():      # the [parameters] entry (the first line "k = { value = ...")
+        text = re.sub(rf"^{k}\s*=\s*{{\s*value\s*=\s*[0-9.]+", f"{k} = {{ value = {v}", text, count=1, flags=re.M)
+    toml = tmp_path / "newcar.toml"
+    toml.write_text(text)
+    veh = load_vehicle(str(toml))
+    assert veh.name == "mbds_250lm" and {k: veh.value(k) for k in own} == own
+    t = 10.0 + 0.01 * np.arange(2001)
+    delta, vx = 0.01 * np.sin(0.8 * (t - 10)), np.full_like(t, 25.0)
+    ref = bl.bicycle(t, delta, vx, {k: veh.value(k) for k in bl.BICYCLE_PARAMETERS}, initial="steady")
+    rows = ["t,delta,vx,yaw_rate,beta"] + [",".join(repr(float(x)) for x in r)
+                                           for r in zip(t, delta, vx, ref["yaw_rate"], ref["beta"])]
+    csv = tmp_path / "newcar.csv"
+    csv.write_text("\n".join(rows) + "\n")
+    m = pipeline.replay(csv, "SideslipFixedOrderEstimator", vehicle=str(toml), out=tmp_path / "out",
+                        fmu_dir=tmp_path / "fmus", plots=False, quiet=True)
+    b = next(iter(m["observers"].values()))["baselines"]
+    s = b["summary"]["beta_hat"]
+    if "bicycle" in b:           # the design file carries the file's Cf, Cr: the record is that model
+        assert {k: b["about"]["bicycle"]["parameters"][k] for k in own} == own
+        assert b["bicycle"]["beta_hat"]["all"]["rms"] < 1e-9
+    else:
+        assert "does not carry" in s["not_computed"]["bicycle"] and s["observer_best"] is not True
