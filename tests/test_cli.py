@@ -287,10 +287,10 @@ FMU_ERRORS = [
      "validate", ["SideslipBankObserverPaper.fmu", "not a readable FMU"]),
     ("zip-not-an-fmu", ["validate", "bank-braking", "--observer", "SideslipBankObserverTire", "--fmu-dir", "{bad}"],
      "validate", ["SideslipBankObserverTire.fmu", "modelDescription.xml"]),
-    ("replay-fmu-truncated", ["replay", "{csv}", "--observer", "SideslipBankObserver", "--fmu-dir", "{bad}"],
+    ("replay-fmu-truncated", ["replay", "{full_csv}", "--observer", "SideslipBankObserver", "--fmu-dir", "{bad}"],
      "replay", ["SideslipBankObserver.fmu", "cannot open FMU"]),
     ("replay-csv-lacks-inputs", ["replay", "{csv}", "--observer", "SideslipBankObserver"], "replay",
-     ["SideslipBankObserver", "'vx', 'yaw_rate', 'roll_angle', 'roll_rate'", "no column in", "t_delta.csv"]),
+     ["SideslipBankObserver", "'vx', 'yaw_rate', 'roll_angle', 'roll_rate'", "cannot run on", "t_delta.csv"]),
     ("out-subfolder-is-a-file", ["validate", "double-lane-change", "--observer", "SideslipBankObserver",
                                  "--out", "{out}"], "validate", ["double-lane-change", "File exists"]),
 ]
@@ -302,10 +302,12 @@ def test_an_fmu_level_user_error_is_one_line_and_exit_2(argv, command, culprits,
     record without the FMU's inputs, an output folder taken by a file), with the session's FMUs."""
     csv = tmp_path / "t_delta.csv"
     csv.write_text("t,delta\n0,0\n0.01,0.001\n0.02,0.002\n")
+    full_csv = tmp_path / "t_all.csv"        # every input of SideslipBankObserver
+    full_csv.write_text("t,delta,vx,yaw_rate,roll_angle,roll_rate\n0,0,20,0,0,0\n0.01,0.001,20,0,0,0\n")
     out = tmp_path / "out"
     out.mkdir()
     (out / "double-lane-change").write_text("a file where validate writes its folder")
-    places = {"bad": _broken_fmu_dir(fmu_dir, tmp_path), "csv": csv, "out": out}
+    places = {"bad": _broken_fmu_dir(fmu_dir, tmp_path), "csv": csv, "full_csv": full_csv, "out": out}
     argv = [a.format(**places) for a in argv]
     if "--fmu-dir" not in argv:
         argv += ["--fmu-dir", str(fmu_dir)]
