@@ -80,9 +80,12 @@ def main(argv: list[str] | None = None) -> int:
                          for seg in m["segments"] if e.get(seg))
         print(f"{name} vs {e['truth']}: RMS error ({e['unit']}) {segs}")
         s = obs["baselines"]["summary"].get(name)
-        if s:
+        if s and s["best_baseline"] is not None:
+            good = s.get("baselines_as_good") or []
             print(f"  best baseline ({s['segment']}): {s['best_baseline']} {s['best_baseline_rms']:.4g}"
-                  f"{'  (as good as the observer)' if s['baseline_as_good'] else ''}")
+                  f"{'  (as good as the observer or better: ' + ', '.join(good) + ')' if good else ''}")
+        for base, why in ((s or {}).get("not_computed") or {}).items():
+            print(f"  {base} baseline not computed: {why}")
     for name, e in obs["intervals"].items():
         print(f"{name} within [{e['lower']}, {e['upper']}]: {100 * e['all']['enclosure_rate']:.1f} % of samples")
     metrics = Path(args.out) / f"replay_{csv_stem(path)}_{m['label']}" / "metrics.json"
