@@ -69,6 +69,7 @@ def test_replay_of_a_unix_time_record_runs(built_fmus, tmp_path, capsys):
     csv = _write_csv(tmp_path / "unix_50hz.csv", _car_record(UNIX_T0 + 0.02 * np.arange(1500)))
     assert main(["replay", str(csv), "--observer", "SideslipBankObserver", "--fmu-dir", str(fmu_dir),
                  "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    assert "t = 1700000000 … 1700000029.98 s" in capsys.readouterr().out      # the record's own times
     m = json.loads((tmp_path / "out" / "replay_unix_50hz_SideslipBankObserver" / "metrics.json").read_text())
     assert m["dt_s"] == pytest.approx(0.02, rel=1e-9) and m["n_samples"] == 1500
     beta = m["observers"]["SideslipBankObserver"]["estimates"]["beta_hat"]["all"]

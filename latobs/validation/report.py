@@ -218,7 +218,7 @@ def _replay_head(metrics: Mapping[str, Any]) -> str:
     seg = metrics.get("segments", {})
     parts = [f"{metrics.get('scenario', 'replay')} through {metrics.get('label')} (vehicle {metrics.get('vehicle')})",
              f"{metrics.get('n_samples')} samples at {metrics.get('dt_s'):.6g} s, t = "
-             f"{metrics.get('t_start_s'):.6g} … {metrics.get('t_end_s'):.6g} s"]
+             f"{metrics.get('t_start_s'):.12g} … {metrics.get('t_end_s'):.12g} s"]   # Unix times too
     if metrics.get("split_s") is not None:
         parts.append(f"split at {metrics['split_s']:g} s ({(seg.get('before_split') or {}).get('n_samples')} + "
                      f"{(seg.get('after_split') or {}).get('n_samples')} samples)")
