@@ -419,9 +419,13 @@ def _headline(c: Campaign, s: dict, folder: Path) -> str:
     if t.get("execution_s"):
         lines[0] += (f"; {t['runs_on_dask']} runs in {t['execution_s']:.1f} s on {t['workers']} worker(s) "
                      f"({t['runs_per_s']:.1f} runs/s; cluster start {t['cluster_start_s']:.1f} s)")
+    from .validation.campaign_report import display
+
     for col, st in s["metrics"].items():
-        if col in s["headline"] and st.get("n"):
-            lines.append(f"  {col}: p50 {st['p50']:.4g}, p95 {st['p95']:.4g}, max {st['max']:.4g}")
+        if col in s["headline"] and st.get("n") and not col.endswith(".violations"):   # the enclosure lines say
+            k, unit = display(col)
+            lines.append(f"  {col}: p50 {k * st['p50']:.4g}, p95 {k * st['p95']:.4g}, max {k * st['max']:.4g}"
+                         + (f" {unit}" if unit else ""))
     for base, e in s["enclosure"].items():
         lines.append(f"  {base}: enclosure violated in {e['runs_with_violations']} of {e['runs']} runs")
     lines.append(f"wrote {folder / 'report.md'}, {folder / 'runs.parquet'}, {folder / 'summary.json'}")
