@@ -331,7 +331,10 @@ def demo(out: Path, verbose: bool = False) -> Path:
              f"steps: [demo.log]({log_path.name}).")
     path = write_index(report, sections, title="latobs demo report", intro=intro)
     header, rows = overview_rows(sections)
-    print(summary_text(header, rows))
+    short = {run_title(*r): f"{r[0]}{' [' + r[1] + ']' if r[1] else ''}" for r in RUNS}
+    keep = [i for i, h in enumerate(header) if h != "‖β−β̂‖₂/‖φr‖₂"]    # in the report's overview
+    print(summary_text([header[i] for i in keep], [[short.get(r[0], r[0]) if i == 0 else r[i] for i in keep]
+                                                   for r in rows]))
     print(f"report: {path} ({time.perf_counter() - t0:.0f} s); every table, figure and step's output there "
           f"({log_path.name}){'' if verbose else '; --verbose prints it all'}")
     return path
