@@ -283,6 +283,31 @@ def test_the_summary_gives_numpy_percentiles_enclosure_and_the_worst_runs(tmp_pa
     assert t.num_rows == 201 and t.column("O.beta.rms").to_pylist()[:3] == list(values[:3])
 
 
+def test_an_interval_that_never_misses_is_plotted_and_ranked_by_its_width_in_degrees(tmp_path):
+    """robustness-001 holds its enclosure: a histogram of zero violation counts says nothing, so the
+    report plots each interval's mean width and lists the widest runs (angles in degrees)."""
+    import math
+
+    from latobs.validation import campaign_report
+
+    metrics = {"O.beta.violations": 0.0, "O.beta.mean_width": 0.0, "O.vy.violations": 0.0, "O.vy.mean_width": 0.0}
+    heads = cp.headline_columns(metrics, {"O": ["yaw_rate"]})
+    assert heads == list(metrics)                          # widths are headline metrics beside the counts
+    c = cp.load(_write(tmp_path, BASE))
+    rows = [{"run": k, "seed": cp.run_seed(0, k), "status": "ok", "error": None, "params": {"plant.mu": 0.5 + k / 100},
+             "metrics": {**metrics, "O.beta.mean_width": 0.01 + k / 1000, "O.vy.mean_width": 0.2 + k / 100},
+             "headline": heads, "seconds": 0.1, "worker": "w"} for k in range(30)]
+    s = cp.summarize(c, rows)
+    assert [w["run"] for w in s["worst"]["O.beta.mean_width"]] == [29, 28, 27, 26, 25]    # the widest runs
+    assert s["worst"]["O.beta.violations"] == []
+    figs = campaign_report.figures(tmp_path, rows)
+    assert {p.name for p in figs} == {"hist_O.png", "scatter_O.beta.mean_width.png", "scatter_O.vy.mean_width.png"}
+    md = campaign_report.markdown(c, s, figs)
+    assert "**`O.beta.mean_width`** (widest runs)" in md and "| value [deg] |" in md
+    assert f"| {campaign_report._g(math.degrees(0.039))} |" in md           # run 29: 0.039 rad
+    assert "No run violated `O.beta.violations`, `O.vy.violations`" in md
+
+
 # --------------------------------------------------------------------------------------------
 # campaigns on Dask
 # --------------------------------------------------------------------------------------------
