@@ -169,10 +169,13 @@ def _open_folder(c: Campaign, folder: Path, fingerprint: str, refs, fresh: bool)
 def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None = None,
                  out: Path = Path("build"), fmu_dir: Path = Path("build"), scheduler: str | None = None,
                  workers: int | None = None, seed: int | None = None, tag: str = "", fresh: bool = False,
-                 plots: bool = True, progress: bool = True) -> dict[str, Any]:
-    """Run (or resume) a campaign and write its folder; returns the summary (with ``timing``)."""
+                 plots: bool = True, progress: bool = True, dashboard: str | None = None) -> dict[str, Any]:
+    """Run (or resume) a campaign and write its folder; returns the summary (with ``timing``).
+    ``dashboard``: the address of the local cluster's Dask dashboard (e.g. ``":8787"``); None, the
+    default, serves none."""
     c = resolve(spec, observers, runs, seed)
     refs = fmu_refs(c, Path(fmu_dir))
+    cp.check_supports(c, refs)                  # a draw outside an FMU's declared range: refused now
     record, split, record_sha = load_record(c)
     hashes = {r.role: r.sha256 for r in refs}
     if record_sha:
@@ -196,7 +199,7 @@ def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None
             todo.remove(0)
         if todo:
             timing.update(_distribute(c, todo, refs, record, split, fingerprint, journal, done, scheduler,
-                                      workers, progress))
+                                      workers, progress, dashboard))
     except KeyboardInterrupt:
         journal.close()
         print(f"\ninterrupted: {len(journal.read())} of {c.runs} runs kept in {journal.path}; the same command "
@@ -216,12 +219,34 @@ def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None
     summary["rerun_command"] = rerun_command(spec, observers, out, fmu_dir, tag, "SEED")
     _write_outputs(c, folder, rows, summary, plots)
     print(_headline(c, summary, folder))
+    if not summary["ok"]:
+        first = summary["failures"][0]
+        raise CampaignFailed(f"campaign {c.name}: all {summary['runs']} runs failed (run {first['run']}, seed "
+                             f"{first['seed']}: {first['error']}); the failures are listed in {folder / 'report.md'}")
     return summary
 
 
-def _distribute(c, todo, refs, record, split, fingerprint, journal, done, scheduler, workers, progress) -> dict:
+class CampaignFailed(CampaignError):
+    """Every run of a campaign failed (its folder is written): ``latobs campaign`` exits 2, as for an
+    FMU that fails in a co-simulation. A campaign where some runs fail exits 0 and lists them."""
+
+
+def local_cluster(workers: int, dashboard: str | None = None):
+    """A LocalCluster of ``workers`` processes (one thread each). Its scheduler serves HTTP in any
+    case (health and metrics routes): without a dashboard it listens on a free port of localhost
+    (port 0), not on Dask's default 8787, so neither a second campaign nor another Dask user on
+    the machine makes it warn "Port 8787 is already in use"."""
+    from dask.distributed import LocalCluster
+
+    kw: dict[str, Any] = {"dashboard_address": dashboard} if dashboard else {
+        "dashboard_address": None, "scheduler_kwargs": {"dashboard_address": "127.0.0.1:0"}}
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, silence_logs=logging.ERROR, **kw)
+
+
+def _distribute(c, todo, refs, record, split, fingerprint, journal, done, scheduler, workers, progress,
+                dashboard=None) -> dict:
     """Run the runs ``todo`` on Dask, appending each row to the journal as it arrives."""
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
     from distributed.scheduler import KilledWorker
     from tqdm import tqdm
 
@@ -233,10 +258,10 @@ def _distribute(c, todo, refs, record, split, fingerprint, journal, done, schedu
         except (OSError, TimeoutError) as exc:
             raise CampaignError(f"--scheduler {scheduler}: cannot connect to a dask scheduler there: {exc}") from None
     else:
-        n = workers or os.cpu_count() or 1
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        cluster = local_cluster(workers or os.cpu_count() or 1, dashboard)
         client = Client(cluster)
+        if dashboard:
+            print(f"dask dashboard: {cluster.dashboard_link}")
     futures = []
     try:
         if scheduler:
@@ -323,6 +348,7 @@ def rerun(spec: str, run_seed: int, observers: list[str] | None = None, out: Pat
 
     c = resolve(spec, observers)
     refs = fmu_refs(c, Path(fmu_dir))
+    cp.check_supports(c, refs)
     record, split, _ = load_record(c)
     folder = campaign_dir(c, out, tag)
     target = folder / f"rerun_{run_seed}"
@@ -393,9 +419,13 @@ def _headline(c: Campaign, s: dict, folder: Path) -> str:
     if t.get("execution_s"):
         lines[0] += (f"; {t['runs_on_dask']} runs in {t['execution_s']:.1f} s on {t['workers']} worker(s) "
                      f"({t['runs_per_s']:.1f} runs/s; cluster start {t['cluster_start_s']:.1f} s)")
+    from .validation.campaign_report import display
+
     for col, st in s["metrics"].items():
-        if col in s["headline"] and st.get("n"):
-            lines.append(f"  {col}: p50 {st['p50']:.4g}, p95 {st['p95']:.4g}, max {st['max']:.4g}")
+        if col in s["headline"] and st.get("n") and not col.endswith(".violations"):   # the enclosure lines say
+            k, unit = display(col)
+            lines.append(f"  {col}: p50 {k * st['p50']:.4g}, p95 {k * st['p95']:.4g}, max {k * st['max']:.4g}"
+                         + (f" {unit}" if unit else ""))
     for base, e in s["enclosure"].items():
         lines.append(f"  {base}: enclosure violated in {e['runs_with_violations']} of {e['runs']} runs")
     lines.append(f"wrote {folder / 'report.md'}, {folder / 'runs.parquet'}, {folder / 'summary.json'}")

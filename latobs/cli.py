@@ -137,14 +137,15 @@ def _cmd_campaign(args) -> int:
         raise CliError("--workers sizes the local cluster; with --scheduler the scheduler's workers run the campaign")
     run_campaign(args.campaign, observers=args.observer, runs=args.runs, out=Path(args.out),
                  fmu_dir=Path(args.fmu_dir), scheduler=args.scheduler, workers=args.workers, seed=args.seed,
-                 tag=args.tag, fresh=args.fresh, plots=not args.no_plots, progress=not args.no_progress)
+                 tag=args.tag, fresh=args.fresh, plots=not args.no_plots, progress=not args.no_progress,
+                 dashboard=args.dashboard)
     return 0
 
 
 def _cmd_demo(args) -> int:
     from .demo import demo
 
-    demo(Path(args.out))
+    demo(Path(args.out), verbose=args.verbose)
     return 0
 
 
@@ -402,9 +403,13 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--fresh", action="store_true", help="discard the runs already in the output folder")
     c.add_argument("--no-plots", action="store_true", help="no PNG figures")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    c.add_argument("--dashboard", nargs="?", const=":8787", default=None, metavar="ADDRESS",
+                   help="serve the local cluster's Dask dashboard (default address :8787); none without it")
     c.set_defaults(func=_cmd_campaign)
     m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
     m.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+    m.add_argument("--verbose", action="store_true", help="print every run's tables (default: a summary, one line "
+                                                          "per observer and scenario; the rest is in the report)")
     m.set_defaults(func=_cmd_demo)
     x = sub.add_parser("export-ssp", help="write a scenario's co-simulation as an SSP 1.0 package (.ssp)")
     x.add_argument("scenario")

@@ -237,14 +237,15 @@ def _headline(report: Path) -> str:
     """Paper 000 on every scenario it ran: the default (robust) designs beside the paper-faithful
     ones and beside the best of the simple baselines (beta^ = 0, open-loop bicycle)."""
     import json
+    import math
 
     rows = ["The default FMUs (`SideslipBankObserver`, `SideslipBankObserverTire`) beside the paper's designs as "
             "printed (`...Paper`, LMI (20) only, eq. (25) literally) and the best simple baseline on the same "
             "signals (beta^ = 0, or the open-loop linear bicycle driven by delta and vx). beta RMS over the run; "
             "bank after 3 s (RMS) and over the whole run (max |error|); `valid` = 0 means outside the linear "
             "domain, the bank estimate frozen.", "",
-            "| run | observer | beta RMS (rad) | best baseline beta RMS | ||beta err||/||bank|| (paper: 9.5e-4 speed, "
-            "8.85e-3 tire) | bank RMS after 3 s (rad) | max |bank error| (rad) | time valid = 0 |",
+            "| run | observer | beta RMS (deg) | best baseline beta RMS (deg) | ||beta err||/||bank|| (paper: 9.5e-4 "
+            "speed, 8.85e-3 tire) | bank RMS after 3 s (deg) | max |bank error| (deg) | time valid = 0 |",
             "|---|---|---|---|---|---|---|---|"]
     for scen, tag, params, noise, obs, _veh in RUNS:
         if obs is not PAPER_000:
@@ -254,27 +255,59 @@ def _headline(report: Path) -> str:
         for lab, o in m["observers"].items():
             b, w = o["estimates"]["beta_hat"], o["estimates"]["bank_angle_hat"]
             best = o.get("baselines", {}).get("summary", {}).get("beta_hat", {})
-            base = (f"{best['best_baseline_rms']:.3g} ({best['best_baseline']})"
+            base = (f"{math.degrees(best['best_baseline_rms']):.3g} ({best['best_baseline']})"
                     if best.get("best_baseline_rms") is not None else "n/a")
             ratio = o.get("beta_error_to_bank_l2_ratio")
             inval = (o.get("valid") or {}).get("fraction_invalid")
-            rows.append(f"| {scen}{' ' + tag if tag else ''} | {lab} | {b['rms']:.3g} | {base} | "
-                        f"{'n/a (flat road)' if ratio is None else f'{ratio:.3g}'} | {w['rms_after_settle']:.3g} | "
-                        f"{w['max_abs']:.3g} | {'n/a' if inval is None else f'{inval:.0%}'} |")
+            rows.append(f"| {scen}{' ' + tag if tag else ''} | {lab} | {math.degrees(b['rms']):.3g} | {base} | "
+                        f"{'n/a (flat road)' if ratio is None else f'{ratio:.3g}'} | "
+                        f"{math.degrees(w['rms_after_settle']):.3g} | {math.degrees(w['max_abs']):.3g} | "
+                        f"{'n/a' if inval is None else f'{inval:.0%}'} |")
     return "\n".join(rows)
 
 
-def demo(out: Path) -> Path:
-    from .validation.report import ReportSection, section_from_dir, write_index
+#: who each run of RUNS validates, in its section title
+GROUPS = ((PAPER_000, "paper 000 observers"), (INTERVAL, "paper 001 interval observer"),
+          (P002, "paper 002 estimator and Kalman baseline"), (P003, "paper 003 observer"))
+
+
+def run_title(scen: str, tag: str, params: dict, noise: bool, observers, plant_vehicle) -> str:
+    """The report's section title of one run of :data:`RUNS`: scenario, observers, plant (unique)."""
+    who = next(text for group, text in GROUPS if observers is group or observers == group)
+    what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] + (["sensor noise and bias"] if noise else [])
+                     + ([f"plant vehicle {plant_vehicle}"] if plant_vehicle else []))
+    return f"{scen}, {who} ({what or 'nominal plant'})"
+
+
+def demo(out: Path, verbose: bool = False) -> Path:
+    """Build, run and report (module docstring). The console gets a summary: one line per observer
+    and run with the best baseline beside it (:func:`latobs.validation.report.overview_rows`);
+    everything the steps print goes to ``REPORT/demo.log`` (linked from the report), and to the
+    console too with ``verbose``."""
+    import contextlib
+    import io
+    import sys
+
+    from .atomic import atomic_write_text
+    from .validation.report import ReportSection, overview_rows, section_from_dir, write_index
 
     t0 = time.perf_counter()
     out = Path(out)
     report = out / "report"
-    build(None, None, out)
+    log = io.StringIO()
+    sink = _Tee(sys.stdout, log) if verbose else log
+
+    def step(what: str, fn, *args, **kw):
+        if not verbose:
+            print(f"{what} ...", flush=True)
+        with contextlib.redirect_stdout(sink):
+            return fn(*args, **kw)
+
+    step("building every FMU (design, certificate, packaging)", build, None, None, out)
     for scen, tag, params, noise, observers, plant_vehicle in RUNS:
-        run_validation(scen, observers, report, out, plant_parameters=params, noise=noise, tag=tag,
-                       plant_vehicle=plant_vehicle)
-    replays = _replays(out, report)
+        step(f"running {scen}{' [' + tag + ']' if tag else ''}", run_validation, scen, observers, report, out,
+             plant_parameters=params, noise=noise, tag=tag, plant_vehicle=plant_vehicle)
+    replays = step("replaying the MBDS record", _replays, out, report)
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
                 ReportSection(title="Paper 000: default and paper-faithful designs, every scenario", markdown=_headline(report)),
@@ -282,21 +315,52 @@ def demo(out: Path) -> Path:
                 ReportSection(title="Paper 002: fixed-order sideslip estimator beside the Kalman baseline",
                               markdown=_table_002(report, replays)),
                 ReportSection(title="Paper 003: motorcycle roll angle and rider torque", markdown=_table_003(report))]
-    for scen, tag, params, noise, _obs, plant_vehicle in RUNS:
+    for scen, tag, params, noise, observers, plant_vehicle in RUNS:
         d = report / (f"{scen}_{tag}" if tag else scen)
-        what = ", ".join([f"{k} = {v:g}" for k, v in params.items()] + (["sensor noise and bias"] if noise else [])
-                         + ([f"plant vehicle {plant_vehicle}"] if plant_vehicle else []))
-        sections.append(section_from_dir(d, title=f"{scen} ({what or 'nominal plant'})"))
+        sections.append(section_from_dir(d, title=run_title(scen, tag, params, noise, observers, plant_vehicle)))
     for label, (metrics, mdir) in replays.items():
         sections.append(section_from_dir(mdir, title=f"Real data: {label}"))
+    log_path = atomic_write_text(report / "demo.log", log.getvalue())
     intro = ("Built by `latobs demo`: every FMU designed, certified and packaged, then co-simulated with fmpy "
              "beside the nonlinear CarPlant FMU (sedan, a representative parameter set, not a paper's). "
-             "Angles in rad unless stated. Paper 000's default designs: the common Lyapunov matrix proves "
+             "Units: angles in degrees and angular rates in deg/s in every table and figure, every other "
+             "quantity in SI units (the FMUs and the metrics.json files are SI throughout: rad, rad/s). "
+             "Paper 000's default designs: the common Lyapunov matrix proves "
              "stability and both H-infinity bounds for any switching and any speed inside each mode's range "
-             "(linear model); the paper-faithful designs: among the grid models only.")
+             "(linear model); the paper-faithful designs: among the grid models only. Console output of the "
+             f"steps: [demo.log]({log_path.name}).")
     path = write_index(report, sections, title="latobs demo report", intro=intro)
-    print(f"report: {path} ({time.perf_counter() - t0:.0f} s)")
+    header, rows = overview_rows(sections)
+    short = {run_title(*r): f"{r[0]}{' [' + r[1] + ']' if r[1] else ''}" for r in RUNS}
+    keep = [i for i, h in enumerate(header) if h != "‖β−β̂‖₂/‖φr‖₂"]    # in the report's overview
+    print(summary_text([header[i] for i in keep], [[short.get(r[0], r[0]) if i == 0 else r[i] for i in keep]
+                                                   for r in rows]))
+    print(f"report: {path} ({time.perf_counter() - t0:.0f} s); every table, figure and step's output there "
+          f"({log_path.name}){'' if verbose else '; --verbose prints it all'}")
     return path
+
+
+def summary_text(header: list[str], rows: list[list]) -> str:
+    """The console summary: the overview's rows as aligned plain text."""
+    from .validation.report import _columns, _fmt
+
+    return _columns([header, *[[_fmt(c).replace("**", "") for c in r] for r in rows]])
+
+
+class _Tee:
+    """A stream writing to several (--verbose: the console and the log)."""
+
+    def __init__(self, *streams):
+        self.streams = streams
+
+    def write(self, text):
+        for st in self.streams:
+            st.write(text)
+        return len(text)
+
+    def flush(self):
+        for st in self.streams:
+            st.flush()
 
 
 def _replays(out: Path, report: Path) -> dict:
@@ -327,9 +391,10 @@ def _interval_table(report: Path, replays: dict) -> str:
 
     rows = ["Inside the guarantee (linear tires, stiffness in the box) every bound must contain the truth; "
             "outside it (Magic Formula tires at the handling limit, real data) the rates show how often the "
-            "model's assumptions fail. Widths in m/s and N.", "",
-            "| run | vy violations | vy mean width after settle | Fyf mean width | Fyr mean width | beta violations |",
-            "|---|---|---|---|---|---|"]
+            "model's assumptions fail. Widths in m/s and N. The beta bounds are atan of the vy bounds over vx: "
+            "they miss the truth exactly when the vy bounds do, so their violations are vy's (not counted again).", "",
+            "| run | vy violations | vy mean width after settle | Fyf mean width | Fyr mean width |",
+            "|---|---|---|---|---|"]
     for scen, tag, params, noise, obs, plant_vehicle in RUNS:
         if obs != INTERVAL:
             continue
@@ -339,8 +404,7 @@ def _interval_table(report: Path, replays: dict) -> str:
             ", no roll (model class)" if plant_vehicle == "sedan_no_roll" else ", rolling sedan")
         rows.append(f"| {scen} ({what}) | {iv['vy']['enclosure_violations']} of {m['n_samples']} | "
                     f"{iv['vy']['mean_width_after_settle']:.3g} | {iv['Fyf']['mean_width_after_settle']:.4g} | "
-                    f"{iv['Fyr']['mean_width_after_settle']:.4g} | "
-                    f"{iv['beta']['enclosure_violations']} |")
+                    f"{iv['Fyr']['mean_width_after_settle']:.4g} |")
     rows += ["", "Real data (MBDS record, t < 425 s tuning half / t >= 425 s held-out half): enclosure rate of the "
              "reference vy, and of m ay within [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (eq. 47).", "",
              "| design | vy enclosed (t < 425 / t >= 425) | vy mean width | m ay enclosed (t < 425 / t >= 425) |",

@@ -88,6 +88,76 @@ def test_a_scenario_alone_takes_the_robustness_distributions_of_its_observers_pa
         resolve("no-such-thing")
 
 
+@pytest.mark.parametrize("extra, culprit", [
+    ("[scenario_fields]\nduration = -1.0\n", r"\[scenario_fields\] duration = -1: .*outside \(0, 3600\]"),
+    ("[scenario_fields]\nduration = 1e12\n", r"\[scenario_fields\] duration = 1e\+12: .*outside"),
+    ("[scenario_fields]\nduration = { uniform = [5.0, 5000.0] }\n", r"duration = 5000 \(an end of U\[5, 5000\]\)"),
+    ("[scenario_fields]\nduration = { normal = [10.0, 1.0] }\n", r"\[scenario_fields\] duration .*any real number"),
+    ("[scenario_fields]\nduration = 0.001\n", r"duration = 0.001: .*shorter than one step"),
+    ("[scenario_fields]\ndecel = { choice = [2.0, -1.0] }\n", r"decel = -1 .*refuses it.*decel > 0"),
+])
+def test_a_drawn_scenario_field_outside_what_the_scenario_accepts_is_refused_on_load(tmp_path, extra, culprit):
+    """Every end of every drawn field's support is tried before anything runs: a negative or huge
+    duration (every run would fail) is refused naming the file, the table and the key."""
+    with pytest.raises(CampaignError, match=culprit) as e:
+        cp.load(_write(tmp_path, BASE + extra))
+    assert "c.toml" in str(e.value)
+
+
+def _model_description_fmu(path: Path, variables: str) -> cp.FmuRef:
+    """An FMU archive holding only a modelDescription.xml with ``variables`` (ScalarVariable
+    elements): all a range check reads."""
+    import zipfile
+
+    xml = ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" modelName="P" '
+           'guid="{0}"><CoSimulation modelIdentifier="P"/><ModelVariables>' + variables
+           + '</ModelVariables><ModelStructure/></fmiModelDescription>')
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("modelDescription.xml", xml)
+    return cp.FmuRef("plant", path.name, "0" * 64, path=str(path))
+
+
+_PLANT_VARS = (
+    '<ScalarVariable name="mu" valueReference="0" causality="parameter" variability="fixed" initial="exact">'
+    '<Real min="0.01" max="2" start="1"/></ScalarVariable>'
+    '<ScalarVariable name="scale_f" valueReference="1" causality="parameter" variability="fixed" '
+    'initial="exact"><Real min="0.1" max="10" start="1"/></ScalarVariable>'
+    '<ScalarVariable name="delta" valueReference="2" causality="input" variability="continuous">'
+    '<Real start="0"/></ScalarVariable>'
+    '<ScalarVariable name="vx" valueReference="3" causality="input" variability="continuous">'
+    '<Real min="0" max="30" start="20"/></ScalarVariable>'
+    '<ScalarVariable name="bank_angle" valueReference="4" causality="input" variability="continuous">'
+    '<Real min="-0.5" max="0.5" start="0"/></ScalarVariable>')
+
+
+@pytest.mark.parametrize("extra, culprit", [
+    ("[plant]\nmu = { uniform = [0.5, 3.0] }\n", r"\[plant\] mu = U\[0.5, 3\] reaches 3, above the maximum 2"),
+    ("[plant]\nmu = -0.2\n", r"\[plant\] mu = -0.2 reaches -0.2, below the minimum 0.01"),
+    ("[plant]\nmu = { normal = [1.0, 0.1] }\n", r"\[plant\] mu = N\(1, 0.1\) reaches -inf"),
+    ("[plant]\nmu = { choice = [0.5, 2.5] }\n", r"reaches 2.5, above the maximum 2"),
+    ("[plant]\nfriction = 0.5\n", r"\[plant\] friction: p.fmu has no such parameter; its parameters: mu, scale_f"),
+    # bank-braking starts at 25 m/s: speed_scale 1.3 drives vx to 32.5 > 30
+    ("[signals]\nspeed_scale = { uniform = [0.9, 1.3] }\n", r"input vx .*speed_scale = 1.3 reaches 32.5, above"),
+    ("[scenario_fields]\nv_start = { uniform = [20.0, 31.0] }\n", r"input vx .*v_start = 31 .*reaches 31, above"),
+    ("[signals]\nbank_offset = { uniform = [-0.6, 0.0] }\n", r"input bank_angle .*bank_offset = -0.6 reaches"),
+])
+def test_a_draw_outside_the_plant_fmus_declared_ranges_is_refused_before_any_run(tmp_path, extra, culprit):
+    """The plant FMU's declared min/max bound every [plant] parameter's support and every plant input
+    the scenario drives once [signals] transformed it (read from its modelDescription, any FMU)."""
+    ref = _model_description_fmu(tmp_path / "p.fmu", _PLANT_VARS)
+    c = cp.load(_write(tmp_path, BASE + extra))
+    with pytest.raises(CampaignError, match=culprit) as e:
+        cp.check_supports(c, [ref])
+    assert "c.toml" in str(e.value)
+
+
+def test_draws_inside_the_declared_ranges_pass_the_check(tmp_path):
+    ref = _model_description_fmu(tmp_path / "p.fmu", _PLANT_VARS)
+    c = cp.load(_write(tmp_path, BASE + "[plant]\nmu = { uniform = [0.01, 2.0] }\nscale_f = { normal = [1.0, 0.1], "
+                                        "clip = [0.5, 1.5] }\n[signals]\nspeed_scale = { uniform = [0.9, 1.2] }\n"))
+    cp.check_supports(c, [ref])                        # 25 m/s * 1.2 = 30 m/s: the declared maximum
+
+
 # --------------------------------------------------------------------------------------------
 # draws
 # --------------------------------------------------------------------------------------------
@@ -211,6 +281,31 @@ def test_the_summary_gives_numpy_percentiles_enclosure_and_the_worst_runs(tmp_pa
     assert worst[0]["seed"] == cp.run_seed(0, worst[0]["run"])
     t = cp.rows_table(rows)
     assert t.num_rows == 201 and t.column("O.beta.rms").to_pylist()[:3] == list(values[:3])
+
+
+def test_an_interval_that_never_misses_is_plotted_and_ranked_by_its_width_in_degrees(tmp_path):
+    """robustness-001 holds its enclosure: a histogram of zero violation counts says nothing, so the
+    report plots each interval's mean width and lists the widest runs (angles in degrees)."""
+    import math
+
+    from latobs.validation import campaign_report
+
+    metrics = {"O.beta.violations": 0.0, "O.beta.mean_width": 0.0, "O.vy.violations": 0.0, "O.vy.mean_width": 0.0}
+    heads = cp.headline_columns(metrics, {"O": ["yaw_rate"]})
+    assert heads == list(metrics)                          # widths are headline metrics beside the counts
+    c = cp.load(_write(tmp_path, BASE))
+    rows = [{"run": k, "seed": cp.run_seed(0, k), "status": "ok", "error": None, "params": {"plant.mu": 0.5 + k / 100},
+             "metrics": {**metrics, "O.beta.mean_width": 0.01 + k / 1000, "O.vy.mean_width": 0.2 + k / 100},
+             "headline": heads, "seconds": 0.1, "worker": "w"} for k in range(30)]
+    s = cp.summarize(c, rows)
+    assert [w["run"] for w in s["worst"]["O.beta.mean_width"]] == [29, 28, 27, 26, 25]    # the widest runs
+    assert s["worst"]["O.beta.violations"] == []
+    figs = campaign_report.figures(tmp_path, rows)
+    assert {p.name for p in figs} == {"hist_O.png", "scatter_O.beta.mean_width.png", "scatter_O.vy.mean_width.png"}
+    md = campaign_report.markdown(c, s, figs)
+    assert "**`O.beta.mean_width`** (widest runs)" in md and "| value [deg] |" in md
+    assert f"| {campaign_report._g(math.degrees(0.039))} |" in md           # run 29: 0.039 rad
+    assert "No run violated `O.beta.violations`, `O.vy.violations`" in md
 
 
 # --------------------------------------------------------------------------------------------
@@ -341,3 +436,64 @@ def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_
     refs = fmu_refs(c, fmus)
     for k in (0, lines[done_at_kill - 1]["run"], lines[-1]["run"]):
         assert cp.run_case(c, k, cp.run_seed(c.seed, k), refs)["metrics"] == by_run[k]["metrics"], k
+
+
+def test_the_local_cluster_serves_no_dashboard_and_never_warns_about_port_8787(recwarn):
+    """`latobs campaign` on a local cluster: no Dask dashboard unless asked, and no "Port 8787 is
+    already in use" warning while another process holds Dask's default port."""
+    import socket
+
+    from latobs.campaign import local_cluster
+
+    holder = socket.socket()
+    try:
+        holder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        holder.bind(("0.0.0.0", 8787))
+        holder.listen()
+    except OSError:
+        pass                                   # someone else holds it: the case the test is about
+    try:
+        cluster = local_cluster(0)
+        try:
+            http = cluster.scheduler.http_server      # health and metrics routes only, on a free local port
+            assert http.port != 8787 and http.address == "127.0.0.1"
+        finally:
+            cluster.close()
+    finally:
+        holder.close()
+    assert not [w for w in recwarn if "8787" in str(w.message)]
+
+
+@pytest.mark.slow
+def test_a_campaign_whose_runs_all_fail_exits_2_after_writing_its_report(built_fmus, tmp_path, monkeypatch, capsys):
+    """Every run fails (each co-simulation raises the error a failing FMU raises): the command writes
+    the folder with the failures, then exits 2 naming the first one, never "0 runs ok" and 0."""
+    from latobs import cli
+    from latobs.validation import harness
+
+    def failing(*a, **k):
+        raise harness.CoSimulationError("plant FMU CarPlant: fmi2Error at t = 0.5 s")
+
+    monkeypatch.setattr(harness, "run", failing)
+    fmus = _fmu_folder(built_fmus, tmp_path, ["CarPlant", "SideslipBankObserver"])
+    c = _write(tmp_path, BASE + "[scenario_fields]\nduration = 1.0\n")
+    rc = cli.main(["campaign", str(c), "--runs", "1", "--fmu-dir", str(fmus), "--out", str(tmp_path / "out"),
+                   "--no-plots", "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "all 1 runs failed" in err[0] and "fmi2Error at t = 0.5 s" in err[0]
+    report = (tmp_path / "out" / "campaign_t" / "report.md").read_text()
+    assert "fmi2Error at t = 0.5 s" in report
+
+
+@pytest.mark.slow
+def test_latobs_campaign_refuses_a_draw_outside_the_plants_range_before_anything_is_written(built_fmus, tmp_path,
+                                                                                          capsys):
+    from latobs import cli
+
+    fmus = _fmu_folder(built_fmus, tmp_path, ["CarPlant", "SideslipBankObserver"])
+    c = _write(tmp_path, BASE + "[plant]\nmu = { uniform = [0.5, 3.0] }\n")
+    rc = cli.main(["campaign", str(c), "--fmu-dir", str(fmus), "--out", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "[plant] mu" in err[0] and "c.toml" in err[0]
+    assert not (tmp_path / "out").exists()                 # nothing ran, nothing was written

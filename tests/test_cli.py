@@ -382,3 +382,12 @@ def test_list_describes_tire_mode_2_as_the_secant_not_half_c1(capsys):
     assert "0.5 C1" not in out and "0.5*C1" not in out and "0.5·C1" not in out
     tire = next(line for line in out.splitlines() if line.strip().startswith("SideslipBankObserverTire "))
     assert "C1 / C2 (secant of the tire curve)" in tire
+
+
+def test_demo_prints_a_summary_unless_verbose():
+    from latobs import cli
+
+    assert cli.parser().parse_args(["demo"]).verbose is False
+    assert cli.parser().parse_args(["demo", "--verbose"]).verbose is True
+    assert cli.parser().parse_args(["campaign", "robustness-000"]).dashboard is None
+    assert cli.parser().parse_args(["campaign", "robustness-000", "--dashboard"]).dashboard == ":8787"

@@ -114,6 +114,35 @@ class Dist:
     def drawn(self) -> bool:
         return self.kind != "fixed"
 
+    def support(self) -> tuple[float, float]:
+        """(lowest, highest) value a draw can take: a normal without clip reaches every real number."""
+        a = self.args
+        if self.kind == "fixed":
+            return a[0], a[0]
+        if self.kind == "normal":
+            if self.clip is not None:
+                return self.clip
+            return (a[0], a[0]) if a[1] == 0 else (-math.inf, math.inf)
+        return min(a), max(a)
+
+    def extremes(self) -> tuple[float, ...]:
+        """The values a check must try: every choice, else the two ends of the support."""
+        if self.kind == "choice":
+            return tuple(sorted(set(self.args)))
+        lo, hi = self.support()
+        return (lo,) if lo == hi else (lo, hi)
+
+    def nominal(self) -> float:
+        """A representative value inside the support (the scenario the input-range check starts from)."""
+        a = self.args
+        if self.kind == "uniform":
+            return 0.5 * (a[0] + a[1])
+        if self.kind == "loguniform":
+            return math.sqrt(a[0] * a[1])
+        if self.kind == "normal":
+            return a[0] if self.clip is None else min(max(a[0], self.clip[0]), self.clip[1])
+        return a[0]
+
     def describe(self) -> str:
         a = ", ".join(f"{x:g}" for x in self.args)
         text = {"fixed": f"{a}", "uniform": f"U[{a}]", "normal": f"N({a})", "loguniform": f"logU[{a}]",
@@ -356,6 +385,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Campaign:
             raise CampaignError(f"{where}: [signals] bank_scale/bank_offset: scenario {scenario!r} has no bank_angle")
         if base.plant not in STEER_SIGNAL and "steer_scale" in dists["signals"]:
             raise CampaignError(f"{where}: [signals] steer_scale: no steering input known for plant {base.plant}")
+        scenario_cases(where, scenario, dists["scenario_fields"], opt_float.get("dt", DEFAULT_DT))
     else:
         if scenario or dists["scenario_fields"] or dists["plant"] or dists["signals"]:
             raise CampaignError(f"{where}: a replay campaign has no scenario, [scenario_fields], [plant] or "
@@ -380,6 +410,127 @@ def from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Campaign:
                     description=str(raw.get("description", "")), scenario=scenario, plant_vehicle=pv,
                     scenario_fields=dists["scenario_fields"], plant=dists["plant"], signals=dists["signals"],
                     noise=noise, replay=replay, source=source, **opt_float)
+
+
+# --------------------------------------------------------------------------------------------
+# supports against the declared ranges: checked before any run
+# --------------------------------------------------------------------------------------------
+#: the longest manoeuvre a campaign runs, s: an hour of driving (720 000 communication steps at the
+#: default 5 ms per run); a longer one is a typing mistake far more often than a plan
+MAX_DURATION_S = 3600.0
+#: the communication step of a cosim run when the definition gives none, s
+DEFAULT_DT = 0.005
+
+
+def scenario_cases(where: str, name: str, fields: Mapping[str, Dist], dt: float) -> list[tuple[str, Scenario]]:
+    """The scenario ``name`` built at its fields' nominal values and at each end of each field's
+    support (a choice: at each value), the other fields nominal: [(label, scenario)]. Every one
+    must be accepted by the scenario, last between 0 and :data:`MAX_DURATION_S` and hold at least
+    one step ``dt``; else CampaignError naming ``where``, the field and the value. A field drawn
+    from a normal without clip is refused (its support is every real number)."""
+    def value(k, x):
+        return int(x) if k == "seed" else x
+
+    for k, d in sorted(fields.items()):
+        if not all(map(math.isfinite, d.support())):
+            raise CampaignError(f"{where}: [scenario_fields] {k} = {d.describe()} can take any real number; "
+                                "bound it (clip = [low, high])")
+    nominal = {k: value(k, d.nominal()) for k, d in fields.items()}
+    cases = [("", nominal)] + [(f"{k} = {x:g} (an end of {d.describe()})", {**nominal, k: value(k, x)})
+                               for k, d in sorted(fields.items()) if d.drawn for x in d.extremes()]
+    out = []
+    for label, vals in cases:
+        culprit = f"[scenario_fields] {label}" if label else (
+            "[scenario_fields] " + ", ".join(f"{k} = {v:g}" for k, v in sorted(vals.items())) if vals
+            else f"scenario {name!r} (its own fields)")
+        try:
+            sc = get_scenario(name, **vals)
+        except (ValueError, TypeError) as exc:
+            raise CampaignError(f"{where}: {culprit}: scenario {name!r} refuses it: {exc}") from None
+        if not 0 < sc.duration <= MAX_DURATION_S:
+            raise CampaignError(f"{where}: {culprit}: the duration {sc.duration:g} s is outside (0, "
+                                f"{MAX_DURATION_S:g}] s")
+        try:
+            sc.time_grid(dt)
+        except ValueError as exc:
+            raise CampaignError(f"{where}: {culprit}: {exc}") from None
+        out.append((label, sc))
+    return out
+
+
+@dataclass(frozen=True)
+class Declared:
+    """A variable of an FMU's modelDescription: causality and declared range (None: unbounded)."""
+
+    causality: str
+    min: float | None
+    max: float | None
+
+
+def declared_variables(path: str | os.PathLike) -> dict[str, Declared]:
+    """{name: Declared} of every Real/Integer variable of the FMU at ``path``; its min/max from the
+    variable or, when it has none, from its declared type."""
+    from fmpy import read_model_description
+
+    def num(x):
+        return None if x in (None, "") else float(x)
+
+    out = {}
+    for v in read_model_description(str(path)).modelVariables:
+        if v.type not in ("Real", "Integer"):
+            continue
+        t = v.declaredType
+        lo = v.min if v.min not in (None, "") else getattr(t, "min", None)
+        hi = v.max if v.max not in (None, "") else getattr(t, "max", None)
+        out[v.name] = Declared(v.causality, num(lo), num(hi))
+    return out
+
+
+def _inside(where: str, what: str, lo: float, hi: float, var: str, decl: Declared, fmu: str) -> None:
+    """CampaignError unless [lo, hi] lies within the range ``fmu`` declares for ``var``."""
+    rng = f"{'-inf' if decl.min is None else f'{decl.min:g}'} .. {'inf' if decl.max is None else f'{decl.max:g}'}"
+    if decl.min is not None and not lo >= decl.min:
+        raise CampaignError(f"{where}: {what} reaches {lo:g}, below the minimum {decl.min:g} that {fmu} declares "
+                            f"for {var} (range {rng})")
+    if decl.max is not None and not hi <= decl.max:
+        raise CampaignError(f"{where}: {what} reaches {hi:g}, above the maximum {decl.max:g} that {fmu} declares "
+                            f"for {var} (range {rng})")
+
+
+def check_supports(c: Campaign, fmus: list[FmuRef]) -> None:
+    """Before any run of a cosim campaign: every [plant] parameter is one the plant FMU (``fmus[0]``,
+    with a local path) has, and its support lies within the range the FMU declares for it; every
+    plant input the scenario drives, transformed by [signals], stays within its declared range,
+    over the ends of every drawn scenario field and transform (:func:`scenario_cases`; the
+    transforms are affine per sample, so the ends bound every draw; a scenario with a seed field
+    is checked at its nominal seed). CampaignError naming the file, table and key otherwise."""
+    if c.kind != "cosim" or not fmus or fmus[0].path is None:
+        return
+    import itertools
+
+    where, plant = f"campaign {c.source or c.name}", fmus[0]
+    decl = declared_variables(plant.path)
+    params = sorted(n for n, d in decl.items() if d.causality == "parameter")
+    for k, d in sorted(c.plant.items()):
+        if k not in params:
+            raise CampaignError(f"{where}: [plant] {k}: {plant.filename} has no such parameter; its parameters: "
+                                f"{', '.join(params) or '(none)'}")
+        _inside(where, f"[plant] {k} = {d.describe()}", *d.support(), k, decl[k], plant.filename)
+    ins = {n: d for n, d in decl.items() if d.causality == "input" and (d.min is not None or d.max is not None)}
+    if not ins:
+        return
+    dt = c.dt or DEFAULT_DT
+    drawn = {k: d.extremes() for k, d in sorted(c.signals.items())}
+    corners = [dict(zip(drawn, xs)) for xs in itertools.product(*drawn.values())] or [{}]
+    for label, base in scenario_cases(where, c.scenario, c.scenario_fields, dt):
+        t = base.time_grid(dt)
+        for tr in corners:
+            sig = PerturbedScenario.of(base, **tr).sampled(t, c.plant_vehicle or "sedan")
+            for n in sorted(set(sig) & set(ins)):
+                what = (f"input {n} of scenario {c.scenario!r}"
+                        + (f" with {label}" if label else "")
+                        + (" and [signals] " + ", ".join(f"{k} = {x:g}" for k, x in tr.items()) if tr else ""))
+                _inside(where, what, float(np.min(sig[n])), float(np.max(sig[n])), n, ins[n], plant.filename)
 
 
 # --------------------------------------------------------------------------------------------
@@ -617,7 +768,7 @@ def cosim_setup(c: Campaign, params: Mapping[str, Any], seed: int) -> tuple[Pert
 
     sc = scenario_of(c, params)
     noise = noise_of(params)
-    kwargs = {"dt": c.dt or 0.005, "seed": int(seed), "vehicle": c.plant_vehicle or "sedan",
+    kwargs = {"dt": c.dt or DEFAULT_DT, "seed": int(seed), "vehicle": c.plant_vehicle or "sedan",
               "noise": NoiseSpec(signals=noise, seed=int(seed)) if noise else None,
               "plant_parameters": {k.split(".", 1)[1]: float(v) for k, v in params.items() if k.startswith("plant.")}}
     return sc, kwargs
@@ -803,12 +954,14 @@ def metric_columns(rows: list[Mapping[str, Any]]) -> list[str]:
 def headline_columns(metrics: Mapping[str, Any], inputs: Mapping[str, list[str]]) -> list[str]:
     """The metric columns ranked for the worst runs and plotted: the RMS error of each estimate of
     a quantity the observer does not measure (``beta``, ``bank_angle``, ``Fyf``, not the filtered
-    ``yaw_rate`` it reads) and each interval's violation count. ``inputs``: {label: its inputs}."""
+    ``yaw_rate`` it reads), and each interval's violation count and mean width (the widest runs:
+    an interval that never misses the truth is judged by how wide it is). ``inputs``: {label:
+    its inputs}."""
     out = []
     for col in metrics:
         label, _, rest = col.partition(".")
         q, _, what = rest.rpartition(".")
-        if what == "violations" or (what == "rms" and q not in inputs.get(label, ())):
+        if what in ("violations", "mean_width") or (what == "rms" and q not in inputs.get(label, ())):
             out.append(col)
     return out
 

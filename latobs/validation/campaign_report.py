@@ -45,15 +45,32 @@ def _numeric_params(rows: list[Mapping[str, Any]]) -> list[str]:
     return [k for k in names if len({r["params"].get(k) for r in rows}) > 1]
 
 
+#: the metrics (last part of a column's name) in the unit of their quantity; the others are counts
+_IN_UNIT = ("rms", "max_abs", "mean_width", "max_violation")
+
+
+def display(column: str) -> tuple[float, str]:
+    """(factor, unit) of a metric column in the report: angles in deg, angular rates in deg/s,
+    other quantities in SI (:func:`latobs.validation.plots.display_scale`); counts: (1, "samples")."""
+    from .plots import display_scale
+
+    parts = column.split(".")
+    if len(parts) >= 3 and parts[-1] in _IN_UNIT:
+        return display_scale(parts[-2])
+    return 1.0, "samples" if parts[-1] in ("violations", "nonfinite") else ""
+
+
 def _metric_table(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
-    lines = ["| metric | runs | p5 | p50 | p95 | p99 | max | mean [95 % CI] |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["| metric | unit | runs | p5 | p50 | p95 | p99 | max | mean [95 % CI] |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for col, s in stats.items():
+        k, unit = display(col)
         if not s.get("n"):
-            lines.append(f"| `{col}` | 0 | | | | | | |")
+            lines.append(f"| `{col}` | {unit} | 0 | | | | | | |")
             continue
         ci = s["mean_ci95"]
-        lines.append(f"| `{col}` | {s['n']} | {_g(s['p5'])} | {_g(s['p50'])} | {_g(s['p95'])} | {_g(s['p99'])} | "
-                     f"{_g(s['max'])} | {_g(s['mean'])} [{_g(ci[0])}, {_g(ci[1])}] |")
+        lines.append(f"| `{col}` | {unit} | {s['n']} | {_g(k * s['p5'])} | {_g(k * s['p50'])} | {_g(k * s['p95'])} | "
+                     f"{_g(k * s['p99'])} | {_g(k * s['max'])} | {_g(k * s['mean'])} [{_g(k * ci[0])}, {_g(k * ci[1])}] |")
     return lines
 
 
@@ -84,8 +101,10 @@ def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> st
         out.append(f"| segment | start uniform in the part, part with probability ∝ its room; "
                    f"{c.replay['segment_s']:g} s |")
     out += ["", "## Metrics over the runs", "",
-            "After each run's settle time; SI units (rad, rad/s, m/s, N). `X.rms`, `X.max_abs`: estimate error; "
-            "`X.violations`: samples where the truth is outside the interval; `X.mean_width`: its mean width.", ""]
+            "After each run's settle time; angles in deg, angular rates in deg/s, other quantities in SI units "
+            "(the definition's distributions above, runs.parquet and summary.json: SI throughout). `X.rms`, "
+            "`X.max_abs`: estimate error; `X.violations`: samples where the truth is outside the interval; "
+            "`X.mean_width`: its mean width.", ""]
     out += _metric_table(summary["metrics"])
     if c.kind == "replay":
         out += ["", "The segments are drawn from one record and overlap: the bootstrap interval of a mean "
@@ -105,12 +124,19 @@ def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> st
     for col, worst in summary["worst"].items():
         if not worst:
             continue
-        out += [f"**`{col}`**", "", "| run | seed | value | drawn quantities |", "|---|---|---|---|"]
+        k, unit = display(col)
+        what = "widest runs" if col.endswith(".mean_width") else "worst runs"
+        out += [f"**`{col}`** ({what})", "", f"| run | seed | value{f' [{unit}]' if unit else ''} | drawn quantities |",
+                "|---|---|---|---|"]
         for w in worst:
             drawn = ", ".join(f"{k} {_g(w['params'][k])}" for k in drawn_names if k in w["params"]
                               and k != "scenario.seed")
-            out.append(f"| {w['run']} | `--rerun {w['seed']}` | {_g(w['value'])} | {drawn} |")
+            out.append(f"| {w['run']} | `--rerun {w['seed']}` | {_g(k * w['value'])} | {drawn} |")
         out.append("")
+    quiet = [col for col, worst in summary["worst"].items() if not worst and col.endswith(".violations")]
+    if quiet:
+        out += [f"No run violated {', '.join(f'`{c}`' for c in quiet)}: their bounds are judged by their widths "
+                "(the widest runs above).", ""]
     if summary["failures"]:
         out += ["## Failed runs", "", "| run | seed | error |", "|---|---|---|"]
         out += [f"| {f['run']} | {f['seed']} | {str(f['error']).splitlines()[0][:200]} |" for f in summary["failures"]]
@@ -130,18 +156,21 @@ def figures(folder: Path, rows: list[Mapping[str, Any]]) -> list[Path]:
     from ..atomic import atomic_path
 
     ok = [r for r in rows if r["status"] == "ok"]
-    cols = headlines(ok)
+    # a violation count that is zero in every run plots nothing: its interval's width says more
+    cols = [c for c in headlines(ok) if not (c.endswith(".violations")
+                                             and all(not r["metrics"].get(c) for r in ok))]
     params = _numeric_params(ok)
     paths = []
     for label in dict.fromkeys(_label_of(c) for c in cols):
         mine = [c for c in cols if _label_of(c) == label]
-        vals = {c: np.array([np.nan if r["metrics"].get(c) is None else r["metrics"][c] for r in ok]) for c in mine}
+        vals = {c: display(c)[0] * np.array([np.nan if r["metrics"].get(c) is None else r["metrics"][c] for r in ok],
+                                            dtype=float) for c in mine}
         fig = Figure(figsize=(4.0 * len(mine), 3.2))
         for i, c in enumerate(mine):
             ax = fig.add_subplot(1, len(mine), i + 1)
             x = vals[c][np.isfinite(vals[c])]
             ax.hist(x, bins=min(40, max(5, int(math.sqrt(max(x.size, 1))))), color="tab:blue", alpha=0.8)
-            ax.set_xlabel(c.split(".", 1)[1])
+            ax.set_xlabel(_axis_label(c))
             ax.set_ylabel("runs")
             ax.grid(alpha=0.3)
         fig.suptitle(f"{label}: {len(ok)} runs")
@@ -157,7 +186,7 @@ def figures(folder: Path, rows: list[Mapping[str, Any]]) -> list[Path]:
                 ax.scatter(px, vals[c], s=4, alpha=0.5)
                 ax.set_xlabel(p, fontsize=8)
                 if j % ncol == 0:
-                    ax.set_ylabel(c.split(".", 1)[1], fontsize=8)
+                    ax.set_ylabel(_axis_label(c), fontsize=8)
                 ax.locator_params(nbins=4)
                 ax.tick_params(labelsize=7)
                 ax.grid(alpha=0.3)
@@ -165,6 +194,11 @@ def figures(folder: Path, rows: list[Mapping[str, Any]]) -> list[Path]:
             fig.tight_layout()
             paths.append(_save(fig, folder / "figures" / f"scatter_{c}.png", FigureCanvasAgg, atomic_path))
     return paths
+
+
+def _axis_label(column: str) -> str:
+    unit = display(column)[1]
+    return column.split(".", 1)[1] + (f" [{unit}]" if unit else "")
 
 
 def _save(fig, path: Path, canvas, atomic_path) -> Path:

@@ -563,7 +563,7 @@ def _figure(run: ReplayRun, panels, sl: slice, title: str, split: float | None, 
     from .plots import BASELINE_STYLE, _save, _ylabel, display_scale, thin
 
     t = run.time[sl]
-    fig = Figure(figsize=(10, 2.3 * len(panels) + 0.8))
+    fig = Figure(figsize=(13, 2.3 * len(panels) + 0.8), layout="constrained")   # legends beside the data
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     lab = run.label
     for ax, p in zip(axes, panels):
@@ -596,11 +596,10 @@ def _figure(run: ReplayRun, panels, sl: slice, title: str, split: float | None, 
                        label=f"held-out test (t ≥ {split:g} s)" if ax is axes[0] else None)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     axes[-1].set_xlabel("time [s]")
     axes[-1].set_xlim(float(t[0]), float(t[-1]))
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     return _save(fig, path)
 
 

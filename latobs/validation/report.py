@@ -7,8 +7,11 @@ A section is one of
 * a mapping with the same keys,
 * a plain string: markdown copied as is (e.g. a design certificate written by the caller).
 
-Image links are made relative to the report directory. Metric values are in the SI unit of the
-signal (rad, rad/s, m/s, N); the unit column repeats it when the FMU declares it.
+Image paths are file paths (absolute, or relative to the working directory like any other path);
+their links are written relative to the report directory, and an image that does not exist is an
+error (a report never links to nothing). The markdown shows angles in degrees and angular rates in
+deg/s (:func:`display_units`), every other quantity in its SI unit; metrics.json and the FMUs stay
+SI. The report opens with a table of contents linking every section.
 
 Baselines (``metrics["observers"][label]["baselines"]``, see :mod:`latobs.validation.metrics`): the
 tables show each scored estimate beside the zero estimate and the model baseline (the car's
@@ -24,6 +27,7 @@ from __future__ import annotations
 from ..atomic import atomic_write_text
 
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +65,7 @@ def _table(header: list[str], rows: list[list[Any]]) -> str:
 
 
 SEGMENTS = ("all", "before_split", "after_split")
+UNITS_NOTE = "angles in deg, angular rates in deg/s, other quantities in SI units"
 BASELINE_TITLES = {"zero": "zero", "bicycle": "linear bicycle", "steady_turn": "steady turn"}
 WARN_MD = "⚠"      # a baseline is as good as or better than the observer (markdown)
 WARN_TEXT = "!"    # the same in plain text
@@ -125,14 +130,27 @@ def _bold(x) -> str:
     return f"**{_fmt(x)}**"
 
 
+def _baseline_values(o: Mapping[str, Any], name: str, bases: list[str]) -> dict[str, Any]:
+    """{baseline: its value of the statistic the summary compares (RMS after settle)} for ``name``."""
+    bl = o.get("baselines") or {}
+    stat = ((bl.get("summary") or {}).get(name) or {}).get("statistic", "rms_after_settle")
+    return {b: ((bl.get(b) or {}).get(name) or {}).get(stat) for b in bases}
+
+
+def _observer_cell(o: Mapping[str, Any], name: str, value, bases: list[str]):
+    """The observer's own value, bold when it is the lowest of its row (ties included)."""
+    if value is None or not bases:
+        return value
+    others = [v for v in _baseline_values(o, name, bases).values() if v is not None]
+    return _bold(value) if others and all(value <= v for v in others) else value
+
+
 def _baseline_cells(o: Mapping[str, Any], name: str, observer_value, bases: list[str]) -> list[Any]:
     """Cells appended to an estimate's (or interval's) markdown row: per baseline its RMS after
     settle (bold when it is the lowest of the row, the observer's included), observer ÷ best
     baseline, and the verdict."""
-    bl = o.get("baselines") or {}
-    summ = (bl.get("summary") or {}).get(name)
-    stat = (summ or {}).get("statistic", "rms_after_settle")
-    vals = {b: ((bl.get(b) or {}).get(name) or {}).get(stat) for b in bases}
+    summ = ((o.get("baselines") or {}).get("summary") or {}).get(name)
+    vals = _baseline_values(o, name, bases)
     cand = [v for v in (observer_value, *vals.values()) if v is not None]
     best = min(cand) if cand else None
     good, missing = _as_good(summ), (summ or {}).get("not_computed") or {}
@@ -232,13 +250,14 @@ def _nothing_scored(metrics: Mapping[str, Any]) -> str:
 
 
 def replay_markdown(metrics: Mapping[str, Any]) -> str:
-    """Markdown of a replay's metrics: the header line and the per-segment table."""
+    """Markdown of a replay's metrics: the header line and the per-segment table (angles in deg)."""
+    metrics = display_units(metrics)
     parts = [_replay_head(metrics) + ".\n"]
     if metrics.get("nothing_scored"):
         parts.append(_nothing_scored(metrics) + "\n")
     else:
         header, rows = replay_rows(metrics, mark="md")
-        parts.append("Scores (estimate − recorded truth, SI units; baselines on the same recorded signals, the "
+        parts.append(f"Scores (estimate − recorded truth, {UNITS_NOTE}; baselines on the same recorded signals, the "
                      f"lowest RMS error in bold, {WARN_MD} where a baseline is as good as or better than the "
                      "observer):\n\n" + _table(header, rows))
         parts += [f"- {line}" for line in _not_computed_notes(metrics)]
@@ -250,6 +269,7 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
     metrics (``kind == "replay"``) as :func:`replay_markdown`."""
     if metrics.get("kind") == "replay":
         return replay_markdown(metrics)
+    metrics = display_units(metrics)
     obs = metrics.get("observers", {})
     parts = []
     head = []
@@ -265,7 +285,7 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
         summ = (o.get("baselines") or {}).get("summary") or {}
         for name, e in o.get("estimates", {}).items():
             row = [lab, name, e.get("truth"), e.get("unit"), e.get("rms"), e.get("max_abs"),
-                   e.get("rms_after_settle"), e.get("max_abs_after_settle")]
+                   _observer_cell(o, name, e.get("rms_after_settle"), bases), e.get("max_abs_after_settle")]
             if bases:
                 row += _baseline_cells(o, name, (summ.get(name) or {}).get("observer_rms"), bases)
             est_rows.append(row)
@@ -274,7 +294,7 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
                    e.get("enclosure_violations_after_settle"), e.get("mean_width"), e.get("max_violation")]
             if bases:
                 mid = (summ.get(name) or {}).get("observer_rms")
-                row += [mid, *_baseline_cells(o, name, mid, bases)]
+                row += [_observer_cell(o, name, mid, bases), *_baseline_cells(o, name, mid, bases)]
             int_rows.append(row)
         occ = o.get("mode_occupancy")
         occ_s = ", ".join(f"{m}: {v:.0%}" for m, v in occ.items()) if occ else None
@@ -287,7 +307,7 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
             f" model): the lowest RMS after settle in bold, {WARN_MD} where a baseline is as good as or better "
             "than the observer." if bases else "")
     if est_rows:
-        parts.append("Estimation errors (estimate − truth, SI units)." + note + "\n\n" + _table(
+        parts.append(f"Estimation errors (estimate − truth, {UNITS_NOTE})." + note + "\n\n" + _table(
             ["observer", "estimate", "truth", "unit", "RMS", "max abs", "RMS after settle", "max abs after settle",
              *bcols], est_rows))
     if int_rows:
@@ -315,10 +335,95 @@ def _as_section(s) -> ReportSection | str:
 
 
 def _rel(path, report_dir: Path) -> str:
-    p = Path(path)
-    if not p.is_absolute():
-        p = report_dir / p
-    return Path(os.path.relpath(p, report_dir)).as_posix()
+    """The link to file ``path`` (absolute or relative to the working directory, as every path)
+    from a markdown file in ``report_dir``; ValueError when there is no such file."""
+    p = Path(os.path.abspath(path))
+    if not p.is_file():
+        raise ValueError(f"report image {path}: no such file")
+    return Path(os.path.relpath(p, os.path.abspath(report_dir))).as_posix()
+
+
+#: unit of an angle (rate) in the report, and the factor from the SI unit
+DISPLAY_UNITS = {"rad": ("deg", 180.0 / math.pi), "rad/s": ("deg/s", 180.0 / math.pi),
+                 "rad/s2": ("deg/s2", 180.0 / math.pi)}
+#: metric keys (at any depth of an estimate's or interval's entry) that carry the signal's unit;
+#: the others (counts, rates, ratios, fractions) are dimensionless
+UNIT_KEYS = frozenset({"rms", "max_abs", "rms_after_settle", "max_abs_after_settle", "mean_error",
+                       "mean_error_after_settle", "mean_width", "mean_width_after_settle", "max_violation",
+                       "observer_rms", "best_baseline_rms", "truth_rms_after_settle"})
+
+
+def _scaled(x: Any, k: float, key: str | None = None) -> Any:
+    if isinstance(x, Mapping):
+        return {kk: (_scaled(v, k, kk) if isinstance(v, Mapping) or kk in UNIT_KEYS else v) for kk, v in x.items()}
+    if key in UNIT_KEYS and isinstance(x, (int, float)) and not isinstance(x, bool):
+        return x * k
+    return x
+
+
+def display_units(metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of ``metrics`` (validate's or replay's) with every angle in degrees and every angular
+    rate in deg/s (:data:`DISPLAY_UNITS`): the values under :data:`UNIT_KEYS` of each estimate and
+    interval whose unit is one of them, of its baselines and of its baseline summary, and its
+    ``unit``. Idempotent (a converted entry's unit is no longer rad)."""
+    out = dict(metrics)
+    obs = {}
+    for lab, o in metrics.get("observers", {}).items():
+        o = dict(o)
+        factors = {}
+        for group in ("estimates", "intervals"):
+            entries = {}
+            for name, e in (o.get(group) or {}).items():
+                du = DISPLAY_UNITS.get(e.get("unit")) if isinstance(e, Mapping) else None
+                if du:
+                    factors[name] = du[1]
+                    e = {**_scaled(e, du[1]), "unit": du[0]}
+                entries[name] = e
+            if group in o:
+                o[group] = entries
+        bl = o.get("baselines")
+        if isinstance(bl, Mapping) and factors:
+            bl = dict(bl)
+            for b, per in bl.items():
+                if b == "summary" or not isinstance(per, Mapping):
+                    continue
+                bl[b] = {n: (_scaled(v, factors[n]) if n in factors and isinstance(v, Mapping) else v)
+                         for n, v in per.items()}
+            summ = bl.get("summary")
+            if isinstance(summ, Mapping):
+                bl["summary"] = {n: ({**_scaled(v, factors[n]),
+                                      "baselines": {b: (None if x is None else x * factors[n])
+                                                    for b, x in (v.get("baselines") or {}).items()}}
+                                     if n in factors and isinstance(v, Mapping) else v) for n, v in summ.items()}
+            o["baselines"] = bl
+        obs[lab] = o
+    out["observers"] = obs
+    return out
+
+
+def worst_bound(o: Mapping[str, Any], key=lambda e: e.get("enclosure_violations")) -> tuple[int, list[str]] | None:
+    """(samples, [bounds]) of an observer's most violated interval(s): a violation count that never
+    adds up bounds of one quantity seen through another (beta = atan(vy / vx) is violated exactly
+    when vy is: 234 + 234 is one event, not 468). None when it has no interval."""
+    counts = {n: key(e) or 0 for n, e in (o.get("intervals") or {}).items()}
+    if not counts:
+        return None
+    n = max(counts.values())
+    return n, [k for k, v in counts.items() if v == n]
+
+
+def anchor(title: str, taken: dict[str, int] | None = None) -> str:
+    """The anchor of a markdown heading (GitHub's rule: lower case, punctuation dropped, spaces to
+    hyphens; the second heading of one anchor gets "-1", the next "-2"). ``taken`` counts the
+    anchors seen so far and is updated."""
+    import re
+
+    a = re.sub(r"[^\w\- ]", "", title.strip().lower(), flags=re.UNICODE).replace(" ", "-")
+    if taken is None:
+        return a
+    n = taken.get(a, 0)
+    taken[a] = n + 1
+    return a if n == 0 else f"{a}-{n}"
 
 
 def section_from_dir(scenario_dir: str | os.PathLike, title: str | None = None, markdown: str = "") -> ReportSection:
@@ -333,58 +438,93 @@ def section_from_dir(scenario_dir: str | os.PathLike, title: str | None = None, 
                          images=pngs, markdown=markdown)
 
 
+def _headline_estimate(o: Mapping[str, Any]) -> str | None:
+    """The estimate an overview line shows: beta_hat, else an interval beta, else the first scored."""
+    summ, est = (o.get("baselines") or {}).get("summary") or {}, o.get("estimates") or {}
+    for n in ("beta_hat", "beta"):
+        if n in summ or n in est:
+            return n
+    return next(iter([*est, *summ]), None)
+
+
+def overview_rows(sections: Iterable) -> tuple[list[str], list[list[Any]]]:
+    """(header, rows) of the overview: per section with metrics and per observer, its headline
+    estimate (:func:`_headline_estimate`), the observer's RMS error and the best baseline's on the
+    same statistic (the summary's: after settle, a replay's held-out part), the most violated
+    bound (:func:`worst_bound`) and paper 000's eq. (26) ratio. Angles in degrees."""
+    header = ["run", "observer", "estimate", "observer RMS", "best baseline RMS", "violations (bound)",
+              "‖β−β̂‖₂/‖φr‖₂"]
+    rows = []
+    for s in (_as_section(x) for x in sections):
+        if not (isinstance(s, ReportSection) and s.metrics):
+            continue
+        m = display_units(s.metrics)
+        replay = m.get("kind") == "replay"
+        for lab, o in m.get("observers", {}).items():
+            name = _headline_estimate(o)
+            entry = (o.get("estimates") or {}).get(name) or (o.get("intervals") or {}).get(name) or {}
+            unit = entry.get("unit") or ""
+            summ = ((o.get("baselines") or {}).get("summary") or {}).get(name) or {}
+            own = summ.get("observer_rms")
+            if own is None:          # no baseline summary: the estimate's own figure
+                own = ((entry.get("after_split") or entry.get("all") or {}).get("rms") if replay
+                       else entry.get("rms_after_settle"))
+            best = None
+            if summ.get("best_baseline") is not None:
+                best = (f"{WARN_MD + ' ' if _as_good(summ) else ''}"
+                        f"{_baseline_title(summ['best_baseline'])}: {_fmt(summ.get('best_baseline_rms'))} {unit}")
+            if summ.get("not_computed") and not _as_good(summ):   # no verdict when a baseline is missing
+                best = (f"{best}; " if best else "") + _verdict(summ, WARN_MD)
+            worst = worst_bound(o, (lambda e: (e.get("all") or {}).get("enclosure_violations")) if replay
+                                else (lambda e: e.get("enclosure_violations")))
+            rows.append([s.title, lab, (name or "—") + (" (midpoint)" if name in (o.get("intervals") or {}) else ""),
+                         None if own is None else f"{_fmt(own)} {unit}".strip(), best,
+                         None if worst is None else (f"{worst[0]} ({', '.join(worst[1])})" if worst[0] else 0),
+                         o.get("beta_error_to_bank_l2_ratio")])
+    return header, rows
+
+
 def render(report_dir: str | os.PathLike, sections: Iterable, title: str = "latobs validation report",
            intro: str = "") -> str:
+    """The report's markdown: title, intro, a table of contents, the overview (one row per section
+    with metrics and observer), then each section (its markdown, tables, figures). Plain-string
+    sections are copied as they are (their headings enter the contents)."""
+    import re
+
     report_dir = Path(report_dir)
+    secs = [_as_section(s) for s in sections]
+    header, rows = overview_rows(secs)
+    body = []
+    if rows:
+        body.append("## Overview\n\nOne row per run and observer: its headline estimate (β when it estimates β, "
+                    "else its first) beside the best baseline on the same signals, after the settle time (a replay: "
+                    f"its held-out part when split); {WARN_MD}: a baseline as good as the observer or better. "
+                    "Violations: samples outside the most violated bound (β = atan(vy/vx) is violated exactly when "
+                    "vy is: one event, counted once).\n\n" + _table(header, rows))
+    for s in secs:
+        if isinstance(s, str):
+            body.append(s.rstrip() + "\n")
+            continue
+        body.append(f"## {s.title}\n")
+        if s.markdown:
+            body.append(s.markdown.rstrip() + "\n")
+        if s.metrics:
+            body.append(metrics_markdown(s.metrics))
+        for img in s.images:
+            body.append(f"![{Path(img).stem}]({_rel(img, report_dir)})\n")
+    taken: dict[str, int] = {anchor(title): 1, "contents": 1}   # the headings above the sections
+    toc = []
+    for block in body:
+        for line in block.splitlines():
+            h = re.match(r"(#{2,3}) (.+)$", line)
+            if h:
+                toc.append(f"{'  ' * (len(h.group(1)) - 2)}- [{h.group(2)}](#{anchor(h.group(2), taken)})")
     out = [f"# {title}\n"]
     if intro:
         out.append(intro.rstrip() + "\n")
-    secs = [_as_section(s) for s in sections]
-    # overview: one row per (scenario, observer)
-    rows = []
-    for s in secs:
-        if isinstance(s, ReportSection) and s.metrics:
-            replay = s.metrics.get("kind") == "replay"
-            for lab, o in s.metrics.get("observers", {}).items():
-                est = o.get("estimates", {})
-                beta = est.get("beta_hat", {})
-                bsum = ((o.get("baselines") or {}).get("summary") or {})
-                bsum = bsum.get("beta_hat") or bsum.get("beta")       # an estimate, else an interval's midpoint
-                best = None
-                if bsum and bsum.get("best_baseline") is not None:
-                    best = (f"{WARN_MD + ' ' if _as_good(bsum) else ''}"
-                            f"{_baseline_title(bsum['best_baseline'])}: {_fmt(bsum.get('best_baseline_rms'))}")
-                if bsum and bsum.get("not_computed") and not _as_good(bsum):
-                    best = (f"{best}; " if best else "") + _verdict(bsum, WARN_MD)
-                if replay:  # the held-out part when there is one, else the whole record
-                    seg = "after_split" if s.metrics.get("split_s") is not None else "all"
-                    viol = sum((v.get("all") or {}).get("enclosure_violations") or 0
-                               for v in o.get("intervals", {}).values()) if o.get("intervals") else None
-                    rows.append([s.title, lab, (beta.get(seg) or {}).get("rms"), None, viol, len(est), best])
-                    continue
-                viol = sum(v.get("enclosure_violations") or 0 for v in o.get("intervals", {}).values()) \
-                    if o.get("intervals") else None
-                rows.append([s.title, lab, beta.get("rms_after_settle"), o.get("beta_error_to_bank_l2_ratio"), viol,
-                             len(est), best])
-    if rows:
-        out.append("## Overview\n\n" + _table(
-            ["scenario", "observer", "β̂ RMS after settle (replay: held-out part) [rad]", "‖β−β̂‖₂/‖φr‖₂", "enclosure violations",
-             "scored estimates",
-             f"β: best baseline RMS, same statistic [rad] ({WARN_MD}: as good as the observer or better)"],
-            rows))
-    for s in secs:
-        if isinstance(s, str):
-            out.append(s.rstrip() + "\n")
-            continue
-        out.append(f"## {s.title}\n")
-        if s.markdown:
-            out.append(s.markdown.rstrip() + "\n")
-        if s.metrics:
-            out.append(metrics_markdown(s.metrics))
-        for img in s.images:
-            rel = _rel(img, report_dir)
-            out.append(f"![{Path(img).stem}]({rel})\n")
-    return "\n".join(out)
+    if toc:
+        out.append("## Contents\n\n" + "\n".join(toc) + "\n")
+    return "\n".join(out + body)
 
 
 def write_index(report_dir: str | os.PathLike, sections: Iterable, title: str = "latobs validation report",
