@@ -190,26 +190,35 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     assert_same(a, {k: np.nan_to_num(v) for k, v in b.items()}, "asymmetric box")
 
 
-def test_refused_step_keeps_the_state(fmus):
-    """A step the C model cannot compute (here: more enclosure substeps than it allows, where the
-    Python runtime would loop for minutes) is an fmi2Error with the state unchanged."""
+@pytest.mark.parametrize("h", [1e7, "above"])
+def test_refused_step_keeps_the_state(fmus, h):
+    """A step longer than the runtime's max_step() (the longest at which the design's bounds
+    contract; here 1e7 s, and the next double above max_step) is an error in both FMUs (fmi2Error
+    from the C model, fmi2Discard from pythonfmu), logged with the limit, with the state unchanged;
+    max_step() itself is accepted by both and gives the same outputs."""
     u = {"delta": 0.01, "vx": 15.0, "yaw_rate": 0.02, "ay": 0.3}
-    runs = []
-    for refuse in (False, True):
-        f = FmuInstance("I", fmus["c"])
-        try:
-            f.start(u)
-            f.set_inputs(u)
-            f.slave.doStep(0.0, 0.005)
-            if refuse:
-                with pytest.raises(Exception):
-                    f.slave.doStep(0.005, 1e7)
-                assert "enclosure substeps" in f.logs[-1]
-            f.slave.doStep(0.005, 0.005)
-            runs.append(f.get_outputs())
-        finally:
-            f.close()
-    assert runs[0] == runs[1]
+    hmax = IntervalObserver(fmus["design"]).max_step()
+    h = np.nextafter(hmax, np.inf) if h == "above" else h
+    outs = {}
+    for backend in ("c", "py"):
+        runs = []
+        for refuse in (False, True):
+            f = FmuInstance("I", fmus[backend])
+            try:
+                f.start(u)
+                f.set_inputs(u)
+                f.slave.doStep(0.0, 0.005)
+                if refuse:
+                    with pytest.raises(Exception):
+                        f.slave.doStep(0.005, h)
+                    assert f"refused: longer than {hmax:g} s" in " ".join(f.logs[-2:]), f.logs[-2:]
+                f.slave.doStep(0.005, hmax)
+                runs.append(f.get_outputs())
+            finally:
+                f.close()
+        assert runs[0] == runs[1], backend
+        outs[backend] = runs[0]
+    assert_same({k: [v] for k, v in outs["py"].items()}, {k: [v] for k, v in outs["c"].items()}, "at max_step")
 
 
 # ------------------------------------------------------------------ model exchange (eq. 23)
