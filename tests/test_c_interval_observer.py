@@ -114,11 +114,12 @@ def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):
     three bands, above the grid, reversing (-5 m/s; -100 m/s, where the a priori enclosure fails;
     -1e5 m/s, where the bounds become non-finite), frozen again, resumed; measurements of the
     nominal model (x' = (A0 + vx A1) x + vx B1 delta) with spikes (inconsistent); step sizes drawn
-    from 1 to 70 ms (substeps from 20 ms)."""
+    from 1 to 25 ms, at most the design's max_step() (substeps from 20 ms)."""
     rng = np.random.default_rng(seed)
     md = data["model"]
     A0, A1, B1 = (np.array(md[k], float) for k in ("A0", "A1", "B1"))
-    h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.03, 0.07], size=n, p=[0.55, 0.15, 0.12, 0.1, 0.05, 0.03])
+    h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.02, 0.025], size=n, p=[0.55, 0.15, 0.12, 0.1, 0.05, 0.03])
+    h = np.minimum(h, IntervalObserver(data).max_step())   # a longer step is refused
     t = np.concatenate([[0.0], np.cumsum(h)])[:n]
     vx = np.interp(t / t[-1], [0, 0.05, 0.3, 0.45, 0.6, 0.75, 0.85, 0.9, 1.0], [0, 0.5, 12, 15, 25, 80, 30, -5, 14])
     vx[1500:1530], vx[1530:1540] = -100.0, -1e5
