@@ -114,12 +114,12 @@ def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):
     three bands, above the grid, reversing (-5 m/s; -100 m/s, where the a priori enclosure fails;
     -1e5 m/s, where the bounds become non-finite), frozen again, resumed; measurements of the
     nominal model (x' = (A0 + vx A1) x + vx B1 delta) with spikes (inconsistent); step sizes drawn
-    from 1 to 25 ms, at most the design's max_step() (substeps from 20 ms)."""
+    from 1 to 25 ms, at most the design's max_communication_step() (substeps from 20 ms)."""
     rng = np.random.default_rng(seed)
     md = data["model"]
     A0, A1, B1 = (np.array(md[k], float) for k in ("A0", "A1", "B1"))
     h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.02, 0.025], size=n, p=[0.55, 0.15, 0.12, 0.1, 0.05, 0.03])
-    h = np.minimum(h, IntervalObserver(data).max_step())   # a longer step is refused
+    h = np.minimum(h, IntervalObserver(data).max_communication_step())   # a longer step is refused
     t = np.concatenate([[0.0], np.cumsum(h)])[:n]
     vx = np.interp(t / t[-1], [0, 0.05, 0.3, 0.45, 0.6, 0.75, 0.85, 0.9, 1.0], [0, 0.5, 12, 15, 25, 80, 30, -5, 14])
     vx[1500:1530], vx[1530:1540] = -100.0, -1e5
@@ -174,6 +174,7 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     md = data["model"]
     cf, cr = (0.85 * md["Cf"], 1.3 * md["Cf"]), (0.7 * md["Cr"], 1.1 * md["Cr"])
     data["stiffness_box"].update(Cf=list(cf), Cr=list(cr))
+    del data["runtime"]["max_communication_step"]       # the symmetric box's: decided again
     bounds = rm.stiffness_bounds(md, cf, cr)
     for key, value in zip(("dA_lower", "dA_upper", "dB1_lower", "dB1_upper"), bounds):
         md[key] = value.tolist()
@@ -193,12 +194,12 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
 
 @pytest.mark.parametrize("h", [1e7, "above"])
 def test_refused_step_keeps_the_state(fmus, h):
-    """A step longer than the runtime's max_step() (the longest at which the design's bounds
-    contract; here 1e7 s, and the next double above max_step) is an error in both FMUs (fmi2Error
+    """A step longer than the runtime's max_communication_step() (the longest at which the design's bounds
+    contract; here 1e7 s, and the next double above max_communication_step) is an error in both FMUs (fmi2Error
     from the C model, fmi2Discard from pythonfmu), logged with the limit, with the state unchanged;
-    max_step() itself is accepted by both and gives the same outputs."""
+    max_communication_step() itself is accepted by both and gives the same outputs."""
     u = {"delta": 0.01, "vx": 15.0, "yaw_rate": 0.02, "ay": 0.3}
-    hmax = IntervalObserver(fmus["design"]).max_step()
+    hmax = IntervalObserver(fmus["design"]).max_communication_step()
     h = np.nextafter(hmax, np.inf) if h == "above" else h
     outs = {}
     for backend in ("c", "py"):
@@ -219,7 +220,7 @@ def test_refused_step_keeps_the_state(fmus, h):
                 f.close()
         assert runs[0] == runs[1], backend
         outs[backend] = runs[0]
-    assert_same({k: [v] for k, v in outs["py"].items()}, {k: [v] for k, v in outs["c"].items()}, "at max_step")
+    assert_same({k: [v] for k, v in outs["py"].items()}, {k: [v] for k, v in outs["c"].items()}, "at max_communication_step")
 
 
 # ------------------------------------------------------------------ model exchange (eq. 23)

@@ -100,16 +100,16 @@ def step_rows(fmus):
 
 
 def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows, capsys):
-    """At every step up to max_step(): zero violations, the vy width after settling bounded and not
+    """At every step up to max_communication_step(): zero violations, the vy width after settling bounded and not
     growing (the last third of a run against the middle third); above it, every run refused at
     once with the limit named (before, 50 ms made the widths 1e30 m/s, silently)."""
     from latobs.fmu_src.interval_observer import IntervalObserver
     from latobs.synthesis import designs
 
     table, rows = step_rows
-    hmax = IntervalObserver(designs.run("LateralIntervalObserver")).max_step()
+    hmax = IntervalObserver(designs.run("LateralIntervalObserver")).max_communication_step()
     with capsys.disabled():
-        print(f"\n001 at every step (max_step {hmax:g} s): {table}")
+        print(f"\n001 at every step (max_communication_step {hmax:g} s): {table}")
     for h in STEPS:
         s = table[h]
         if h <= hmax:

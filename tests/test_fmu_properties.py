@@ -15,7 +15,7 @@ initialisation, set/step/get after terminate, fmi2Reset anywhere). Asserted:
   to the same run on a freshly instantiated FMU;
 * (not random) with constant realistic inputs, a 0.1 s communication step keeps the outputs within
   10 times those at 10 ms, or refuses the step (LateralIntervalObserver refuses steps longer
-  than its max_step(); an FMU that fails it goes in ``UNBOUNDED_AT_LONG_STEPS``, a strict xfail).
+  than its max_communication_step(); an FMU that fails it goes in ``UNBOUNDED_AT_LONG_STEPS``, a strict xfail).
 
 Each FMU runs in a worker process (``conformance_runs.py serve``, the FMU extracted once, one
 fresh instance per program): a crash kills the worker, never pytest, and is reported with the
