@@ -1184,17 +1184,20 @@ class IntervalObserver:
         the initial box (+-x0_halfwidth on vy and x4) at zero inputs (then the width map is
         positively homogeneous: its decay rate is the rate at which any initial error is forgotten,
         the signals only add constant terms), at every band edge (both sides) and grid speed, the
-        widths of vy and x4 must decay at >= ``MAX_COMM_STEP_DECAY`` (1/s) between MAX_COMM_STEP_PROBE/2 and
-        MAX_COMM_STEP_PROBE seconds. The decay rate falls with h (sedan, +-20 %: 5.5 /s at 1 ms, 2.3 /s
-        at 20 ms, < 0 from 30 ms at 10 m/s); the largest step on a ``MAX_COMM_STEP_RESOLUTION`` grid up
-        to ``MAX_COMM_STEP_CEILING`` that passes is found by bisection (0.0: none, every step refused).
-        The design stores it (runtime.max_communication_step, from the synthesis, which calls this); a design
-        file without it gets it computed here once per process (0.4 s for the sedan's 3 modes, 2 s
-        for 13). The native C model gets this value as a constant (IV_MAX_COMM_STEP, from the emitter)."""
+        widths of vy and x4 must decay at >= ``MAX_COMM_STEP_DECAY`` (1/s) between
+        MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE seconds. The decay rate falls with h (sedan,
+        +-20 %: 5.5 /s at 1 ms, 2.3 /s at 20 ms, < 0 from 30 ms at 10 m/s); the largest step on a
+        ``MAX_COMM_STEP_RESOLUTION`` grid up to ``MAX_COMM_STEP_CEILING`` that passes is found by
+        bisection (0.0: none, every step refused). This is a measured decay, not a proof.
+        The design stores it (runtime.max_communication_step, from the synthesis, which calls
+        this); a design file without it gets it computed here once per process (0.4 s for the
+        sedan's 3 modes, 2 s for 13). The native C model gets the same value as a constant
+        (IV_MAX_COMM_STEP, from the emitter)."""
         if self._max_comm_step is not None:
             return self._max_comm_step
         key = (self._key, self.ENCLOSURE_TRIES, self.ENCLOSURE_GROW, self.ENCLOSURE_MULT, self.SUBSTEP_RHO_H,
-               self.MAX_COMM_STEP_DECAY, self.MAX_COMM_STEP_PROBE, self.MAX_COMM_STEP_RESOLUTION, self.MAX_COMM_STEP_CEILING)
+               self.MAX_COMM_STEP_DECAY, self.MAX_COMM_STEP_PROBE, self.MAX_COMM_STEP_RESOLUTION,
+               self.MAX_COMM_STEP_CEILING)
         with _LOCK:
             hmax = _MAX_COMM_STEP.get(key)
             if hmax is None:
@@ -1285,7 +1288,7 @@ class IntervalObserver:
         self._advance(h, u)
 
     def _advance(self, h: float, u: dict) -> None:
-        """``step`` without the check of h against ``max_communication_step`` (the probes of ``max_communication_step``)."""
+        """``step`` without the check of h against ``max_communication_step`` (for its probes)."""
         if not self._started:
             self.initialize(u)
         vx, d = u["vx"], u["delta"]

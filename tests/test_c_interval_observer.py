@@ -194,8 +194,8 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
 
 @pytest.mark.parametrize("h", [1e7, "above"])
 def test_refused_step_keeps_the_state(fmus, h):
-    """A step longer than the runtime's max_communication_step() (the longest at which the design's bounds
-    contract; here 1e7 s, and the next double above max_communication_step) is an error in both FMUs (fmi2Error
+    """A step longer than the runtime's max_communication_step() (the longest at which the design's
+    bounds contract; here 1e7 s, and the next double above it) is an error in both FMUs (fmi2Error
     from the C model, fmi2Discard from pythonfmu), logged with the limit, with the state unchanged;
     max_communication_step() itself is accepted by both and gives the same outputs."""
     u = {"delta": 0.01, "vx": 15.0, "yaw_rate": 0.02, "ay": 0.3}
@@ -220,7 +220,8 @@ def test_refused_step_keeps_the_state(fmus, h):
                 f.close()
         assert runs[0] == runs[1], backend
         outs[backend] = runs[0]
-    assert_same({k: [v] for k, v in outs["py"].items()}, {k: [v] for k, v in outs["c"].items()}, "at max_communication_step")
+    assert_same({k: [v] for k, v in outs["py"].items()}, {k: [v] for k, v in outs["c"].items()},
+                "at max_communication_step")
 
 
 # ------------------------------------------------------------------ model exchange (eq. 23)

@@ -24,9 +24,9 @@ Python runtime's data:
                                  step the C model computes them by the same algorithm
 and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H), and
 
-    IV_MAX_COMM_STEP                  the longest communication step the design accepts (s), the runtime's
-                                 ``max_communication_step()`` (decided once, here, by running the runtime): a longer
-                                 step is refused by both
+    IV_MAX_COMM_STEP             the longest communication step the design accepts (s): the runtime's
+                                 ``max_communication_step()`` (runtime.max_communication_step, which
+                                 the synthesis decides by running the runtime); both refuse a longer one
 
 The C model implements the runtime's default bounds (``STIFFNESS = "structured"``, ``PRODUCT =
 "hull"``); the emitter refuses the others.
