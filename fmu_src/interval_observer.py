@@ -1188,7 +1188,9 @@ class IntervalObserver:
         MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE seconds. The decay rate falls with h (sedan,
         +-20 %: 5.5 /s at 1 ms, 2.3 /s at 20 ms, < 0 from 30 ms at 10 m/s); the largest step on a
         ``MAX_COMM_STEP_RESOLUTION`` grid up to ``MAX_COMM_STEP_CEILING`` that passes is found by
-        bisection (0.0: none, every step refused). This is a measured decay, not a proof.
+        bisection (0.0: none, every step refused). This is a measured decay, not a proof; it holds
+        inside the design grid: outside it (the nearest mode, a warning) the speed mismatch slows
+        the decay (sedan at 20 ms: 1.4 /s at 8 m/s, < 0 at 5 m/s).
         The design stores it (runtime.max_communication_step, from the synthesis, which calls
         this); a design file without it gets it computed here once per process (0.4 s for the
         sedan's 3 modes, 2 s for 13). The native C model gets the same value as a constant
