@@ -25,6 +25,11 @@ known to within s C F, and the large output-injection gains, |J| ~ 170 on the ya
 N ~ -7 I, turned that into a width feedback of ~1000 h /s: the bounds diverged at h = 5-10 ms
 near the band edges. With the delayed correction the vy width decays at 5.5 /s (h = 1 ms),
 5 /s (5 ms), 4 /s (10 ms), 2-3 /s (20 ms) in every band and just outside the grid.)
+The remainders of y between the samples still grow with the bounds' width, times h^2 |J|: above
+some step the decay of exp(N h) loses and the bounds diverge (sedan: from ~30 ms at 10 m/s; 1e30
+m/s at 50 ms). No substep can help there, since no measurement arrives inside a step, so a step
+longer than ``max_communication_step()`` (decided from the design, the same constant in the native C model) is
+refused with an error, the state kept.
 
 One call of ``step(h, u)``, u the inputs at t (held over [t, t + h]):
  1. measurement intersection: the published box of the measured states (x2, x3) at t is
@@ -773,6 +778,7 @@ def _source_correct(model, mode, h, maps, meas, product: str) -> str:
 # -- the per-process cache of compiled step maps --------------------------------------------------
 _LOCK = threading.RLock()
 _CACHE: dict = {}      # key -> compiled object, oldest first
+_MAX_COMM_STEP: dict = {}   # (design, tuning) -> IntervalObserver.max_communication_step
 
 
 def _cached(key, build, size: int):
@@ -829,6 +835,12 @@ class IntervalObserver:
     ENCLOSURE_MULT = 1.0             # .. times this per failed attempt (2.0: the former doubling)
     SUBSTEP_RHO_H = 0.3              # substeps so that hs * rho(|A|) <= this at the band's top speed
     CACHE_SIZE = 64                  # compiled (design, mode, h) maps kept per process
+    # the largest communication step (``max_communication_step``): the bounds must forget an initial error at
+    # least this fast (1/s) at every probed speed, probed over this long (s), at this resolution (s)
+    MAX_COMM_STEP_DECAY = 1.0
+    MAX_COMM_STEP_PROBE = 1.0
+    MAX_COMM_STEP_RESOLUTION = 1e-3
+    MAX_COMM_STEP_CEILING = 1.0           # s: the longest step probed
     PRODUCT = "hull"                 # [dA][x]: "hull" exact interval product, "eq21" the bound of eq. (21)
     # the stiffness part dA x + vx dB1 delta (of omega and of G): "structured" through the slip
     # angles (``_emit_structured``; needs the design file's stiffness_box and the relaxation model
@@ -846,6 +858,7 @@ class IntervalObserver:
         if not (math.isfinite(self.vx_hold) and self.vx_hold >= 0):
             raise ValueError(f"parameter vx_hold must be finite and >= 0 m/s, got {self.vx_hold}")
         self._key = repr((self.model, self.modes, self.edges, self.eta, self.PRODUCT, self.STIFFNESS))
+        self._data = data
         self._S = None
         self._G = _cached((self._key, "G"), lambda: _compile(_source_G(self.model, self.PRODUCT), "G"),
                           self.CACHE_SIZE)
@@ -923,6 +936,12 @@ class IntervalObserver:
         if any(v < 0 for v in self.nu + self.w0 + model["w"]):
             raise ValueError("design file: runtime.y_error_bound, runtime.x0_halfwidth and "
                              "runtime.disturbance_bound must be >= 0")
+        self._max_comm_step = rt.get("max_communication_step")   # the design's, else decided here
+        if self._max_comm_step is not None:
+            self._max_comm_step = float(self._max_comm_step)
+            if not (math.isfinite(self._max_comm_step) and self._max_comm_step >= 0):
+                raise ValueError("design file: runtime.max_communication_step must be finite and >= 0 s, got "
+                                 f"{rt['max_communication_step']!r}")
         eta = float(rt.get("eta", 0.0))
         if not (math.isfinite(eta) and eta >= 0):
             raise ValueError(f"design file: runtime.eta must be finite and >= 0, got {rt.get('eta')!r}")
@@ -1151,6 +1170,96 @@ class IntervalObserver:
         self._xi_mode = -1
         self._pending = None
 
+    # -- the longest communication step -----------------------------------------------------------
+    def max_communication_step(self) -> float:
+        """The longest communication step (s) this design accepts: ``step`` refuses a longer one.
+
+        The measurements arrive only at the communication points. Between two of them the
+        correction (``_source_correct``) bounds y(s) by the samples at both ends and a remainder
+        that grows with the bounds' own width (through the enclosure of the step), and the
+        output-injection gains J multiply it: the width feedback grows like h^2 |J| (ERRATA 001's
+        Theorem 1 remark: Omega grows with the width), and above some step it beats the decay of
+        exp(N h). Substeps cannot help there (no measurement arrives inside a step), so such steps
+        are refused. The bound is decided from the design itself, by running this runtime: from
+        the initial box (+-x0_halfwidth on vy and x4) at zero inputs (then the width map is
+        positively homogeneous: its decay rate is the rate at which any initial error is forgotten,
+        the signals only add constant terms), at every band edge (both sides) and grid speed, the
+        widths of vy and x4 must decay at >= ``MAX_COMM_STEP_DECAY`` (1/s) between
+        MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE seconds. The decay rate falls with h (sedan,
+        +-20 %: 5.5 /s at 1 ms, 2.3 /s at 20 ms, < 0 from 30 ms at 10 m/s); the largest step on a
+        ``MAX_COMM_STEP_RESOLUTION`` grid up to ``MAX_COMM_STEP_CEILING`` that passes is found by
+        bisection (0.0: none, every step refused). This is a measured decay, not a proof; it holds
+        inside the design grid: outside it (the nearest mode, a warning) the speed mismatch slows
+        the decay (sedan at 20 ms: 1.4 /s at 8 m/s, < 0 at 5 m/s).
+        The design stores it (runtime.max_communication_step, from the synthesis, which calls
+        this); a design file without it gets it computed here once per process (0.4 s for the
+        sedan's 3 modes, 2 s for 13). The native C model gets the same value as a constant
+        (IV_MAX_COMM_STEP, from the emitter)."""
+        if self._max_comm_step is not None:
+            return self._max_comm_step
+        key = (self._key, self.ENCLOSURE_TRIES, self.ENCLOSURE_GROW, self.ENCLOSURE_MULT, self.SUBSTEP_RHO_H,
+               self.MAX_COMM_STEP_DECAY, self.MAX_COMM_STEP_PROBE, self.MAX_COMM_STEP_RESOLUTION,
+               self.MAX_COMM_STEP_CEILING)
+        with _LOCK:
+            hmax = _MAX_COMM_STEP.get(key)
+            if hmax is None:
+                hmax = _MAX_COMM_STEP[key] = self._find_max_communication_step()
+        return hmax
+
+    def _probe_speeds(self) -> list[float]:
+        """Every grid speed and band edge, an interior edge from both sides (eq. 44's half-open bands)."""
+        e = self.edges
+        below = [math.nextafter(x, -math.inf) for x in e[1:-1]]
+        return sorted(set(e) | set(below) | {m["vx"] for m in self.modes if e[0] <= m["vx"] <= e[-1]})
+
+    def decay_rate(self, h: float, vx: float, probe: "IntervalObserver | None" = None) -> float:
+        """The rate (1/s) at which the widths of vy and x4 decay at step h and speed vx, zero inputs
+        (the slower of the two, between MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE; -inf if they do not
+        stay finite or the bounds restart). ``probe``: an instance of this design to run (reset)."""
+        if probe is None:
+            probe = type(self)(self._data, {"vx_hold": 0.0})
+        probe.events.clear()
+        probe._holding = probe._outside = probe._inconsistent = probe._fallback_episode = False
+        u = {"delta": 0.0, "vx": vx, "yaw_rate": 0.0, "ay": 0.0}
+        probe.initialize(u)
+        n = max(8, math.ceil(self.MAX_COMM_STEP_PROBE / h))
+        half = n // 2
+        rate = math.inf
+        for k in range(n):
+            probe._advance(h, u)
+            w = (probe.box[_N] - probe.box[0], probe.box[2 * _N - 1] - probe.box[_N - 1])
+            if k == half - 1:
+                w_half = w
+        if any(e[0] == "warning" for e in probe.events):
+            return -math.inf                 # a restart (non-finite bounds) or an inconsistency
+        for a, b in zip(w_half, w):
+            if not (math.isfinite(b) and a > 0.0):
+                return -math.inf
+            if b > 0.0:
+                rate = min(rate, math.log(a / b) / ((n - half) * h))
+        return rate
+
+    def _find_max_communication_step(self) -> float:
+        res = self.MAX_COMM_STEP_RESOLUTION
+        speeds = self._probe_speeds()
+        probe = type(self)(self._data, {"vx_hold": 0.0})
+
+        def ok(k: int) -> bool:
+            for i, v in enumerate(speeds):
+                if not self.decay_rate(k * res, v, probe) >= self.MAX_COMM_STEP_DECAY:
+                    speeds.insert(0, speeds.pop(i))       # the failing speed first next time
+                    return False
+            return True
+
+        lo, hi = 0, int(round(self.MAX_COMM_STEP_CEILING / res)) + 1
+        while hi - lo > 1:                   # the decay rate falls with h: bisection
+            mid = (lo + hi) // 2
+            if ok(mid):
+                lo = mid
+            else:
+                hi = mid
+        return round(lo * res, 12)
+
     def initialize(self, u: dict) -> None:
         """The bounds at the start: vy in +-x0_halfwidth[0], x4 in +-x0_halfwidth[3], the measured
         yaw rate and ay +-y_error_bound; the mode of the initial speed; outputs published."""
@@ -1172,6 +1281,16 @@ class IntervalObserver:
         this step waits for the measurement at t + h (the observer runs one step behind the
         published prediction, which is itself a guaranteed bound)."""
         h = float(h)          # a numpy float would print as np.float64(...) into the generated code
+        hmax = self.max_communication_step()
+        if not h <= hmax:     # refused before anything changes: the state is kept
+            raise ValueError(f"communication step {h:g} s refused: longer than {hmax:g} s, the longest step at "
+                             "which this design's bounds contract (the measurements arrive only at the "
+                             "communication points, so substeps cannot replace them); use a step <= "
+                             f"{hmax:g} s")
+        self._advance(h, u)
+
+    def _advance(self, h: float, u: dict) -> None:
+        """``step`` without the check of h against ``max_communication_step`` (for its probes)."""
         if not self._started:
             self.initialize(u)
         vx, d = u["vx"], u["delta"]

@@ -186,7 +186,7 @@ def to_design_dict(d: Design) -> dict:
     dA_lo, dA_hi, dB_lo, dB_hi = rm.stiffness_bounds(v, d.cf_box, d.cr_box)
     eta_shift = max(o.eta, max(float(-np.min(np.diag(m["N"]))) for m in d.modes))
     alpha = 1.0
-    return {
+    data = {
         "schema": "latobs.design/1",
         "name": o.name,
         "paper": "001",
@@ -223,3 +223,8 @@ def to_design_dict(d: Design) -> dict:
             "certificate adds the small-gain check of the width dynamics that Theorem 1 omits.",
         ],
     }
+    # the longest communication step at which the bounds contract, decided by running the runtime
+    # itself (one source for both FMU backends; the FMUs then need not probe at their first step)
+    from ..fmu_src.interval_observer import IntervalObserver
+    data["runtime"]["max_communication_step"] = IntervalObserver(data).max_communication_step()
+    return data

@@ -114,11 +114,12 @@ def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):
     three bands, above the grid, reversing (-5 m/s; -100 m/s, where the a priori enclosure fails;
     -1e5 m/s, where the bounds become non-finite), frozen again, resumed; measurements of the
     nominal model (x' = (A0 + vx A1) x + vx B1 delta) with spikes (inconsistent); step sizes drawn
-    from 1 to 70 ms (substeps from 20 ms)."""
+    from 1 to 25 ms, at most the design's max_communication_step() (substeps from 20 ms)."""
     rng = np.random.default_rng(seed)
     md = data["model"]
     A0, A1, B1 = (np.array(md[k], float) for k in ("A0", "A1", "B1"))
-    h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.03, 0.07], size=n, p=[0.55, 0.15, 0.12, 0.1, 0.05, 0.03])
+    h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.02, 0.025], size=n, p=[0.55, 0.15, 0.12, 0.1, 0.05, 0.03])
+    h = np.minimum(h, IntervalObserver(data).max_communication_step())   # a longer step is refused
     t = np.concatenate([[0.0], np.cumsum(h)])[:n]
     vx = np.interp(t / t[-1], [0, 0.05, 0.3, 0.45, 0.6, 0.75, 0.85, 0.9, 1.0], [0, 0.5, 12, 15, 25, 80, 30, -5, 14])
     vx[1500:1530], vx[1530:1540] = -100.0, -1e5
@@ -173,6 +174,7 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     md = data["model"]
     cf, cr = (0.85 * md["Cf"], 1.3 * md["Cf"]), (0.7 * md["Cr"], 1.1 * md["Cr"])
     data["stiffness_box"].update(Cf=list(cf), Cr=list(cr))
+    del data["runtime"]["max_communication_step"]       # the symmetric box's: decided again
     bounds = rm.stiffness_bounds(md, cf, cr)
     for key, value in zip(("dA_lower", "dA_upper", "dB1_lower", "dB1_upper"), bounds):
         md[key] = value.tolist()
@@ -190,26 +192,36 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     assert_same(a, {k: np.nan_to_num(v) for k, v in b.items()}, "asymmetric box")
 
 
-def test_refused_step_keeps_the_state(fmus):
-    """A step the C model cannot compute (here: more enclosure substeps than it allows, where the
-    Python runtime would loop for minutes) is an fmi2Error with the state unchanged."""
+@pytest.mark.parametrize("h", [1e7, "above"])
+def test_refused_step_keeps_the_state(fmus, h):
+    """A step longer than the runtime's max_communication_step() (the longest at which the design's
+    bounds contract; here 1e7 s, and the next double above it) is an error in both FMUs (fmi2Error
+    from the C model, fmi2Discard from pythonfmu), logged with the limit, with the state unchanged;
+    max_communication_step() itself is accepted by both and gives the same outputs."""
     u = {"delta": 0.01, "vx": 15.0, "yaw_rate": 0.02, "ay": 0.3}
-    runs = []
-    for refuse in (False, True):
-        f = FmuInstance("I", fmus["c"])
-        try:
-            f.start(u)
-            f.set_inputs(u)
-            f.slave.doStep(0.0, 0.005)
-            if refuse:
-                with pytest.raises(Exception):
-                    f.slave.doStep(0.005, 1e7)
-                assert "enclosure substeps" in f.logs[-1]
-            f.slave.doStep(0.005, 0.005)
-            runs.append(f.get_outputs())
-        finally:
-            f.close()
-    assert runs[0] == runs[1]
+    hmax = IntervalObserver(fmus["design"]).max_communication_step()
+    h = np.nextafter(hmax, np.inf) if h == "above" else h
+    outs = {}
+    for backend in ("c", "py"):
+        runs = []
+        for refuse in (False, True):
+            f = FmuInstance("I", fmus[backend])
+            try:
+                f.start(u)
+                f.set_inputs(u)
+                f.slave.doStep(0.0, 0.005)
+                if refuse:
+                    with pytest.raises(Exception):
+                        f.slave.doStep(0.005, h)
+                    assert f"refused: longer than {hmax:g} s" in " ".join(f.logs[-2:]), f.logs[-2:]
+                f.slave.doStep(0.005, hmax)
+                runs.append(f.get_outputs())
+            finally:
+                f.close()
+        assert runs[0] == runs[1], backend
+        outs[backend] = runs[0]
+    assert_same({k: [v] for k, v in outs["py"].items()}, {k: [v] for k, v in outs["c"].items()},
+                "at max_communication_step")
 
 
 # ------------------------------------------------------------------ model exchange (eq. 23)

@@ -85,3 +85,43 @@ def test_zero_enclosure_violations_over_200_randomised_cosimulations(fmus, capsy
 def test_a_model_error_bound_covers_the_rolling_car(fmus, capsys):
     rows = campaign(fmus["plant"], fmus["observer_robust"], 50, fmus["box"])
     _check(rows, f"CarPlant with linear tires and roll, model_error_bound {ROLL_ERROR_BOUND}", fmus["box"], capsys)
+
+
+STEPS = (0.005, 0.02, 0.05, 0.1, 0.2)
+
+
+@pytest.fixture(scope="module")
+def step_rows(fmus):
+    """5 plants of the campaign (the first seeds, their stiffness scales) x the 5 steps, 20 s."""
+    from enclosure_runs import step_table
+
+    table, rows = step_table(str(fmus["plant_rigid"]), str(fmus["observer"]), 5, fmus["box"], list(STEPS), 20.0)
+    return table, rows
+
+
+def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows, capsys):
+    """At every step up to max_communication_step(): zero violations, the vy width after settling bounded and not
+    growing (the last third of a run against the middle third); above it, every run refused at
+    once with the limit named (before, 50 ms made the widths 1e30 m/s, silently)."""
+    from latobs.fmu_src.interval_observer import IntervalObserver
+    from latobs.synthesis import designs
+
+    table, rows = step_rows
+    hmax = IntervalObserver(designs.run("LateralIntervalObserver")).max_communication_step()
+    with capsys.disabled():
+        print(f"\n001 at every step (max_communication_step {hmax:g} s): {table}")
+    for h in STEPS:
+        s = table[h]
+        if h <= hmax:
+            assert s["refused"] == 0 and s["violations"] == 0, (h, s)
+            assert s["vy_width_max"] < 1.0 and s["growth"] < 1.5, (h, s)
+        else:
+            assert s["refused"] == s["runs"] == 5, (h, s)
+            assert all(f"refused: longer than {hmax:g} s" in r["refused"] for r in rows if r["h"] == h)
+
+
+@pytest.mark.xfail(strict=True, reason="not reached: at 20 ms the mean vy width is ~2.3 times the 5 ms one (the "
+                                       "remainders of y between the samples, bounded through the width itself)")
+def test_vy_width_at_20_ms_within_25_percent_of_5_ms(step_rows):
+    table, _ = step_rows
+    assert table[0.02]["vy_width_mean"] <= 1.25 * table[0.005]["vy_width_mean"], table

@@ -14,8 +14,8 @@ initialisation, set/step/get after terminate, fmi2Reset anywhere). Asserted:
 * after fmi2Reset, anywhere in a program, a run is bit-identical (every status and every output)
   to the same run on a freshly instantiated FMU;
 * (not random) with constant realistic inputs, a 0.1 s communication step keeps the outputs within
-  10 times those at 10 ms: LateralIntervalObserver fails it (a strict xfail, see
-  ``UNBOUNDED_AT_LONG_STEPS``).
+  10 times those at 10 ms, or refuses the step (LateralIntervalObserver refuses steps longer
+  than its max_communication_step(); an FMU that fails it goes in ``UNBOUNDED_AT_LONG_STEPS``, a strict xfail).
 
 Each FMU runs in a worker process (``conformance_runs.py serve``, the FMU extracted once, one
 fresh instance per program): a crash kills the worker, never pytest, and is reported with the
@@ -251,11 +251,7 @@ STEADY = {"delta": 0.02, "vx": 15.0, "yaw_rate": 0.1, "ay": 1.0, "roll_angle": 0
           "bank_angle": 0.0, "steer_angle": 0.01, "rider_torque": 5.0, "stiffness_scale_f": 1.0,
           "stiffness_scale_r": 1.0}
 #: FMUs known to fail the test below (issue 10, item 6): a strict xfail flips when they are fixed
-UNBOUNDED_AT_LONG_STEPS = {
-    "LateralIntervalObserver": "its bounds diverge exponentially at communication steps >= ~40 ms (vy width "
-                               "1e34 m/s after 20 s at 50 ms, 1e101 at 100 ms), with status OK, consistent = 1 "
-                               "and no warning; the runtime only restarts them when they overflow",
-}
+UNBOUNDED_AT_LONG_STEPS: dict[str, str] = {}
 
 
 def _steady_run(w: Worker, h: float, duration: float) -> dict:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import time
 
 import numpy as np
@@ -659,9 +660,10 @@ def test_never_raises_for_finite_inputs(design):
     obs = IntervalObserver(design, {})
     rng = np.random.default_rng(3)
     obs.initialize(_u())
+    steps = [0.001, 0.005, 0.02, obs.max_communication_step()]      # a longer step is refused
     for k in range(300):
         vals = rng.normal(0, 1, 4) * np.array([1.0, 40.0, 2.0, 30.0]) * (10.0 if k % 50 == 0 else 1.0)
-        obs.step([0.001, 0.005, 0.02, 0.1][k % 4], _u(vx=vals[1], delta=vals[0], r=vals[2], ay=vals[3]))
+        obs.step(steps[k % 4], _u(vx=vals[1], delta=vals[0], r=vals[2], ay=vals[3]))
         obs.events.clear()
         assert all(math.isfinite(obs.y[k2]) for k2 in io.OUTPUT_NAMES)
         assert obs.y["mode"] in (1, 2, 3) and obs.y["consistent"] in (0, 1)
@@ -675,6 +677,74 @@ def test_long_steps_use_substeps_for_the_enclosure_and_still_enclose(design):
     assert obs._core(2, 0.02).nsub >= 2
     viol, w = _check_enclosure(rows, v)
     assert viol == []
+
+
+# ------------------------------------------------------------------------------------------
+# the longest communication step
+# ------------------------------------------------------------------------------------------
+def _state(obs):
+    return copy.deepcopy((obs.box, obs.y, obs._xi, obs._xi_mode, obs._vx, obs.mode, obs._started, obs._holding,
+                          [p for p in (obs._pending or ()) if not isinstance(p, io._Core)]))
+
+
+@pytest.mark.parametrize("h", [0.05, 0.1, 0.2, 1.0, 1e300])
+def test_a_step_longer_than_max_communication_step_is_refused_with_the_state_kept(design, h):
+    """Constant steady-turn inputs (15 m/s): before, a 50 ms step made the vy width 1e30 m/s within
+    10 s (1e98 at 100 ms) with consistent = 1 and no message. Now a step longer than
+    max_communication_step() raises ValueError naming both steps, nothing changes, and the next
+    accepted step gives what it gives without the refused call."""
+    u = _u(vx=15.0, delta=0.02, r=0.1, ay=1.0)
+    runs = []
+    for refuse in (False, True):
+        obs = IntervalObserver(design, {})
+        obs.initialize(u)
+        for _ in range(20):
+            obs.step(0.005, u)
+        if refuse:
+            before = _state(obs)
+            with pytest.raises(ValueError, match=re.escape(f"communication step {h:g} s refused: longer than "
+                                                 f"{obs.max_communication_step():g} s")):
+                obs.step(h, u)
+            assert _state(obs) == before and not obs.events
+        obs.step(0.005, u)
+        runs.append(dict(obs.y))
+    assert runs[0] == runs[1]
+
+
+def test_max_communication_step_is_where_the_bounds_stop_contracting(design):
+    """max_communication_step(): at every probed speed the widths of vy and x4 decay at >=
+    MAX_COMM_STEP_DECAY (1/s) at that step, not at the next step of the grid; at 50 ms they grow
+    (the divergence it refuses). The design file's value is the runtime's own (decided again from
+    a design file without it)."""
+    obs = IntervalObserver(design, {})
+    hmax, res = obs.max_communication_step(), obs.MAX_COMM_STEP_RESOLUTION
+    assert hmax == design["runtime"]["max_communication_step"] and 0.005 < hmax < 0.05
+    speeds = obs._probe_speeds()
+    assert len(speeds) == 3 + 4 + 2                      # grid speeds, edges, interior edges from below
+    assert all(obs.decay_rate(hmax, v) >= obs.MAX_COMM_STEP_DECAY for v in speeds)
+    assert min(obs.decay_rate(hmax + res, v) for v in speeds) < obs.MAX_COMM_STEP_DECAY
+    assert min(obs.decay_rate(0.05, v) for v in speeds) < 0.0
+    assert obs.decay_rate(0.005, 15.0) > 4.0              # ~5 /s at the default step
+    bare = copy.deepcopy(design)
+    del bare["runtime"]["max_communication_step"]
+    assert IntervalObserver(bare, {}).max_communication_step() == hmax
+    bare["runtime"]["max_communication_step"] = -1.0
+    with pytest.raises(ValueError, match="runtime.max_communication_step must be finite and >= 0"):
+        IntervalObserver(bare, {})
+
+
+def test_bounds_enclose_and_stay_bounded_at_max_communication_step(design):
+    """The run of ``test_bounds_enclose_the_exact_linear_model`` at the longest accepted step."""
+    obs = IntervalObserver(design, {})
+    h = obs.max_communication_step()
+    rng = np.random.default_rng(6)
+    cf, cr = rng.uniform(*design["stiffness_box"]["Cf"]), rng.uniform(*design["stiffness_box"]["Cr"])
+    rows, v = _simulate(design, h, 12.0, lambda t: (cf, cr), [0.5, 0.02, 0.3, 2.0], seed=6)
+    viol, w = _check_enclosure(rows, v)
+    assert viol == [], viol[:5]
+    late = w[len(w) // 3:]
+    assert np.max(late[:, 0]) < 1.0                      # vy width (m/s) after the transient
+    assert np.mean(w[-len(w) // 6:, 0]) < 1.5 * np.mean(w[len(w) // 3: len(w) // 2, 0]) + 0.05
 
 
 # ------------------------------------------------------------------------------------------

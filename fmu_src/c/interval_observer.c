@@ -23,9 +23,10 @@
  * The step maps (Phi, Gam, Gam1, Gam2) of (mode, h) are the runtime's ``phi_gamma``: from the
  * emitter for the default step IV_H0, otherwise computed here by the same algorithm; the
  * correction's coefficients derived from them are cached per mode (one step size at a time).
- * A step whose step maps are not finite (h or |vx| near the double range) or that would need more
- * than MAX_SUBSTEPS enclosure substeps (h > ~1000 s) is refused with an error, the state
- * unchanged; there the Python runtime raises (OverflowError) or runs for minutes.
+ * A step longer than IV_MAX_COMM_STEP (the runtime's ``max_communication_step``: the longest at
+ * which the design's bounds contract; the measurements arrive only at the communication points,
+ * so substeps cannot replace them), whose step maps are not finite (|vx| near the double range) or that would need
+ * more than MAX_SUBSTEPS enclosure substeps is refused with an error, the state unchanged.
  *
  * Model exchange: the paper's continuous-time observer eq. (23) itself,
  *     xi_up' = N xi_up + J y + H delta + Omega_up,   xi_lo' = N xi_lo + J y + H delta + Omega_lo,
@@ -906,6 +907,12 @@ static int step(Model *m, double h, const double *u, const Log *log)
 {
     State *s = &m->s;
     double vx = u[IN_vx], d = u[IN_delta], hold = m->vx_hold, y[NY];
+    if (!(h <= IV_MAX_COMM_STEP)) {     /* ``max_communication_step``: the bounds would not contract */
+        log_event(log, LOG_ERROR, "communication step %g s refused: longer than %g s, the longest step at which "
+                  "this design's bounds contract (the measurements arrive only at the communication points, so "
+                  "substeps cannot replace them); use a step <= %g s", h, IV_MAX_COMM_STEP, IV_MAX_COMM_STEP);
+        return -1;
+    }
     if (!s->started) start(m, u, log);
     measurements(u, y);
     if (frozen(vx, hold)) {

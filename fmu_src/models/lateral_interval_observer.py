@@ -23,6 +23,12 @@ def _variant(data: dict) -> str:
     return "; ".join(parts) or "speed modes"
 
 
+def max_communication_step(data: dict) -> float:
+    """The longest communication step (s) of this design: a longer one is refused with an error,
+    the state kept (``IntervalObserver.max_communication_step``: the bounds would not contract)."""
+    return IntervalObserver(data).max_communication_step()
+
+
 SPEC = ModelSpec(
     description="Switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and "
                 "axle lateral forces for cornering stiffnesses in a box "

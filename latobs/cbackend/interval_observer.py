@@ -22,7 +22,11 @@ Python runtime's data:
     IV_MAPS_H0[mode]             (Phi, Gam, Gam1, Gam2) = ``phi_gamma(N, IV_H0, eta, order=3)``, the
                                  runtime's own maps at the default step IV_H0 = 0.005 s; for another
                                  step the C model computes them by the same algorithm
-and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H).
+and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H), and
+
+    IV_MAX_COMM_STEP             the longest communication step the design accepts (s): the runtime's
+                                 ``max_communication_step()`` (runtime.max_communication_step, which
+                                 the synthesis decides by running the runtime); both refuse a longer one
 
 The C model implements the runtime's default bounds (``STIFFNESS = "structured"``, ``PRODUCT =
 "hull"``); the emitter refuses the others.
@@ -74,6 +78,7 @@ def emit(data: dict) -> CModel:
         c_define("IV_ENCLOSURE_GROW", float(rt.ENCLOSURE_GROW)),
         c_define("IV_ENCLOSURE_MULT", float(rt.ENCLOSURE_MULT)),
         c_define("IV_SUBSTEP_RHO_H", float(rt.SUBSTEP_RHO_H)),
+        c_define("IV_MAX_COMM_STEP", float(rt.max_communication_step())),
         c_define("IV_M", md["m"]), c_define("IV_IZ", md["Iz"]), c_define("IV_LF", md["lf"]),
         c_define("IV_LR", md["lr"]),
         c_define("IV_K3", sk["k3"]), c_define("IV_K4F", sk["k4f"]), c_define("IV_K4R", sk["k4r"]),
