@@ -299,12 +299,30 @@ class Fmi2Slave:
     def set_string(self, vrs, values):
         self._refuse_set("String", vrs)
 
-    def _get_fmu_state(self):    # canGetAndSetFMUstate="false": never called by a conforming host
-        self.log("fmi2GetFMUstate is not supported by this FMU", ERROR)
-        return {}
+    # The FMU state (canGetAndSetFMUstate="false", canSerializeFMUstate="false"). With the native
+    # guard these calls never get here: it answers all six with a logged fmi2Error. Without it
+    # (an FMU built without a C compiler) pythonfmu 0.7.0 answers fmi2OK whatever happens here
+    # (an exception would be fmi2Fatal and destroy the instance), so: the refusal is logged as an
+    # error, and after a refused fmi2SetFMUstate the instance is in the error state (every later
+    # doStep refused, fmi2Discard), since the host believes it has restored a state it has not.
+    def _get_fmu_state(self):
+        self.log("fmi2GetFMUstate: this FMU cannot get or set its state (canGetAndSetFMUstate=\"false\"); "
+                 "the state returned is empty and cannot be restored", ERROR)
+        return None
 
     def _set_fmu_state(self, state):
-        self.log("fmi2SetFMUstate is not supported by this FMU", ERROR)
+        self._fault = ("fmi2SetFMUstate: this FMU cannot restore a state (canGetAndSetFMUstate=\"false\"); "
+                       "the instance keeps its own state and refuses every further step")
+        self._phase = "error"
+        self.log(self._fault, ERROR)
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):      # fmi2Serialize[d]FMUstate[Size] without the guard: nothing
+        return b""
+
+    @staticmethod
+    def _fmu_state_from_bytes(raw):      # fmi2DeSerializeFMUstate without the guard: an empty state
+        return None
 
     # -- FMI calls -----------------------------------------------------------------------------
     def setup_experiment(self, start_time=0.0, stop_time=None, tolerance=None):
