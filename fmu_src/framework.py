@@ -68,8 +68,19 @@ DEFAULT_STEP = 0.005  # s, communication step suggested in the model description
 # pythonfmu 0.7.0's native findClass() ends with Py_DECREF(PyModule_GetDict(module)): it releases,
 # on every instantiation, a reference to the entry module's __dict__ that it never owned, so the
 # dict is freed after a few instances and the next instantiation crashes the host (upstream issue
-# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see Fmi2Slave.__init__).
+# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see Fmi2Slave.__init__): as a
+# bare reference count through the C API (no memory per instance: a host may instantiate millions
+# of times), or, where ctypes cannot reach the C API, held in this list.
 _ENTRY_DICT_REFS: list = []
+
+
+def _give_back_entry_dict(module) -> None:
+    d = vars(module)
+    try:
+        import ctypes
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(d))
+    except Exception:
+        _ENTRY_DICT_REFS.append(d)
 
 
 class _LogMsg:
@@ -152,7 +163,7 @@ class Fmi2Slave:
     def __init__(self, instance_name="", resources=None, logger=None, visible=False, **_):
         module = sys.modules.get(type(self).__module__)
         if module is not None:
-            _ENTRY_DICT_REFS.append(vars(module))   # see _ENTRY_DICT_REFS
+            _give_back_entry_dict(module)           # see _ENTRY_DICT_REFS
         self.instance_name = instance_name
         self.resources = resources
         self.log_queue: list = []

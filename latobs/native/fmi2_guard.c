@@ -189,35 +189,67 @@ static PyObj *(*real_Repr)(PyObj *);
 static int (*real_ListInsert)(PyObj *, long, PyObj *);
 static PyObj *(*real_GetAttr)(PyObj *, PyObj *);
 
-/* the references this thread's current fmi2 call leaked, released when it returns */
-static __thread PyObj **pool;
-static __thread size_t pool_n, pool_cap;
-static __thread int call_depth;
+/* The references leaked by the fmi2 calls in progress, with the thread making each call: a
+ * call releases only its own thread's (another thread's call may still use its objects). No
+ * thread-local storage: the guard needs nothing but libc (and libdl) of glibc 2.17. */
+typedef struct {
+    pthread_t owner;
+    PyObj *obj;
+} PoolEntry;
+static pthread_mutex_t pool_lock = PTHREAD_MUTEX_INITIALIZER;
+static PoolEntry *pool;        /* guarded by pool_lock */
+static size_t pool_n, pool_cap; /* guarded by pool_lock */
 
 static void pool_add(PyObj *o)
 {
     if (o == NULL) return;
+    pthread_mutex_lock(&pool_lock);
     if (pool_n == pool_cap) {
-        size_t cap = pool_cap ? 2 * pool_cap : 16;
-        PyObj **p = realloc(pool, cap * sizeof *p);
-        if (p == NULL) return; /* out of memory: leak as pythonfmu would */
-        pool = p;
-        pool_cap = cap;
+        size_t cap = pool_cap ? 2 * pool_cap : 32;
+        PoolEntry *p = realloc(pool, cap * sizeof *p);
+        if (p != NULL) {
+            pool = p;
+            pool_cap = cap;
+        }
     }
-    pool[pool_n++] = o;
+    if (pool_n < pool_cap) { /* else out of memory: leaked, as pythonfmu would */
+        pool[pool_n].owner = pthread_self();
+        pool[pool_n].obj = o;
+        pool_n++;
+    }
+    pthread_mutex_unlock(&pool_lock);
 }
 
+/* Releases the calling thread's entries, under the GIL (never while holding pool_lock: a thread
+ * holding the GIL may be waiting for it in pool_add). */
 static void pool_release(void)
 {
+    pthread_t self = pthread_self();
+    PyObj **mine = NULL;
+    size_t n = 0, kept = 0;
     int gil;
 
-    if (pool_n == 0) return;
-    gil = py.gil_ensure();
-    for (size_t i = 0; i < pool_n; i++) py.decref(pool[i]);
-    py.gil_release(gil);
-    free(pool);
-    pool = NULL;
-    pool_n = pool_cap = 0;
+    pthread_mutex_lock(&pool_lock);
+    if (pool_n > 0) mine = malloc(pool_n * sizeof *mine);
+    if (mine != NULL) {
+        for (size_t i = 0; i < pool_n; i++) {
+            if (pthread_equal(pool[i].owner, self)) mine[n++] = pool[i].obj;
+            else pool[kept++] = pool[i];
+        }
+        pool_n = kept;
+    }
+    if (pool_n == 0) { /* this library may be unloaded next: keep no allocation */
+        free(pool);
+        pool = NULL;
+        pool_cap = 0;
+    }
+    pthread_mutex_unlock(&pool_lock);
+    if (n > 0) {
+        gil = py.gil_ensure();
+        for (size_t i = 0; i < n; i++) py.decref(mine[i]);
+        py.gil_release(gil);
+    }
+    free(mine);
 }
 
 static PyObj *hook_AsUTF8String(PyObj *o)
@@ -424,12 +456,10 @@ static void bind_hooks_locked(void) {}
 static void unbind_hooks_locked(void) {}
 #endif
 
-/* Around every call into the real library: releases what the call leaked (outermost call). */
-#define CALL_ENTER() (call_depth++)
-#define CALL_LEAVE()                                                                  \
-    do {                                                                              \
-        if (--call_depth == 0 && pool_n > 0) pool_release();                          \
-    } while (0)
+/* After every call into the real library: release what the call leaked. (A call made from the
+ * host's logger inside another call releases the outer call's objects too; pythonfmu no longer
+ * uses any of them once it has called the logger.) */
+#define CALL_LEAVE() pool_release()
 
 /* ---- logging -------------------------------------------------------------- */
 
@@ -566,7 +596,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     if (err != NULL) {
         LOG_ERROR(g, "fmi2Instantiate: %s", err);
     } else {
-        CALL_ENTER();
         g->real = api.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
                                   &g->functions, visible, loggingOn);
         CALL_LEAVE();
@@ -589,7 +618,6 @@ void fmi2FreeInstance(fmi2Component c)
 
     if (g == NULL) return;
     pthread_mutex_lock(&lock);
-    CALL_ENTER();
     api.FreeInstance(g->real);
     CALL_LEAVE();
     if (--n_instances == 0) unload_real_locked();
@@ -603,9 +631,7 @@ void fmi2FreeInstance(fmi2Component c)
 /* Makes the call into the real library and returns its status, releasing what it leaked. */
 #define RETURN_FORWARDED(call)                                                    \
     do {                                                                          \
-        fmi2Status status_;                                                       \
-        CALL_ENTER();                                                             \
-        status_ = (call);                                                         \
+        fmi2Status status_ = (call);                                              \
         CALL_LEAVE();                                                             \
         return status_;                                                           \
     } while (0)
