@@ -74,10 +74,10 @@ def test_unguarded_fmu_logs_the_refusal_and_refuses_to_step_after_a_false_restor
 # ---- instantiate/free cycles ---------------------------------------------------------------------
 
 # cycles at which RSS is read (after gc.collect()); growth is judged after the warm-up (cycle 500).
-# Before the fix MotorcycleFaultObserver grew 3.4-3.9 KB per cycle (5.5 MB from 500 to 2000) and
-# other FMUs 2.3 KB per cycle; the native C FMUs grow 0 KB over the same cycles.
-MARKS = (500, 1000, 1500, 2000)
-MAX_GROWTH_KB = 256
+# Measured from cycle 500 to 2000 (library unloaded every cycle): before the fix 5.4-5.7 MB
+# (MotorcycleFaultObserver, CarPlant); after it 0-50 KB; the native C FMUs 80-180 KB.
+MARKS = tuple(int(x) for x in os.environ.get("LATOBS_TEST_MARKS", "500,1000,1500,2000").split(","))
+MAX_GROWTH_KB = 512
 
 
 @needs_cc
