@@ -16,7 +16,8 @@
  * fmi2Instantiate. Rejected calls are logged through the host's logger and
  * return fmi2Error without reaching Python. The FMU state functions (fmi2GetFMUstate ...
  * fmi2DeSerializeFMUstate), which the FMU does not declare and pythonfmu answers with a false
- * fmi2OK, are always refused that way.
+ * fmi2OK, are always refused that way. And it releases the Python objects pythonfmu leaks at
+ * every instantiation and logged message (see "pythonfmu 0.7.0's reference leaks" below).
  *
  * guard_config.h defines:
  *   GUARD_MODEL_IDENTIFIER  string, the FMU's modelIdentifier
@@ -269,7 +270,7 @@ static PyObj *hook_SequenceList(PyObj *o)
 static PyObj *hook_Repr(PyObj *o)
 {
     PyObj *r = real_Repr(o);
-    if (r != NULL && (py.type_flags(PY_TYPE(o)) & PY_TPFLAGS_TYPE_SUBCLASS)) pool_add(r); /* a class */
+    if (r != NULL && o != NULL && (py.type_flags(PY_TYPE(o)) & PY_TPFLAGS_TYPE_SUBCLASS)) pool_add(r); /* a class */
     return r;
 }
 
