@@ -68,8 +68,19 @@ DEFAULT_STEP = 0.005  # s, communication step suggested in the model description
 # pythonfmu 0.7.0's native findClass() ends with Py_DECREF(PyModule_GetDict(module)): it releases,
 # on every instantiation, a reference to the entry module's __dict__ that it never owned, so the
 # dict is freed after a few instances and the next instantiation crashes the host (upstream issue
-# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see Fmi2Slave.__init__).
+# NTNU-IHB/PythonFMU#228). Each instance hands one reference back (see Fmi2Slave.__init__): as a
+# bare reference count through the C API (no memory per instance: a host may instantiate millions
+# of times), or, where ctypes cannot reach the C API, held in this list.
 _ENTRY_DICT_REFS: list = []
+
+
+def _give_back_entry_dict(module) -> None:
+    d = vars(module)
+    try:
+        import ctypes
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(d))
+    except Exception:
+        _ENTRY_DICT_REFS.append(d)
 
 
 class _LogMsg:
@@ -152,7 +163,7 @@ class Fmi2Slave:
     def __init__(self, instance_name="", resources=None, logger=None, visible=False, **_):
         module = sys.modules.get(type(self).__module__)
         if module is not None:
-            _ENTRY_DICT_REFS.append(vars(module))   # see _ENTRY_DICT_REFS
+            _give_back_entry_dict(module)           # see _ENTRY_DICT_REFS
         self.instance_name = instance_name
         self.resources = resources
         self.log_queue: list = []
@@ -299,12 +310,30 @@ class Fmi2Slave:
     def set_string(self, vrs, values):
         self._refuse_set("String", vrs)
 
-    def _get_fmu_state(self):    # canGetAndSetFMUstate="false": never called by a conforming host
-        self.log("fmi2GetFMUstate is not supported by this FMU", ERROR)
-        return {}
+    # The FMU state (canGetAndSetFMUstate="false", canSerializeFMUstate="false"). With the native
+    # guard these calls never get here: it answers all six with a logged fmi2Error. Without it
+    # (an FMU built without a C compiler) pythonfmu 0.7.0 answers fmi2OK whatever happens here
+    # (an exception would be fmi2Fatal and destroy the instance), so: the refusal is logged as an
+    # error, and after a refused fmi2SetFMUstate the instance is in the error state (every later
+    # doStep refused, fmi2Discard), since the host believes it has restored a state it has not.
+    def _get_fmu_state(self):
+        self.log("fmi2GetFMUstate: this FMU cannot get or set its state (canGetAndSetFMUstate=\"false\"); "
+                 "the state returned is empty and cannot be restored", ERROR)
+        return None
 
     def _set_fmu_state(self, state):
-        self.log("fmi2SetFMUstate is not supported by this FMU", ERROR)
+        self._fault = ("fmi2SetFMUstate: this FMU cannot restore a state (canGetAndSetFMUstate=\"false\"); "
+                       "the instance keeps its own state and refuses every further step")
+        self._phase = "error"
+        self.log(self._fault, ERROR)
+
+    @staticmethod
+    def _fmu_state_to_bytes(state):      # fmi2Serialize[d]FMUstate[Size] without the guard: nothing
+        return b""
+
+    @staticmethod
+    def _fmu_state_from_bytes(raw):      # fmi2DeSerializeFMUstate without the guard: an empty state
+        return None
 
     # -- FMI calls -----------------------------------------------------------------------------
     def setup_experiment(self, start_time=0.0, stop_time=None, tolerance=None):

@@ -159,11 +159,15 @@ from {pkg}.models.{model} import SPEC  # noqa: E402
 # for the first instantiation, before any instance exists.
 _GLOBALS_RESERVE = [globals()] * 8
 
-
-class {cls}(Fmi2Slave):
-    spec = SPEC
-    data_file = "{data_file}"
-    data_sha256 = "{data_sha}"
+if "{cls}" in globals():
+    # pythonfmu re-executes this module (into a scratch namespace) at every instantiation, and
+    # instantiates the module's own class: bind that one rather than create a class per instance
+    {cls} = globals()["{cls}"]
+else:
+    class {cls}(Fmi2Slave):
+        spec = SPEC
+        data_file = "{data_file}"
+        data_sha256 = "{data_sha}"
 '''
 
 

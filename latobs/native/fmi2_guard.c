@@ -14,7 +14,10 @@
  * valid calls unchanged to the real pythonfmu library, which sits next to this
  * file under the name GUARD_REAL_LIBRARY and is dlopen'ed on first
  * fmi2Instantiate. Rejected calls are logged through the host's logger and
- * return fmi2Error without reaching Python.
+ * return fmi2Error without reaching Python. The FMU state functions (fmi2GetFMUstate ...
+ * fmi2DeSerializeFMUstate), which the FMU does not declare and pythonfmu answers with a false
+ * fmi2OK, are always refused that way. And it releases the Python objects pythonfmu leaks at
+ * every instantiation and logged message (see "pythonfmu 0.7.0's reference leaks" below).
  *
  * guard_config.h defines:
  *   GUARD_MODEL_IDENTIFIER  string, the FMU's modelIdentifier
@@ -31,11 +34,14 @@
 #define _GNU_SOURCE /* dladdr */
 
 #include <dlfcn.h>
+#include <link.h> /* dl_iterate_phdr, ElfW */
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include "fmi2Functions.h"
 
@@ -99,9 +105,7 @@ static const char *other_type_of(fmi2ValueReference vr)
     X(SetDebugLogging) X(Instantiate) X(FreeInstance) X(SetupExperiment)      \
     X(EnterInitializationMode) X(ExitInitializationMode) X(Terminate)        \
     X(Reset) X(GetReal) X(GetInteger) X(GetBoolean) X(GetString) X(SetReal)  \
-    X(SetInteger) X(SetBoolean) X(SetString) X(GetFMUstate) X(SetFMUstate)   \
-    X(FreeFMUstate) X(SerializedFMUstateSize) X(SerializeFMUstate)           \
-    X(DeSerializeFMUstate) X(GetDirectionalDerivative)                       \
+    X(SetInteger) X(SetBoolean) X(SetString) X(GetDirectionalDerivative)     \
     X(SetRealInputDerivatives) X(GetRealOutputDerivatives) X(DoStep)         \
     X(CancelStep) X(GetStatus) X(GetRealStatus) X(GetIntegerStatus)          \
     X(GetBooleanStatus) X(GetStringStatus)
@@ -148,6 +152,316 @@ typedef struct {
     char *instance_name;
 } GuardComponent;
 
+/* ---- pythonfmu 0.7.0's reference leaks ------------------------------------- */
+
+/* pythonfmu 0.7.0's library never releases some Python objects it owns (about 3 KB per
+ * fmi2Instantiate/fmi2FreeInstance cycle, and one string per logged message, for the life of
+ * the process):
+ *   - fmi2Instantiate: the resources path it inserts into sys.path (PyList_Insert does not
+ *     steal), and in findClass, for every class of the entry module, the list of its __mro__
+ *     (PySequence_List; it holds the class, which pythonfmu creates anew at every instantiation),
+ *     the repr of every class in it (PyObject_Repr) and the UTF-8 copies of those reprs and of
+ *     the class's name (PyUnicode_AsUTF8String);
+ *   - after every call, for every logged message: its msg, category and status attributes
+ *     (PyObject_GetAttr in clearLogBuffer).
+ * Each of these functions is called only at those places (objdump of the library: the sole
+ * other PyObject_Repr, in handle_py_exception, takes an exception, never a type; the sole other
+ * PyObject_GetAttr takes the entry module). The guard binds them, in the real library's global
+ * offset table, to wrappers that note the leaked reference, and releases the noted references
+ * (under the GIL) when the fmi2 call that made them returns. The table is restored before the
+ * real library is released (it is never unmapped, and this library may be). If a symbol is
+ * missing (an unexpected platform or library), nothing is bound and the library runs as is. */
+typedef struct guard_pyobject PyObj; /* opaque; a PyObject starts with ob_refcnt, ob_type */
+#define PY_TYPE(o) (((void *const *)(o))[1])
+#define PY_TPFLAGS_TYPE_SUBCLASS (1UL << 31)
+
+static struct {
+    void (*decref)(PyObj *);
+    int (*gil_ensure)(void);
+    void (*gil_release)(int);
+    unsigned long (*type_flags)(void *);
+    int (*compare_ascii)(PyObj *, const char *);
+    void *module_type;
+} py; /* guarded by lock (set while loading, read while an instance exists) */
+
+static PyObj *(*real_AsUTF8String)(PyObj *);
+static PyObj *(*real_SequenceList)(PyObj *);
+static PyObj *(*real_Repr)(PyObj *);
+static int (*real_ListInsert)(PyObj *, long, PyObj *);
+static PyObj *(*real_GetAttr)(PyObj *, PyObj *);
+
+/* The references leaked by the fmi2 calls in progress, with the thread making each call: a
+ * call releases only its own thread's (another thread's call may still use its objects). No
+ * thread-local storage: the guard needs nothing but libc (and libdl) of glibc 2.17. */
+typedef struct {
+    pthread_t owner;
+    PyObj *obj;
+} PoolEntry;
+static pthread_mutex_t pool_lock = PTHREAD_MUTEX_INITIALIZER;
+static PoolEntry *pool;        /* guarded by pool_lock */
+static size_t pool_n, pool_cap; /* guarded by pool_lock */
+
+static void pool_add(PyObj *o)
+{
+    if (o == NULL) return;
+    pthread_mutex_lock(&pool_lock);
+    if (pool_n == pool_cap) {
+        size_t cap = pool_cap ? 2 * pool_cap : 32;
+        PoolEntry *p = realloc(pool, cap * sizeof *p);
+        if (p != NULL) {
+            pool = p;
+            pool_cap = cap;
+        }
+    }
+    if (pool_n < pool_cap) { /* else out of memory: leaked, as pythonfmu would */
+        pool[pool_n].owner = pthread_self();
+        pool[pool_n].obj = o;
+        pool_n++;
+    }
+    pthread_mutex_unlock(&pool_lock);
+}
+
+/* Releases the calling thread's entries, under the GIL (never while holding pool_lock: a thread
+ * holding the GIL may be waiting for it in pool_add). */
+static void pool_release(void)
+{
+    pthread_t self = pthread_self();
+    PyObj **mine = NULL;
+    size_t n = 0, kept = 0;
+    int gil;
+
+    pthread_mutex_lock(&pool_lock);
+    if (pool_n > 0) mine = malloc(pool_n * sizeof *mine);
+    if (mine != NULL) {
+        for (size_t i = 0; i < pool_n; i++) {
+            if (pthread_equal(pool[i].owner, self)) mine[n++] = pool[i].obj;
+            else pool[kept++] = pool[i];
+        }
+        pool_n = kept;
+    }
+    if (pool_n == 0) { /* this library may be unloaded next: keep no allocation */
+        free(pool);
+        pool = NULL;
+        pool_cap = 0;
+    }
+    pthread_mutex_unlock(&pool_lock);
+    if (n > 0) {
+        gil = py.gil_ensure();
+        for (size_t i = 0; i < n; i++) py.decref(mine[i]);
+        py.gil_release(gil);
+    }
+    free(mine);
+}
+
+static PyObj *hook_AsUTF8String(PyObj *o)
+{
+    PyObj *r = real_AsUTF8String(o);
+    pool_add(r);
+    return r;
+}
+
+static PyObj *hook_SequenceList(PyObj *o)
+{
+    PyObj *r = real_SequenceList(o);
+    pool_add(r);
+    return r;
+}
+
+static PyObj *hook_Repr(PyObj *o)
+{
+    PyObj *r = real_Repr(o);
+    if (r != NULL && o != NULL && (py.type_flags(PY_TYPE(o)) & PY_TPFLAGS_TYPE_SUBCLASS)) pool_add(r); /* a class */
+    return r;
+}
+
+static int hook_ListInsert(PyObj *list, long where, PyObj *item)
+{
+    int rc = real_ListInsert(list, where, item);
+    if (rc == 0) pool_add(item); /* the list holds its own reference now */
+    return rc;
+}
+
+static PyObj *hook_GetAttr(PyObj *o, PyObj *name)
+{
+    PyObj *r = real_GetAttr(o, name);
+    if (r != NULL && PY_TYPE(o) != py.module_type
+        && (py.compare_ascii(name, "msg") == 0 || py.compare_ascii(name, "category") == 0
+            || py.compare_ascii(name, "status") == 0))
+        pool_add(r);
+    return r;
+}
+
+typedef struct {
+    const char *name;
+    void *hook;
+    void **real; /* where the original goes */
+    void **slot; /* its GOT entry in the real library; NULL when not bound */
+    void *orig;
+} GuardHook;
+
+#define HOOK(sym, fn, real) {#sym, (void *)fn, (void **)&real, NULL, NULL}
+static GuardHook hooks[] = {
+    HOOK(PyUnicode_AsUTF8String, hook_AsUTF8String, real_AsUTF8String),
+    HOOK(PySequence_List, hook_SequenceList, real_SequenceList),
+    HOOK(PyObject_Repr, hook_Repr, real_Repr),
+    HOOK(PyList_Insert, hook_ListInsert, real_ListInsert),
+    HOOK(PyObject_GetAttr, hook_GetAttr, real_GetAttr),
+};
+#define N_HOOKS (sizeof hooks / sizeof hooks[0])
+static int hooks_bound; /* guarded by lock */
+
+#if defined(__x86_64__) && defined(__ELF__)
+#define GUARD_R_JUMP_SLOT 7 /* R_X86_64_JUMP_SLOT */
+#define GUARD_R_GLOB_DAT 6  /* R_X86_64_GLOB_DAT */
+#elif defined(__aarch64__) && defined(__ELF__)
+#define GUARD_R_JUMP_SLOT 1026 /* R_AARCH64_JUMP_SLOT */
+#define GUARD_R_GLOB_DAT 1025  /* R_AARCH64_GLOB_DAT */
+#endif
+
+#ifdef GUARD_R_JUMP_SLOT
+typedef struct {
+    const void *inside; /* an address in the real library */
+    ElfW(Addr) base;
+    const ElfW(Dyn) *dynamic;
+    ElfW(Addr) relro_lo, relro_hi;
+} GuardObject;
+
+static int find_object(struct dl_phdr_info *info, size_t size, void *data)
+{
+    GuardObject *obj = data;
+    const ElfW(Addr) a = (ElfW(Addr))obj->inside;
+    int hit = 0;
+    (void)size;
+    for (int i = 0; i < info->dlpi_phnum; i++) {
+        const ElfW(Phdr) *ph = &info->dlpi_phdr[i];
+        if (ph->p_type == PT_LOAD && a >= info->dlpi_addr + ph->p_vaddr
+            && a < info->dlpi_addr + ph->p_vaddr + ph->p_memsz)
+            hit = 1;
+    }
+    if (!hit) return 0;
+    obj->base = info->dlpi_addr;
+    for (int i = 0; i < info->dlpi_phnum; i++) {
+        const ElfW(Phdr) *ph = &info->dlpi_phdr[i];
+        if (ph->p_type == PT_DYNAMIC) obj->dynamic = (const ElfW(Dyn) *)(info->dlpi_addr + ph->p_vaddr);
+        if (ph->p_type == PT_GNU_RELRO) {
+            obj->relro_lo = info->dlpi_addr + ph->p_vaddr;
+            obj->relro_hi = obj->relro_lo + ph->p_memsz;
+        }
+    }
+    return 1;
+}
+
+/* Writes a GOT entry, making a read-only (RELRO) page writable for the time of the write. */
+static int write_slot(const GuardObject *obj, void **slot, void *value)
+{
+    ElfW(Addr) a = (ElfW(Addr))slot;
+    if (a >= obj->relro_lo && a < obj->relro_hi) {
+        long page = sysconf(_SC_PAGESIZE);
+        void *start = (void *)(a & ~(ElfW(Addr))(page - 1));
+        if (page <= 0 || mprotect(start, (size_t)page, PROT_READ | PROT_WRITE) != 0) return -1;
+        *slot = value;
+        mprotect(start, (size_t)page, PROT_READ);
+    } else {
+        *slot = value;
+    }
+    return 0;
+}
+
+/* Finds the GOT entry of every hook in the library holding `inside`; 0 if all are found. */
+static int locate_slots(const GuardObject *obj)
+{
+    const ElfW(Sym) *symtab = NULL;
+    const char *strtab = NULL;
+    const ElfW(Rela) *tables[2] = {NULL, NULL};
+    size_t sizes[2] = {0, 0};
+    int plt_is_rela = 1;
+
+    if (obj->dynamic == NULL) return -1;
+    for (const ElfW(Dyn) *d = obj->dynamic; d->d_tag != DT_NULL; d++) {
+        /* glibc relocates these in place; other loaders may leave them as offsets */
+        ElfW(Addr) v = d->d_un.d_ptr < obj->base ? obj->base + d->d_un.d_ptr : d->d_un.d_ptr;
+        switch (d->d_tag) {
+        case DT_SYMTAB: symtab = (const ElfW(Sym) *)v; break;
+        case DT_STRTAB: strtab = (const char *)v; break;
+        case DT_JMPREL: tables[0] = (const ElfW(Rela) *)v; break;
+        case DT_PLTRELSZ: sizes[0] = d->d_un.d_val; break;
+        case DT_PLTREL: plt_is_rela = d->d_un.d_val == DT_RELA; break;
+        case DT_RELA: tables[1] = (const ElfW(Rela) *)v; break;
+        case DT_RELASZ: sizes[1] = d->d_un.d_val; break;
+        default: break;
+        }
+    }
+    if (symtab == NULL || strtab == NULL || !plt_is_rela) return -1;
+    for (size_t h = 0; h < N_HOOKS; h++) hooks[h].slot = NULL;
+    for (int t = 0; t < 2; t++) {
+        if (tables[t] == NULL) continue;
+        for (size_t k = 0; k < sizes[t] / sizeof(ElfW(Rela)); k++) {
+            const ElfW(Rela) *r = &tables[t][k];
+            unsigned long type = ELF64_R_TYPE(r->r_info);
+            const char *name;
+            if (type != GUARD_R_JUMP_SLOT && type != GUARD_R_GLOB_DAT) continue;
+            name = strtab + symtab[ELF64_R_SYM(r->r_info)].st_name;
+            for (size_t h = 0; h < N_HOOKS; h++)
+                if (hooks[h].slot == NULL && strcmp(name, hooks[h].name) == 0)
+                    hooks[h].slot = (void **)(obj->base + r->r_offset);
+        }
+    }
+    for (size_t h = 0; h < N_HOOKS; h++)
+        if (hooks[h].slot == NULL || *hooks[h].slot == NULL) return -1;
+    return 0;
+}
+
+static GuardObject bound_object; /* guarded by lock */
+
+static void unbind_hooks_locked(void)
+{
+    if (!hooks_bound) return;
+    for (size_t h = 0; h < N_HOOKS; h++) write_slot(&bound_object, hooks[h].slot, hooks[h].orig);
+    hooks_bound = 0;
+}
+
+/* Binds the hooks in the real library (just loaded with RTLD_NOW: its GOT is resolved). */
+static void bind_hooks_locked(void)
+{
+    GuardObject obj = {0};
+    size_t h;
+
+    if (hooks_bound) return;
+    *(void **)&py.decref = dlsym(RTLD_DEFAULT, "Py_DecRef");
+    *(void **)&py.gil_ensure = dlsym(RTLD_DEFAULT, "PyGILState_Ensure");
+    *(void **)&py.gil_release = dlsym(RTLD_DEFAULT, "PyGILState_Release");
+    *(void **)&py.type_flags = dlsym(RTLD_DEFAULT, "PyType_GetFlags");
+    *(void **)&py.compare_ascii = dlsym(RTLD_DEFAULT, "PyUnicode_CompareWithASCIIString");
+    py.module_type = dlsym(RTLD_DEFAULT, "PyModule_Type");
+    if (!py.decref || !py.gil_ensure || !py.gil_release || !py.type_flags || !py.compare_ascii
+        || !py.module_type)
+        return;
+    obj.inside = (const void *)api.Instantiate;
+    if (!dl_iterate_phdr(find_object, &obj) || locate_slots(&obj) != 0) return;
+    bound_object = obj;
+    for (h = 0; h < N_HOOKS; h++) {
+        hooks[h].orig = *hooks[h].slot;
+        *hooks[h].real = hooks[h].orig;
+    }
+    for (h = 0; h < N_HOOKS; h++) {
+        if (write_slot(&bound_object, hooks[h].slot, hooks[h].hook) != 0) break;
+    }
+    if (h < N_HOOKS) { /* undo the ones written */
+        while (h-- > 0) write_slot(&bound_object, hooks[h].slot, hooks[h].orig);
+        return;
+    }
+    hooks_bound = 1;
+}
+#else
+static void bind_hooks_locked(void) {}
+static void unbind_hooks_locked(void) {}
+#endif
+
+/* After every call into the real library: release what the call leaked. (A call made from the
+ * host's logger inside another call releases the outer call's objects too; pythonfmu no longer
+ * uses any of them once it has called the logger.) */
+#define CALL_LEAVE() pool_release()
+
 /* ---- logging -------------------------------------------------------------- */
 
 /* Formats the message, then escapes it for the FMI logger, whose message is a
@@ -180,6 +494,7 @@ static void unload_real_locked(void)
 {
     if (real_handle != NULL) {
         release_python_state_locked(); /* before the library can run its own destructors */
+        unbind_hooks_locked();         /* it stays mapped; this library may not */
         dlclose(real_handle);
     }
     real_handle = NULL;
@@ -228,6 +543,7 @@ static const char *load_real_locked(void)
         unload_real_locked();
         return "the real library " GUARD_REAL_LIBRARY " does not export fmi2Instantiate/fmi2FreeInstance";
     }
+    bind_hooks_locked();
     return NULL;
 }
 
@@ -283,6 +599,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     } else {
         g->real = api.Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
                                   &g->functions, visible, loggingOn);
+        CALL_LEAVE();
         if (g->real != NULL) n_instances++;
         else if (n_instances == 0) unload_real_locked();
     }
@@ -303,6 +620,7 @@ void fmi2FreeInstance(fmi2Component c)
     if (g == NULL) return;
     pthread_mutex_lock(&lock);
     api.FreeInstance(g->real);
+    CALL_LEAVE();
     if (--n_instances == 0) unload_real_locked();
     pthread_mutex_unlock(&lock);
     free(g->instance_name);
@@ -310,6 +628,14 @@ void fmi2FreeInstance(fmi2Component c)
 }
 
 /* ---- plain forwarding ----------------------------------------------------- */
+
+/* Makes the call into the real library and returns its status, releasing what it leaked. */
+#define RETURN_FORWARDED(call)                                                    \
+    do {                                                                          \
+        fmi2Status status_ = (call);                                              \
+        CALL_LEAVE();                                                             \
+        return status_;                                                           \
+    } while (0)
 
 /* A NULL component, or a function the real library does not export, is an error. */
 #define FORWARD(name, ...)                                                        \
@@ -319,7 +645,7 @@ void fmi2FreeInstance(fmi2Component c)
         LOG_ERROR(g, "fmi2" #name ": not provided by " GUARD_REAL_LIBRARY);       \
         return fmi2Error;                                                         \
     }                                                                             \
-    return api.name(g->real, __VA_ARGS__)
+    RETURN_FORWARDED(api.name(g->real, __VA_ARGS__))
 
 #define FORWARD0(name)                                                            \
     GuardComponent *g = c;                                                        \
@@ -328,7 +654,7 @@ void fmi2FreeInstance(fmi2Component c)
         LOG_ERROR(g, "fmi2" #name ": not provided by " GUARD_REAL_LIBRARY);       \
         return fmi2Error;                                                         \
     }                                                                             \
-    return api.name(g->real)
+    RETURN_FORWARDED(api.name(g->real))
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[])
@@ -347,36 +673,59 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD0(ExitInitializa
 fmi2Status fmi2Terminate(fmi2Component c) { FORWARD0(Terminate); }
 fmi2Status fmi2Reset(fmi2Component c) { FORWARD0(Reset); }
 
+/* The FMU state functions are refused here, without reaching pythonfmu: the model description
+ * declares canGetAndSetFMUstate="false" and canSerializeFMUstate="false", and pythonfmu 0.7.0
+ * answers fmi2GetFMUstate with fmi2OK and a non-null "state" (whatever the Python side returns,
+ * even when it logs that it cannot) and fmi2SetFMUstate with fmi2OK without restoring anything,
+ * so a host would carry on from a state it never got back. */
+static fmi2Status no_fmu_state(GuardComponent *g, const char *fn)
+{
+    if (g == NULL) return fmi2Error;
+    LOG_ERROR(g, "%s: %s cannot get, set or serialize its state (canGetAndSetFMUstate=\"false\", "
+                 "canSerializeFMUstate=\"false\" in its modelDescription); nothing done",
+              fn, GUARD_MODEL_IDENTIFIER);
+    return fmi2Error;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    FORWARD(GetFMUstate, FMUstate);
+    if (FMUstate != NULL) *FMUstate = NULL;
+    return no_fmu_state(c, "fmi2GetFMUstate");
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
-    FORWARD(SetFMUstate, FMUstate);
+    (void)FMUstate;
+    return no_fmu_state(c, "fmi2SetFMUstate");
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    FORWARD(FreeFMUstate, FMUstate);
+    /* FMI 2.0: freeing a null state is ignored (e.g. after a refused fmi2GetFMUstate) */
+    if (c != NULL && FMUstate != NULL && *FMUstate == NULL) return fmi2OK;
+    return no_fmu_state(c, "fmi2FreeFMUstate");
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
-    FORWARD(SerializedFMUstateSize, FMUstate, size);
+    (void)FMUstate;
+    if (size != NULL) *size = 0;
+    return no_fmu_state(c, "fmi2SerializedFMUstateSize");
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[],
                                  size_t size)
 {
-    FORWARD(SerializeFMUstate, FMUstate, serializedState, size);
+    (void)FMUstate, (void)serializedState, (void)size;
+    return no_fmu_state(c, "fmi2SerializeFMUstate");
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate)
 {
-    FORWARD(DeSerializeFMUstate, serializedState, size, FMUstate);
+    (void)serializedState, (void)size;
+    if (FMUstate != NULL) *FMUstate = NULL;
+    return no_fmu_state(c, "fmi2DeSerializeFMUstate");
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[],
@@ -474,7 +823,7 @@ static fmi2Status check(GuardComponent *g, const char *fn, int type, int is_set,
         LOG_ERROR(g, "fmi2" #name ": not provided by " GUARD_REAL_LIBRARY);       \
         return fmi2Error;                                                         \
     }                                                                             \
-    return api.name(g->real, vr, nvr, value)
+    RETURN_FORWARDED(api.name(g->real, vr, nvr, value))
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
