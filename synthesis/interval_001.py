@@ -97,7 +97,7 @@ class Design:
 
 def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list[float]]:
     """(edges, speeds) of the switching law eq. (44): the options', else the paper's, else, for a
-    vehicle with a ``speed`` range (m/s) outside the paper's grid, equal bands covering the range,
+    vehicle with a ``speed`` range (m/s or km/h) outside the paper's grid, equal bands covering the range,
     at most 4 m/s wide like the paper's widest band (16-20 m/s), the model speed at each band's
     centre. (The runtime bounds the speed mismatch inside a band; its width gain (vx - vx_i)/sigma
     on the yaw-acceleration state must stay below eta: the certificate checks it.)"""
@@ -105,10 +105,11 @@ def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list
         edges = [float(x) for x in opts.edges]
         speeds = list(opts.speeds) if opts.speeds is not None else [(a + b) / 2 for a, b in zip(edges, edges[1:])]
         return edges, [float(s) for s in speeds]
-    rng = vehicle.ranges.get("speed")
-    if rng is not None and rng.unit == "m/s" and (rng.min < PAPER_EDGES[0] or rng.max > PAPER_EDGES[-1]):
-        n = max(1, math.ceil((rng.max - rng.min) / 4.0))
-        edges = [rng.min + (rng.max - rng.min) * k / n for k in range(n + 1)]
+    rng = vehicle.speed_range()
+    if rng is not None and (rng[0] < PAPER_EDGES[0] or rng[1] > PAPER_EDGES[-1]):
+        lo, hi = rng
+        n = max(1, math.ceil((hi - lo) / 4.0))
+        edges = [lo + (hi - lo) * k / n for k in range(n + 1)]
         return edges, [(a + b) / 2 for a, b in zip(edges, edges[1:])]
     return list(PAPER_EDGES), list(opts.speeds or PAPER_SPEEDS)
 

@@ -159,3 +159,10 @@ def test_projection_refuses_more_than_round_off():
         lmi.project_lower(X, 0.0, "my LMI")
     Y, shift = lmi.project_lower(np.array([[1.0, -1e-9], [0.0, -3.0]]), np.array([[-np.inf, 0.0], [0.0, -3.0]]), "x")
     assert Y[0, 1] == 0.0 and Y[1, 1] == -3.0 and shift == 1e-9
+
+
+def test_a_speed_range_in_km_h_sets_the_bands():
+    """delibasi declares 20..40 km/h: the bands cover 5.56..11.11 m/s, not the paper's 10..20 m/s."""
+    d = designs.run("LateralIntervalObserver", "delibasi")
+    edges = d["switching"]["edges"]
+    assert d["certified"] and edges[0] == pytest.approx(20 / 3.6) and edges[-1] == pytest.approx(40 / 3.6)
