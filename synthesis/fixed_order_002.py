@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -733,14 +734,16 @@ def full_order_hinfsyn(box: Box | str, eps: float = 1e-3):
 # 5. Design for a vehicle (the catalogue's SideslipFixedOrderEstimator[Scheduled]) and its file
 # ----------------------------------------------------------------------------------------------
 
-#: Largest speed ratio v_hi / v_lo of a scheduled band (extension of paper 002). The model's
-#: steady-state sideslip per yaw rate, beta/r = b1(0)/b2(0) = lr/v - m lf v/(Cr L) (eq. 2, see
-#: ``steady_beta_per_r``), is a term in 1/v plus a term in v, each decreasing: across a band of
-#: ratio rho each changes by at most the factor 1 - 1/rho of its largest value, so beta/r varies
-#: within a band by at most (1 - 1/rho) (lr/v_lo + m lf v_hi/(Cr L)): 20 % of the band's own scale
-#: at rho = 1.25, for any speed range. (Bands of equal width in m/s did not bound it: 4 m/s at
-#: 2.5..6.5 m/s is a ratio of 2.6, and one estimator for the band halved beta at 2.5 m/s.)
+#: Scheduled bands (extension of paper 002): each band of speeds has a speed ratio v_hi/v_lo <=
+#: BAND_RATIO and the model's steady-state sideslip per yaw rate, beta/r = b1(0)/b2(0) = lr/v -
+#: m lf v/(Cr L) (eq. 2, ``steady_beta_per_r``, decreasing in v), varies inside it by at most
+#: BAND_BETA_STEP (s = rad per rad/s), whatever the speed range: the one estimator of a band then
+#: misses the model's beta/r by at most about half the step (the ratio bounds the 1/v term's
+#: share at low speed, the step the absolute spread everywhere). Bands of equal width in m/s
+#: bounded neither: 4 m/s at 2.5..6.5 m/s is a ratio of 2.6 and a beta/r spread of 0.29 s, and
+#: the band's estimator halved beta at 2.5 m/s.
 BAND_RATIO = 1.25
+BAND_BETA_STEP = 0.05        # s
 
 
 @dataclass(frozen=True)
@@ -749,8 +752,9 @@ class DesignOptions:
 
     name       artefact name.
     scheduled  False: one estimator for the vehicle's whole speed range (paper 002);
-               True: one per speed band, switched on vx (extension): bands of equal speed
-               ratio, none above ``band_ratio`` (``speed_bands``, :data:`BAND_RATIO`).
+               True: one per speed band, switched on vx (extension): every band of speed
+               ratio <= ``band_ratio`` and model beta/r spread <= ``band_beta_step`` s
+               (``speed_bands``, :data:`BAND_RATIO`).
     order      estimator order (0, 1 or 2; polish needs <= 2).
     recentre   central-polynomial iterations of ``design`` (kept while the certified gamma
                improves).
@@ -767,6 +771,7 @@ class DesignOptions:
     grid: tuple = (9, 9, 9)
     box: str = "physical"
     band_ratio: float = BAND_RATIO   # largest v_hi / v_lo of a scheduled band
+    band_beta_step: float = BAND_BETA_STEP   # s, largest spread of the model's steady beta/r in a band
     tie_break: float | None = 1e-3   # polish's tie-break tolerance (None: off), see ``_tie_break``
 
 
@@ -808,18 +813,55 @@ def vehicle_box(vehicle: Vehicle, box: str = "physical") -> Box:
 
 
 
-def speed_bands(v: tuple[float, float], ratio: float = BAND_RATIO) -> list[tuple[float, float]]:
-    """Contiguous bands covering [v_lo, v_hi] (m/s, 0 < v_lo), of equal speed ratio, none above
-    ``ratio`` (:data:`BAND_RATIO`): the fewest such bands, edges v_lo (v_hi/v_lo)^(k/n)."""
+
+
+def speed_bands(v: tuple[float, float], ratio: float = BAND_RATIO, beta_step: float = BAND_BETA_STEP,
+                beta_per_r: Callable[[float], float] | None = None) -> list[tuple[float, float]]:
+    """Contiguous bands covering [v_lo, v_hi] (m/s, 0 < v_lo), the fewest with every band's speed
+    ratio <= ``ratio`` and, given the model's ``beta_per_r(v)`` (monotone in v), its variation
+    inside every band <= ``beta_step``. The bands are balanced: both limits are scaled by the
+    least common factor c <= 1 for which n greedy bands reach v_hi (ratio^c, c beta_step)."""
     lo, hi = (float(x) for x in v)
     if not (ratio > 1 and math.isfinite(ratio)):
         raise ValueError(f"band ratio must be a finite number > 1, got {ratio}")
+    if not (beta_step > 0):
+        raise ValueError(f"band beta/r step must be > 0 s, got {beta_step}")
     if not (0 < lo <= hi and math.isfinite(hi)):
         raise ValueError(f"speed range must satisfy 0 < min <= max (m/s), got {v}")
-    n = max(1, math.ceil(math.log(hi / lo) / math.log(ratio) - 1e-9))
-    edges = [lo * (hi / lo) ** (k / n) for k in range(n + 1)]
-    edges[0], edges[-1] = lo, hi
-    return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:])]
+    if hi == lo:
+        return [(lo, hi)]
+
+    def step(a: float, c: float) -> float:               # the greedy band's upper edge from a
+        b = a * ratio ** c
+        if beta_per_r is None:
+            return b
+        ba = beta_per_r(a)
+        if abs(beta_per_r(b) - ba) <= c * beta_step:
+            return b
+        x, y = a, b                                      # bisection: |beta/r(x) - beta/r(a)| = c step
+        for _ in range(50):
+            mid = 0.5 * (x + y)
+            x, y = (mid, y) if abs(beta_per_r(mid) - ba) <= c * beta_step else (x, mid)
+        return x
+
+    def reach(c: float, n: int) -> float:
+        a = lo
+        for _ in range(n):
+            a = step(a, c)
+        return a
+
+    n, a = 0, lo
+    while a < hi * (1 - 1e-12):
+        a, n = step(a, 1.0), n + 1
+    c_lo, c_hi = 0.0, 1.0                                # reach(c, n) increases with c; reach(1, n) >= hi
+    for _ in range(40):
+        c = 0.5 * (c_lo + c_hi)
+        c_lo, c_hi = (c, c_hi) if reach(c, n) < hi else (c_lo, c)
+    edges = [lo]
+    for _ in range(n - 1):
+        edges.append(step(edges[-1], c_hi))
+    edges.append(hi)
+    return [(float(x), float(y)) for x, y in zip(edges[:-1], edges[1:])]
 
 
 def steady_beta_per_r(box: Box, v: float, Cf: float | None = None, Cr: float | None = None) -> float:
@@ -907,7 +949,8 @@ def design_for_vehicle(vehicle: Vehicle, opts: DesignOptions) -> VehicleDesign:
         raise ValueError(f"{opts.name}: order must be 0, 1 or 2, got {opts.order}")
     t0 = time.perf_counter()
     base = vehicle_box(vehicle, opts.box)
-    bands = speed_bands(base.v, opts.band_ratio) if opts.scheduled else [base.v]
+    bands = speed_bands(base.v, opts.band_ratio, opts.band_beta_step,
+                        lambda v: steady_beta_per_r(base, v)) if opts.scheduled else [base.v]
     modes = []
     for i, band in enumerate(bands):
         box = Box(f"{base.name}" + (f" band {i + 1}" if opts.scheduled else ""), base.m, base.Iz,

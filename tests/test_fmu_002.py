@@ -32,9 +32,10 @@ def single(built_fmus):
 
 @pytest.fixture(scope="module")
 def scheduled(tmp_path_factory):
-    """Two bands of speed ratio sqrt(63/15) = 2.05 over mbds_250lm's 15..63 m/s (the default ratio 1.25 is the demo's)."""
+    """Two bands of speed ratio sqrt(63/15) = 2.05 over mbds_250lm's 15..63 m/s, no beta/r limit
+    (the default bands, ratio <= 1.25 and beta/r spread <= 0.05 s, are the demo's)."""
     out = tmp_path_factory.mktemp("fmu_002s")
-    data = designs.run("SideslipFixedOrderEstimatorScheduled", band_ratio=2.1)
+    data = designs.run("SideslipFixedOrderEstimatorScheduled", band_ratio=2.1, band_beta_step=1.0)
     return packaging.package_design(design_file.write(data, out), out), data
 
 
