@@ -24,7 +24,7 @@ P003 = ["MotorcycleFaultObserver"]
 #: Paper 002 on the real record: (label, design, vehicle), the estimators side by side.
 REPLAYS_002 = [
     ("fixed-order estimator, one for 15..63 m/s", "SideslipFixedOrderEstimator", "mbds_250lm"),
-    ("fixed-order estimators scheduled on speed (4 m/s bands)", "SideslipFixedOrderEstimatorScheduled", None),
+    ("fixed-order estimators scheduled on speed (bands of bounded beta/r)", "SideslipFixedOrderEstimatorScheduled", None),
     ("Kalman baseline (ay and yaw rate)", "SideslipKalmanFilter", None),
 ]
 #: beta RMS (deg) of the dataset authors' filter, reference port (issue 7): t < 425 s, t >= 425 s.

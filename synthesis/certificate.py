@@ -808,7 +808,12 @@ def _certify_002(d: dict) -> list[Check]:
     file's overall ``gamma`` / ``gamma_grid`` are the modes' maxima. Scheduled: the bands are
     contiguous, cover the vehicle's speed range and match the runtime's ``estimators``."""
     checks: list[Check] = []
-    par = d["vehicle"]["parameters"]
+    vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
+    par = vehicle.require(("m", "Iz", "lf", "lr"), f"certificate of {d['name']} (bicycle model, eq. 2)")
+    model = d.get("model", {})
+    checks.append(_le("bicycle model m, Iz, lf, lr = the design file's vehicle (max relative difference)",
+                      max(abs(float(model.get(k, math.nan)) - par[k]) / par[k] for k in par)
+                      if all(k in model for k in par) else math.inf, 1e-9))
     m, Iz, lf, lr = (float(par[k]) for k in ("m", "Iz", "lf", "lr"))
     W1, W2 = d["weights"]["W1"], d["weights"]["W2"]
     grid = tuple(int(k) for k in d.get("certificate_grid", (9, 9, 9)))

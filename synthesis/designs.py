@@ -189,3 +189,45 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
             f"design {data['name']} failed its certificate ({len(failed)} of {len(checks)} checks): "
             + "; ".join(f"{c.name}: {c.value:.6g} > {c.limit:.6g}" for c in failed[:5]))
     return data
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What ``attempt`` found for one design and vehicle: ``status`` "certified"; "n/a" (the
+    vehicle lacks a parameter or range the design needs, ``detail`` names it); "infeasible" (the
+    design's LMIs have no solution, ``detail`` names the LMI); or "refused" (solved, but the
+    certificate fails, ``detail`` names the failing checks). ``seconds``: design + certificate."""
+
+    design: str
+    vehicle: str
+    status: str
+    detail: str
+    seconds: float
+    data: dict | None = None
+
+
+def design_errors() -> tuple[type, ...]:
+    """The DesignError class of every paper's design module (LMIs infeasible, solver failure)."""
+    from . import fixed_order_002, interval_001, kalman_baseline, pi_hinf_000, pi_switched_003
+
+    return tuple(m.DesignError for m in (pi_hinf_000, interval_001, fixed_order_002, kalman_baseline,
+                                         pi_switched_003))
+
+
+def attempt(name: str, vehicle: str, **overrides) -> Outcome:
+    """``run`` with its user-facing failures as an :class:`Outcome` (a bug still raises)."""
+    import time
+
+    from .params import VehicleParameterError
+
+    t0 = time.perf_counter()
+    try:
+        data = run(name, vehicle, **overrides)
+        status, detail = "certified", ""
+    except VehicleParameterError as exc:
+        data, status, detail = None, "n/a", str(exc)
+    except CertificateError as exc:
+        data, status, detail = None, "refused", str(exc)
+    except design_errors() as exc:
+        data, status, detail = None, "infeasible", str(exc)
+    return Outcome(name, vehicle, status, detail, time.perf_counter() - t0, data)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,7 +51,7 @@ import numpy.polynomial.polynomial as P
 from scipy.optimize import minimize_scalar
 
 from . import lmi
-from .params import Vehicle, load_vehicle
+from .params import Vehicle, VehicleParameterError, load_vehicle
 
 # Weights of eqs. (5), (6), ascending coefficients
 NF1 = np.array([39.4784])
@@ -733,13 +734,27 @@ def full_order_hinfsyn(box: Box | str, eps: float = 1e-3):
 # 5. Design for a vehicle (the catalogue's SideslipFixedOrderEstimator[Scheduled]) and its file
 # ----------------------------------------------------------------------------------------------
 
+#: Scheduled bands (extension of paper 002): each band of speeds has a speed ratio v_hi/v_lo <=
+#: BAND_RATIO and the model's steady-state sideslip per yaw rate, beta/r = b1(0)/b2(0) = lr/v -
+#: m lf v/(Cr L) (eq. 2, ``steady_beta_per_r``, decreasing in v), varies inside it by at most
+#: BAND_BETA_STEP (s = rad per rad/s), whatever the speed range: the one estimator of a band then
+#: misses the model's beta/r by at most about half the step (the ratio bounds the 1/v term's
+#: share at low speed, the step the absolute spread everywhere). Bands of equal width in m/s
+#: bounded neither: 4 m/s at 2.5..6.5 m/s is a ratio of 2.6 and a beta/r spread of 0.29 s, and
+#: the band's estimator halved beta at 2.5 m/s.
+BAND_RATIO = 1.25
+BAND_BETA_STEP = 0.05        # s
+
+
 @dataclass(frozen=True)
 class DesignOptions:
     """Options of ``design_for_vehicle``.
 
     name       artefact name.
     scheduled  False: one estimator for the vehicle's whole speed range (paper 002);
-               True: one per speed band of ``band_width`` m/s, switched on vx (extension).
+               True: one per speed band, switched on vx (extension): every band of speed
+               ratio <= ``band_ratio`` and model beta/r spread <= ``band_beta_step`` s
+               (``speed_bands``, :data:`BAND_RATIO`).
     order      estimator order (0, 1 or 2; polish needs <= 2).
     recentre   central-polynomial iterations of ``design`` (kept while the certified gamma
                improves).
@@ -755,7 +770,8 @@ class DesignOptions:
     polish: bool = True
     grid: tuple = (9, 9, 9)
     box: str = "physical"
-    band_width: float = 4.0          # m/s
+    band_ratio: float = BAND_RATIO   # largest v_hi / v_lo of a scheduled band
+    band_beta_step: float = BAND_BETA_STEP   # s, largest spread of the model's steady beta/r in a band
     tie_break: float | None = 1e-3   # polish's tie-break tolerance (None: off), see ``_tie_break``
 
 
@@ -770,34 +786,90 @@ def vehicle_box(vehicle: Vehicle, box: str = "physical") -> Box:
     Any other vehicle: its ``[ranges]`` ``Cf``, ``Cr`` (N/rad, per axle) and ``speed`` (m/s), e.g.
     ``mbds_250lm`` (where the Cr range is identified on the record's tuning half, see its file).
     """
-    if vehicle.name == "delibasi" or "cf_tyre" in vehicle.ranges:
+    if "cf_tyre" in vehicle.ranges:          # the paper's own per-tyre ranges (delibasi.toml), by content
         if box not in ("physical", "paper"):
             raise ValueError(f"vehicle {vehicle.name!r}: box must be 'physical' or 'paper', got {box!r}")
         return boxes(vehicle)[box]
     vals = vehicle.require(VEHICLE_KEYS, "paper 002's bicycle model (eq. 2)")
-    need = {"Cf": "N/rad", "Cr": "N/rad", "speed": "m/s"}
-    for k, unit in need.items():
+    # the example in the message: the vehicle's own stiffness +-10 % where it has one
+    cf, cr = (vehicle.parameters[k].value if k in vehicle.parameters else 8e4 for k in ("Cf", "Cr"))
+    need = {"Cf": ("N/rad", "front axle cornering stiffness", 0.9 * cf, 1.1 * cf),
+            "Cr": ("N/rad", "rear axle cornering stiffness", 0.9 * cr, 1.1 * cr),
+            "speed": ("m/s", "speed", 5.0, 40.0)}
+    for k, (unit, what, lo, hi) in need.items():
         rg = vehicle.ranges.get(k)
+        how = (f"give it in the vehicle's TOML file as `[ranges]` `{k} = {{ min = {lo:g}, max = {hi:g}, "
+               f"unit = \"{unit}\" }}` (the {what} range the robust design covers)")
         if rg is None:
-            raise ValueError(f"vehicle {vehicle.name!r}: paper 002 needs a range {k!r} ({unit}) in its "
-                             f"[ranges] table (the robust design's parameter box)")
+            raise VehicleParameterError(f"vehicle {vehicle.name!r}: paper 002 needs a range {k!r} ({unit}): {how}")
         if rg.unit != unit:
-            raise ValueError(f"vehicle {vehicle.name!r}: range {k!r} must be in {unit}, got {rg.unit!r}")
+            raise VehicleParameterError(f"vehicle {vehicle.name!r}: range {k!r} must be in {unit}, got {rg.unit!r}: {how}")
         if not (0 < rg.min <= rg.max):
-            raise ValueError(f"vehicle {vehicle.name!r}: range {k!r} must satisfy 0 < min <= max")
+            raise VehicleParameterError(f"vehicle {vehicle.name!r}: range {k!r} must satisfy 0 < min <= max: {how}")
     rc, rr, rv = vehicle.ranges["Cf"], vehicle.ranges["Cr"], vehicle.ranges["speed"]
     return Box(vehicle.name, vals["m"], vals["Iz"], vals["lf"], vals["lr"],
                (rc.min, rc.max), (rr.min, rr.max), (rv.min, rv.max))
 
 
-def speed_bands(v: tuple[float, float], width: float) -> list[tuple[float, float]]:
-    """Contiguous bands covering [v_lo, v_hi], as equal as possible, none wider than ``width``."""
-    lo, hi = v
-    if not width > 0:
-        raise ValueError(f"band width must be > 0 m/s, got {width}")
-    n = max(1, math.ceil((hi - lo) / width - 1e-9))
-    edges = np.linspace(lo, hi, n + 1)
-    return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+
+
+def speed_bands(v: tuple[float, float], ratio: float = BAND_RATIO, beta_step: float = BAND_BETA_STEP,
+                beta_per_r: Callable[[float], float] | None = None) -> list[tuple[float, float]]:
+    """Contiguous bands covering [v_lo, v_hi] (m/s, 0 < v_lo), the fewest with every band's speed
+    ratio <= ``ratio`` and, given the model's ``beta_per_r(v)`` (monotone in v), its variation
+    inside every band <= ``beta_step``. The bands are balanced: both limits are scaled by the
+    least common factor c <= 1 for which n greedy bands reach v_hi (ratio^c, c beta_step)."""
+    lo, hi = (float(x) for x in v)
+    if not (ratio > 1 and math.isfinite(ratio)):
+        raise ValueError(f"band ratio must be a finite number > 1, got {ratio}")
+    if not (beta_step > 0):
+        raise ValueError(f"band beta/r step must be > 0 s, got {beta_step}")
+    if not (0 < lo <= hi and math.isfinite(hi)):
+        raise ValueError(f"speed range must satisfy 0 < min <= max (m/s), got {v}")
+    if hi == lo:
+        return [(lo, hi)]
+
+    def step(a: float, c: float) -> float:               # the greedy band's upper edge from a
+        b = a * ratio ** c
+        if beta_per_r is None:
+            return b
+        ba = beta_per_r(a)
+        if abs(beta_per_r(b) - ba) <= c * beta_step:
+            return b
+        x, y = a, b                                      # bisection: |beta/r(x) - beta/r(a)| = c step
+        for _ in range(50):
+            mid = 0.5 * (x + y)
+            x, y = (mid, y) if abs(beta_per_r(mid) - ba) <= c * beta_step else (x, mid)
+        return x
+
+    def reach(c: float, n: int) -> float:
+        a = lo
+        for _ in range(n):
+            a = step(a, c)
+        return a
+
+    n, a = 0, lo
+    while a < hi * (1 - 1e-12):
+        a, n = step(a, 1.0), n + 1
+    c_lo, c_hi = 0.0, 1.0                                # reach(c, n) increases with c; reach(1, n) >= hi
+    for _ in range(40):
+        c = 0.5 * (c_lo + c_hi)
+        c_lo, c_hi = (c, c_hi) if reach(c, n) < hi else (c_lo, c)
+    edges = [lo]
+    for _ in range(n - 1):
+        edges.append(step(edges[-1], c_hi))
+    edges.append(hi)
+    return [(float(x), float(y)) for x, y in zip(edges[:-1], edges[1:])]
+
+
+def steady_beta_per_r(box: Box, v: float, Cf: float | None = None, Cr: float | None = None) -> float:
+    """The model's steady-state beta/r (s: rad of sideslip per rad/s of yaw rate) at speed v: b1(0)/b2(0) of eq. (2),
+    at the box's centre stiffnesses unless given. An estimator y/x matches it at DC iff y0/x0 = it."""
+    cf, cr, _ = box.centre()
+    b1, b2, _ = box.tf(cf if Cf is None else Cf, cr if Cr is None else Cr, v)
+    return float(b1[0] / b2[0])
 
 
 @dataclass
@@ -877,7 +949,8 @@ def design_for_vehicle(vehicle: Vehicle, opts: DesignOptions) -> VehicleDesign:
         raise ValueError(f"{opts.name}: order must be 0, 1 or 2, got {opts.order}")
     t0 = time.perf_counter()
     base = vehicle_box(vehicle, opts.box)
-    bands = speed_bands(base.v, opts.band_width) if opts.scheduled else [base.v]
+    bands = speed_bands(base.v, opts.band_ratio, opts.band_beta_step,
+                        lambda v: steady_beta_per_r(base, v)) if opts.scheduled else [base.v]
     modes = []
     for i, band in enumerate(bands):
         box = Box(f"{base.name}" + (f" band {i + 1}" if opts.scheduled else ""), base.m, base.Iz,
@@ -907,6 +980,10 @@ def to_design_dict(vd: VehicleDesign) -> dict:
         modes.append({
             "index": i + 1,
             "vx_band": [float(m.box.v[0]), float(m.box.v[1])],
+            # the model's steady-state beta/r at the band's ends (centre stiffnesses) beside the
+            # estimator's DC gain y(0)/x(0): how far one estimator per band is from the model
+            "steady_beta_per_r": {"model_at_vx_band": [steady_beta_per_r(m.box, v) for v in m.box.v],
+                                  "estimator": float(m.y[0] / m.x[0]), "unit": "rad/(rad/s) = s"},
             "box": {"Cf": list(map(float, m.box.cf)), "Cr": list(map(float, m.box.cr)),
                     "v": list(map(float, m.box.v)), "units": "N/rad per axle, N/rad per axle, m/s"},
             "estimator": est,
@@ -930,8 +1007,11 @@ def to_design_dict(vd: VehicleDesign) -> dict:
         "name": opts.name,
         "paper": "002",
         "kind": "fixed_order_estimator",
-        "vehicle": {"name": veh.name, "parameters": {k: float(getattr(vd.modes[0].box, k)) for k in VEHICLE_KEYS},
-                    "ranges": veh.as_dict().get("ranges", {})},
+        # the vehicle the user gave, every parameter and range (the certificate, the runtime's
+        # checks and the validation's bicycle baseline read them from here: m, Iz, lf, lr, Cf, Cr)
+        "vehicle": veh.as_dict(),
+        # the bicycle model of eq. (2) the boxes were built with (SI)
+        "model": {k: float(getattr(vd.modes[0].box, k)) for k in VEHICLE_KEYS},
         "order": opts.order,
         "scheduled": bool(opts.scheduled),
         "weights": {"W1": {"num": _asc(NF1), "den": _asc(DF1)}, "W2": {"num": _asc(NF2), "den": _asc(DF2)},

@@ -97,7 +97,7 @@ class Design:
 
 def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list[float]]:
     """(edges, speeds) of the switching law eq. (44): the options', else the paper's, else, for a
-    vehicle with a ``speed`` range (m/s) outside the paper's grid, equal bands covering the range,
+    vehicle with a ``speed`` range (m/s or km/h) outside the paper's grid, equal bands covering the range,
     at most 4 m/s wide like the paper's widest band (16-20 m/s), the model speed at each band's
     centre. (The runtime bounds the speed mismatch inside a band; its width gain (vx - vx_i)/sigma
     on the yaw-acceleration state must stay below eta: the certificate checks it.)"""
@@ -105,10 +105,11 @@ def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list
         edges = [float(x) for x in opts.edges]
         speeds = list(opts.speeds) if opts.speeds is not None else [(a + b) / 2 for a, b in zip(edges, edges[1:])]
         return edges, [float(s) for s in speeds]
-    rng = vehicle.ranges.get("speed")
-    if rng is not None and rng.unit == "m/s" and (rng.min < PAPER_EDGES[0] or rng.max > PAPER_EDGES[-1]):
-        n = max(1, math.ceil((rng.max - rng.min) / 4.0))
-        edges = [rng.min + (rng.max - rng.min) * k / n for k in range(n + 1)]
+    rng = vehicle.speed_range()
+    if rng is not None and (rng[0] < PAPER_EDGES[0] or rng[1] > PAPER_EDGES[-1]):
+        lo, hi = rng
+        n = max(1, math.ceil((hi - lo) / 4.0))
+        edges = [lo + (hi - lo) * k / n for k in range(n + 1)]
         return edges, [(a + b) / 2 for a, b in zip(edges, edges[1:])]
     return list(PAPER_EDGES), list(opts.speeds or PAPER_SPEEDS)
 
@@ -151,24 +152,60 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
                           f"eps = {opts.epsilon:g}, eta = {opts.eta:g}) over {len(speeds)} speed modes; "
                           + _diagnose(base, lmi35, lmi36))
     qv = np.asarray(q.value, float)
-    Qi = np.diag(1.0 / qv)
-    modes = []
+    modes, shift, worst = [], 0.0, -math.inf
     for i, vx in enumerate(speeds):
         A, B = A0 + vx * A1, vx * B1
-        E = Qi @ X[i].value
-        K = tau * Qi @ W[i].value
-        P = np.eye(n) - E @ C
-        N = P @ A - K @ C
-        # rounding leaves off-diagonal entries of order 1e-16 where (36) made them 0: set them to
-        # exactly 0, so that N is Metzler in floating point too (the runtime's order-preserving
-        # update relies on it); the certificate checks N = P A - K C to 1e-9 afterwards
-        tiny = (np.abs(N) <= 1e-12 * np.max(np.abs(N))) & ~np.eye(n, dtype=bool)
-        N[tiny] = 0.0
-        modes.append({"A": A, "B": B, "E": E, "K": K, "P": P, "N": N, "J": K + N @ E, "H": P @ B})
+        E = np.diag(1.0 / qv) @ X[i].value
+        K = tau * np.diag(1.0 / qv) @ W[i].value
+        mode, s = _exact_structure(A, B, E, K, opts.eta, f"design {opts.name}, mode {i + 1} ({vx:g} m/s)")
+        shift = max(shift, s)
+        # LMI (35) re-checked on the projected N (the numbers the runtime uses), in the solver's
+        # scaled units (L = Q N / tau, gamma_s = tau gamma), with the stated margin VERIFY_MARGIN
+        Qm = np.diag(qv)
+        L = Qm @ mode["N"] / tau
+        M = np.block([[L + L.T + eps_s * Qm, Qm], [Qm, -float(g.value) * np.eye(n)]])
+        worst = max(worst, lmi.max_eig(M))
+        modes.append(mode)
+    if not worst <= -VERIFY_MARGIN * opts.margin:
+        raise DesignError(f"design {opts.name}: LMI (35) fails on the gains projected onto the Metzler "
+                          f"structure of (36): largest eigenvalue {worst:.3g} > -{VERIFY_MARGIN * opts.margin:.3g} "
+                          f"(scaled units); raise margin")
     return Design(options=opts, vehicle=vehicle, values=v, edges=edges, speeds=speeds, cf_box=cf_box,
                   cr_box=cr_box, q=qv, gamma=float(g.value) / tau, modes=modes,
                   solver={"name": lmi.current(), "status": str(status), "seconds": round(seconds, 4),
-                          "lmis": len(base) + len(lmi35) + len(lmi36), "time_scale_per_s": tau})
+                          "lmis": len(base) + len(lmi35) + len(lmi36), "time_scale_per_s": tau,
+                          "structure": {"largest_projection_shift": shift, "lmi35_max_eig_scaled": worst,
+                                        "lmi35_required": -VERIFY_MARGIN * opts.margin}})
+
+
+#: LMI (35) must hold on the projected gains with max eigenvalue <= -VERIFY_MARGIN x margin (scaled
+#: units): the solver imposed -margin to its tolerance, the projection moves N by round-off.
+VERIFY_MARGIN = 0.5
+
+
+def _exact_structure(A, B, E, K, eta: float, where: str) -> tuple[dict, float]:
+    """The mode's matrices with the structure of (36) imposed exactly (not in the paper: the solver
+    meets (36) only to its tolerance, leaving off-diagonal entries of N = P A - K C of -1e-8 where
+    the optimum puts them on 0, and the runtime's order-preserving update needs N Metzler in
+    floating point). N is projected onto {N + eta I >= 0} (off-diagonal >= 0, diagonal >= -eta),
+    then E, K are re-solved so that eq. (33) holds for the projected N: N = A - E C A - K C row by
+    row, [E K] S = A - N with S = [C A; C] (invertible for this model: C picks r and ay, C A adds
+    the yaw acceleration and a row with -(cf + cr)/(m sigma) on vy), and P, J, H follow (30, 33).
+    Returns (matrices, the largest entry the projection moved)."""
+    n = A.shape[0]
+    C = rm.C
+    N0 = (np.eye(n) - E @ C) @ A - K @ C
+    try:
+        N, shift = lmi.project_lower(N0, -eta * np.eye(n), f"{where}: (36) N + eta I >= 0")
+    except lmi.StructureError as exc:
+        raise DesignError(str(exc)) from None
+    S = np.vstack([C @ A, C])
+    if np.linalg.matrix_rank(S) < n:
+        raise DesignError(f"{where}: [C A; C] is singular, the gains cannot be re-solved for the projected N (33)")
+    EK = np.linalg.solve(S.T, (A - N).T).T
+    E, K = EK[:, :C.shape[0]], EK[:, C.shape[0]:]
+    P = np.eye(n) - E @ C
+    return {"A": A, "B": B, "E": E, "K": K, "P": P, "N": N, "J": K + N @ E, "H": P @ B}, shift
 
 
 def _diagnose(base, lmi35, lmi36) -> str:

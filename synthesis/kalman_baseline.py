@@ -263,11 +263,8 @@ def speed_range(vehicle, opts: DesignOptions) -> tuple[float, float]:
     ``DEFAULT_SPEED_RANGE``."""
     if opts.speed_range is not None:
         return float(opts.speed_range[0]), float(opts.speed_range[1])
-    rng = getattr(vehicle, "ranges", {}).get("speed")
-    per = {"m/s": 1.0, "km/h": 1.0 / 3.6}
-    if rng is not None and rng.unit in per:
-        return float(rng.min * per[rng.unit]), float(rng.max * per[rng.unit])
-    return DEFAULT_SPEED_RANGE
+    rng = vehicle.speed_range()
+    return (float(rng[0]), float(rng[1])) if rng is not None else DEFAULT_SPEED_RANGE
 
 
 def steady_state(vehicle_values: Mapping, q, r_meas, speeds, h: float) -> dict:

@@ -154,3 +154,49 @@ def feasible(constraints: list) -> bool:
     import cvxpy as cp
 
     return solved(solve(cp.Problem(cp.Minimize(0), constraints))[0])
+
+
+# -- exact structure after the solve ------------------------------------------------------------
+# An interior-point solver meets an elementwise constraint X >= 0 only to its tolerance: entries
+# the optimum puts on the boundary come back as -1e-9 ... -1e-8, and a runtime or a certificate
+# that relies on the sign (a Metzler matrix, a nonnegative gain) then sees the wrong one. The
+# design modules therefore impose such structure exactly after the solve (:func:`project_lower`),
+# rebuild every dependent number from the projected one, and re-check the definite LMIs on the
+# projected numbers with a stated margin (:func:`max_eig`), so that what is certified and
+# packaged is exactly what was verified.
+
+#: Largest shift :func:`project_lower` accepts, relative to max(1, max |X|): solver round-off
+#: (Clarabel's default tolerances are 1e-8), not a violated constraint.
+PROJECTION_TOL = 1e-6
+
+
+class StructureError(ValueError):
+    """The solver's answer is farther from the required structure than round-off (``PROJECTION_TOL``)."""
+
+
+def project_lower(X, lower, what: str, tol: float = PROJECTION_TOL):
+    """The Euclidean projection of ``X`` onto {X >= lower} (elementwise, ``lower`` broadcast; -inf
+    leaves an entry free): max(X, lower), entries exactly on the bound. Returns (projected, shift)
+    with shift = the largest change. Raises StructureError naming ``what`` if the shift exceeds
+    ``tol`` x max(1, max |X|), i.e. if the violation is not round-off."""
+    import numpy as np
+
+    X = np.asarray(X, dtype=float)
+    out = np.maximum(X, np.broadcast_to(np.asarray(lower, dtype=float), X.shape))
+    shift = float(np.max(np.abs(out - X))) if X.size else 0.0
+    scale = max(1.0, float(np.max(np.abs(X)))) if X.size else 1.0
+    if not shift <= tol * scale:
+        raise StructureError(f"{what}: the solver's answer violates the constraint by {shift:.3g} "
+                             f"(more than round-off, {tol:g} x {scale:.3g})")
+    return out, shift
+
+
+def max_eig(M) -> float:
+    """Largest eigenvalue of the symmetric part of M (inf if M has a non-finite entry): an LMI
+    M < 0 re-checked on numbers outside the solver holds with margin m iff max_eig(M) <= -m."""
+    import numpy as np
+
+    M = np.asarray(M, dtype=float)
+    if not np.all(np.isfinite(M)):
+        return float("inf")
+    return float(np.max(np.linalg.eigvalsh((M + M.T) / 2)))

@@ -72,6 +72,17 @@ class Vehicle:
             )
         return {n: self.parameters[n].value for n in names}
 
+    def speed_range(self) -> tuple[float, float] | None:
+        """The ``speed`` range in m/s (converted from km/h), or None if the set has none; another
+        unit raises naming it."""
+        rng = self.ranges.get("speed")
+        if rng is None:
+            return None
+        per = {"m/s": 1.0, "km/h": 1.0 / 3.6}
+        if rng.unit not in per:
+            raise VehicleParameterError(f"vehicle {self.name!r}: range 'speed' must be in m/s or km/h, got {rng.unit!r}")
+        return rng.min * per[rng.unit], rng.max * per[rng.unit]
+
     def with_values(self, **values: float) -> "Vehicle":
         """A copy with some values replaced (validated like a loaded file)."""
         params = dict(self.parameters)

@@ -164,7 +164,7 @@ def test_mbds_replay_equals_the_python_fmu(pairs, mbds, name, vehicle):
 
 @pytest.mark.parametrize("name, vehicle", REPLAYS)
 def test_mbds_replay_at_the_default_step(pairs, mbds, name, vehicle):
-    """The record's first 100 s (63 band switches for the scheduled estimator) on the default
+    """The record's first 100 s (50 band switches for the scheduled estimator) on the default
     step's grid: the same samples, one per 0.005 s."""
     head = {k: v[:10001] for k, v in mbds.items()}
     _replay(pairs, dict(head, t=head["t"][0] + DEFAULT_STEP * np.arange(head["t"].size)), name, vehicle)
@@ -274,11 +274,11 @@ def _record_window(mbds, t0: float, t1: float) -> dict:
 
 @pytest.mark.slow
 def test_model_exchange_matches_co_simulation_with_band_switches(pairs, built_fmus, mbds):
-    """The speed-scheduled estimator on 20 s of the MBDS record (16 band switches, up and down)."""
+    """The speed-scheduled estimator on 20 s of the MBDS record (9 band switches, up and down)."""
     _, c = pairs("SideslipFixedOrderEstimatorScheduled")
     data = _record_window(mbds, 200.0, 220.0)
     cs = rp.drive(c, data).outputs
-    assert np.count_nonzero(np.diff(cs["mode"])) >= 10
+    assert np.count_nonzero(np.diff(cs["mode"])) >= 6
     assert _check_me(c, built_fmus.design("SideslipFixedOrderEstimatorScheduled"), data["t"],
                      {"yaw_rate": data["yaw_rate"], "vx": data["vx"]}, cs) == []
 

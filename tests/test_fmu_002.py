@@ -32,9 +32,10 @@ def single(built_fmus):
 
 @pytest.fixture(scope="module")
 def scheduled(tmp_path_factory):
-    """Two 24 m/s bands over mbds_250lm's 15..63 m/s (the default 4 m/s bands are the demo's)."""
+    """Two bands of speed ratio sqrt(63/15) = 2.05 over mbds_250lm's 15..63 m/s, no beta/r limit
+    (the default bands, ratio <= 1.25 and beta/r spread <= 0.05 s, are the demo's)."""
     out = tmp_path_factory.mktemp("fmu_002s")
-    data = designs.run("SideslipFixedOrderEstimatorScheduled", band_width=24.0)
+    data = designs.run("SideslipFixedOrderEstimatorScheduled", band_ratio=2.1, band_beta_step=1.0)
     return packaging.package_design(design_file.write(data, out), out), data
 
 
@@ -126,7 +127,8 @@ def test_fmu_equals_scipy_zoh_of_the_design_file(single):
 
 def test_scheduled_fmu_switches_bands_bumplessly(scheduled):
     path, d = scheduled
-    assert d["certified"] and [e["vx_band"] for e in d["estimators"]] == [[15.0, 39.0], [39.0, 63.0]]
+    assert d["certified"] and [e["vx_band"] for e in d["estimators"]] == [[15.0, pytest.approx(15.0 * 4.2 ** 0.5)],
+                                                                         [pytest.approx(15.0 * 4.2 ** 0.5), 63.0]]
     r = np.array([yaw(k) for k in range(600)])
     vx = np.where(np.arange(600) < 300, 30.0, 50.0)               # band 1, then band 2 at step 300
     e1, e2 = d["estimators"]
@@ -188,10 +190,10 @@ def test_bad_vehicle_box_names_the_culprit():
 
 
 def test_speed_bands_cover_the_range_contiguously():
-    b = f.speed_bands((15.0, 63.0), 4.0)
-    assert len(b) == 12 and b[0][0] == 15.0 and b[-1][1] == 63.0
+    b = f.speed_bands((15.0, 63.0))
+    assert len(b) == 7 and b[0][0] == 15.0 and b[-1][1] == 63.0
     assert all(x[1] == y[0] for x, y in zip(b, b[1:]))
-    assert len(f.speed_bands((5.56, 11.11), 4.0)) == 2
+    assert len(f.speed_bands((5.56, 11.11))) == 4
 
 
 def test_mbds_box_centre_is_the_tuning_half_optimum():
