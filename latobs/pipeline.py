@@ -152,6 +152,12 @@ def _plan(names: list[str], vehicle, out: Path, backend: str) -> list[_Artefact]
     return plans
 
 
+def current(name: str, vehicle: str | None, out: Path, backend: str = "auto") -> bool:
+    """Whether ``out`` holds the FMU ``name`` (catalogue design or plant) for ``vehicle`` as
+    :func:`build` would make it now (and would reuse it)."""
+    return _plan([name], vehicle, Path(out), backend)[0].current(design_file_needed=False)[0]
+
+
 def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "auto",
           design_files: bool = True) -> list[Path]:
     """Design + package the named FMUs (default: every observer and plant) with ``backend``:
