@@ -115,25 +115,28 @@ def packaging_code() -> str:
 
 
 @lru_cache(maxsize=None)
+def compiler_version(cc: str) -> bytes:
+    """What ``cc --version`` says (the compiler's identity; once per process)."""
+    import shlex
+    import subprocess
+
+    try:
+        return subprocess.run([*shlex.split(cc), "--version"], capture_output=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        return f"{cc}: {exc}".encode()
+
+
+@lru_cache(maxsize=None)
 def toolchain(backend: str) -> str:
     """Hash of the tools whose output an FMU of ``backend`` holds: the C compiler (its
     ``--version`` and the flags; the pythonfmu backend compiles its native guard with it), the FMI
     headers, and for the pythonfmu backend pythonfmu's binaries."""
-    import shlex
-    import subprocess
-
     from .native_guard import CFLAGS as GUARD_FLAGS
     from .native_guard import find_compiler
 
     h = hashlib.sha256()
     cc = find_compiler()
-    if cc is None:
-        h.update(b"no C compiler")
-    else:
-        try:
-            h.update(subprocess.run([*shlex.split(cc), "--version"], capture_output=True, timeout=60).stdout)
-        except (OSError, subprocess.SubprocessError) as exc:
-            h.update(f"{cc}: {exc}".encode())
+    h.update(b"no C compiler" if cc is None else compiler_version(cc))
     if backend == "c":
         from .cbackend import CFLAGS, FMI_HEADERS
         from .native_guard import fmi2_headers

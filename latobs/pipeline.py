@@ -168,9 +168,10 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
     An FMU already in ``out`` is reused only when it carries the identity of what would be built
     now (``latobs.identity``: design or plant inputs, backend, code, toolchain) and, for an
     observer, its design file beside it is the design inside it (or, without ``design_files``,
-    is absent: an FMU carries its design); otherwise it is rebuilt, saying what changed. A design file whose identity matches is packaged without solving again. The
-    folder is locked while anything is written (``latobs.atomic.locked_folder``); each design
-    file and its FMU are written as one unit."""
+    is absent: an FMU carries its design); otherwise it is rebuilt, saying what changed. A
+    design file whose identity matches is packaged without solving again. The folder is locked
+    while anything is written (``latobs.atomic.locked_folder``); each design file and its FMU
+    are written as one unit (``latobs.packaging.install``)."""
     from . import packaging
     from .atomic import locked_folder
 

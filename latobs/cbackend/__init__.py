@@ -208,7 +208,9 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
         return {"sources/fmu_config.h": config, f"binaries/linux64/{class_name}.so": library}
 
     # the compiler's identity is part of what the binary is made from
-    stamp = hashlib.sha256(subprocess.run([*shlex.split(cc), "--version"], capture_output=True).stdout)
+    from ..identity import compiler_version
+
+    stamp = hashlib.sha256(compiler_version(cc))
     return install(Path(out_dir), class_name, lambda tmp: seal_fmu(
         files, class_name, md, [], tmp, native=compiled, native_sources=stamp.digest() + " ".join(CFLAGS).encode()),
         beside)
