@@ -186,8 +186,8 @@ def of_data(data: dict) -> Identity:
         return Identity(dict(carried["parts"]))
     from .synthesis import design_file
 
-    return Identity({"kind": "data", "data": sha256_json(json.loads(design_file.dumps(design_file.reproducible(data)))),
-                     "latobs": __version__})
+    content = design_file.dumps(design_file.reproducible(data)).encode()
+    return Identity({"kind": "data", "data": hashlib.sha256(content).hexdigest(), "latobs": __version__})
 
 
 def of_fmu(base: Identity, backend: str) -> Identity:
