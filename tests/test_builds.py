@@ -274,7 +274,8 @@ def _assert_pairs_match(out: Path):
 #: a `latobs build` whose packaging stops half-way (the FMU's temporary partly written, the design
 #: file's written): says "sealing" and waits to be killed
 HANG_IN_SEAL = """
-import sys, time
+import signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)   # a background job may start with SIGINT ignored
 import latobs.packaging as pk
 def hang(files, model_identifier, model_description, guard_variables, path, *a, **k):
     open(path, "wb").write(b"PK half an FMU")
@@ -287,7 +288,11 @@ sys.exit(main(sys.argv[1:]))
 
 
 @pytest.mark.slow
-def test_a_build_killed_mid_way_leaves_the_old_pair_and_the_next_build_cleans_up(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "Ctrl-C"])
+def test_a_build_killed_mid_way_leaves_the_old_pair_and_the_next_build_cleans_up(sig, tmp_path):
+    """A real `latobs build` process stopped while packaging (its design already solved): the
+    design file and FMU on disk stay the old, matching pair (before, the new design file was
+    already written beside the old FMU), and the next build removes what the killed one left."""
     out = tmp_path / "fmus"
     toml = _vehicle_file(tmp_path, "mycar")
     fmu, = build(["LateralIntervalObserver"], str(toml), out, backend="python")
@@ -298,15 +303,18 @@ def test_a_build_killed_mid_way_leaves_the_old_pair_and_the_next_build_cleans_up
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _wait_line(proc, "sealing")
-        proc.send_signal(signal.SIGKILL)
-        proc.communicate(timeout=30)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    # the pair on disk is the old one, whole; the killed build's temporaries are there
+    # the pair on disk is the old one, whole; a SIGKILLed build leaves its temporaries, Ctrl-C none
     assert fmu.read_bytes() == old
     _assert_pairs_match(out)
     left = stale_temporaries(out)
-    assert any(".fmu." in p.name for p in left) and any(".design.json." in p.name for p in left), left
+    if sig == signal.SIGKILL:
+        assert any(".fmu." in p.name for p in left) and any(".design.json." in p.name for p in left), left
+    else:
+        assert proc.returncode == 130 and err.strip() == "latobs build: interrupted" and left == [], (err, left)
     # the next build removes them and writes the new pair
     rc = main(["build", "LateralIntervalObserver", "--vehicle", str(toml), "--backend", "python", "--out", str(out)])
     assert rc == 0 and stale_temporaries(out) == []
