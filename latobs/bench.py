@@ -313,13 +313,17 @@ def lmi_section(names: list[str], solvers=SOLVERS, scs_max_iters: int | None = N
 def ensure_fmus(folder: Path, backend: str, names: list[str]) -> dict[str, str]:
     """Build the FMUs of ``names`` missing in ``folder`` with ``backend`` (Clarabel designs);
     returns {name: reason} of those that could not be built (the build's output is kept quiet)."""
-    from .pipeline import build
+    from .pipeline import build, current
 
     failed = {}
     for name in names:
-        if (folder / f"{name}.fmu").is_file():
-            continue
         model, vehicle, _ = _parse_fmu(name)
+        try:
+            if (folder / f"{name}.fmu").is_file() and current(model, vehicle, folder, backend):
+                continue                                    # built from identical inputs: reused
+        except Exception as exc:
+            failed[name] = _reason(exc)
+            continue
         _progress(f"building {name} ({BACKEND_LABEL[backend]}) in {folder}")
         log = io.StringIO()
         try:

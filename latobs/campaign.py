@@ -114,7 +114,8 @@ def _sha256(path: Path) -> str:
 
 
 def fmu_refs(c: Campaign, fmu_dir: Path) -> list[cp.FmuRef]:
-    """The campaign's FMUs in ``fmu_dir`` (built if missing): the plant first (cosim), then the observers."""
+    """The campaign's FMUs in ``fmu_dir`` (each reused if built from identical inputs, else built:
+    ``pipeline.build``): the plant first (cosim), then the observers."""
     from .pipeline import ensure_fmus, ensure_plant
 
     paths: list[tuple[str, Path]] = []

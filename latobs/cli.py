@@ -1,5 +1,6 @@
-"""Command line ``latobs`` (CONTRACT.md): list, design, build, validate, replay, campaign, bench, demo,
-export-ssp."""
+"""latobs: vehicle lateral-dynamics observers from published LMI designs, designed, certified,
+packaged as FMI 2.0 FMUs and validated. Commands: list, design, build, validate, replay, campaign,
+bench, demo, export-ssp (``latobs COMMAND --help``)."""
 from __future__ import annotations
 
 import argparse
@@ -30,25 +31,47 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USER, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
 
 
+#: `latobs list` fits this many columns
+LIST_WIDTH = 100
+
+
+def _list_entry(name: str, text: str, width: int = LIST_WIDTH) -> str:
+    """``name`` and ``text`` wrapped to ``width`` columns: the text beside the name when the name
+    is short, else on the next lines, indented."""
+    import textwrap
+
+    indent = " " * 26
+    first = f"  {name:<23} " if len(name) <= 23 else f"  {name}\n{indent}"
+    lines = textwrap.wrap(" ".join(text.split()), width=width - len(indent)) or [""]
+    return first + ("\n" + indent).join(lines)
+
+
 def _cmd_list(args) -> int:
+    import tomllib
+
+    from .campaign import shipped
     from .packaging import PLANTS
     from .synthesis import designs
     from .synthesis.params import load_vehicle, vehicle_names
     from .validation.scenarios import SCENARIOS
 
-    print("designs (observer FMUs):")
+    print("designs (observer FMUs; `latobs build NAME`):")
     for name, e in designs.DESIGNS.items():
-        print(f"  {name:28s} paper {e.paper}, default vehicle {e.default_vehicle}: {e.description}")
-    print("plants:")
+        print(_list_entry(name, f"paper {e.paper}, default vehicle {e.default_vehicle}: {e.description}"))
+    print("plants (`latobs build NAME`):")
     for name, k in PLANTS.items():
-        print(f"  {name:28s} default vehicle {k.default_vehicle}")
-    print("vehicles:")
+        print(_list_entry(name, f"default vehicle {k.default_vehicle}"))
+    print("vehicles (--vehicle NAME, or a TOML file):")
     for name in vehicle_names():
         v = load_vehicle(name)
-        print(f"  {name:28s} {v.kind}: {v.description}")
-    print("scenarios:")
-    for name, s in SCENARIOS.items():
-        print(f"  {name:28s} {s.duration:g} s: {s.description}")
+        print(_list_entry(name, f"{v.kind}: {v.description}"))
+    print("scenarios (`latobs validate SCENARIO`):")
+    for name, sc in SCENARIOS.items():
+        print(_list_entry(name, f"{sc.duration:g} s: {sc.description}"))
+    print("campaigns (`latobs campaign NAME`):")
+    for name, path in shipped().items():
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        print(_list_entry(name, f"{raw.get('runs', '?')} runs: {raw.get('description', '')}"))
     return 0
 
 
@@ -74,7 +97,10 @@ def _cmd_build(args) -> int:
     with contextlib.redirect_stdout(sys.stderr) if to_stdout else contextlib.nullcontext():
         built = build(args.names, args.vehicle, Path(args.out), args.backend)
     if args.json is not None:
-        text = json.dumps(build_summary(built), indent=1) + "\n"
+        from .atomic import locked_folder
+
+        with locked_folder(args.out, "build"):   # the FMUs and design files as no other build leaves them
+            text = json.dumps(build_summary(built), indent=1) + "\n"
         if to_stdout:
             sys.stdout.write(text)
         else:
@@ -265,12 +291,14 @@ def _vehicle(text: str) -> str:
     if is_file and not Path(text).is_file():
         raise argparse.ArgumentTypeError(f"{text!r}: no such file" if not Path(text).exists()
                                          else f"{text!r} is not a file")
+    from .synthesis.designs import ArtefactNameError, check_vehicle_name
+
     try:
-        load_vehicle(text)
+        check_vehicle_name(load_vehicle(text).name)    # it names FMUs and files: checked before any is written
     except Exception as exc:            # a file's content is the user's, whatever it breaks
-        if not (is_file or isinstance(exc, VehicleParameterError)):
+        if not (is_file or isinstance(exc, (VehicleParameterError, ArtefactNameError))):
             raise
-        msg = str(exc) if isinstance(exc, (VehicleParameterError, OSError, UnicodeError)) else \
+        msg = str(exc) if isinstance(exc, (VehicleParameterError, ArtefactNameError, OSError, UnicodeError)) else \
             f"malformed vehicle file ({type(exc).__name__}: {exc})"
         raise argparse.ArgumentTypeError(msg if not is_file or msg.startswith(text) else f"{text}: {msg}") \
             from None
@@ -329,30 +357,47 @@ def _check_bench_args(argv: list[str]) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     p = _Parser(prog="latobs", description=__doc__)
-    sub = p.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="designs, plants, vehicles and scenarios").set_defaults(func=_cmd_list)
+    p.add_argument("--version", action="version", version=f"latobs {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub.add_parser("list", help="designs, plants, vehicles, scenarios and campaigns").set_defaults(func=_cmd_list)
     d = sub.add_parser("design", help="solve the LMIs, certify, write NAME.design.json")
-    d.add_argument("name")
-    d.add_argument("--vehicle", type=_vehicle)
-    d.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+    d.add_argument("name", help="an observer design (see `latobs list`)")
+    d.add_argument("--vehicle", type=_vehicle, metavar="V",
+                   help="a shipped vehicle set or a vehicle .toml file (default: the design's); a vehicle other "
+                        "than the default names the file NAME_V.design.json, V the set's `name`")
+    d.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
+                   help="folder written (default: build); nothing is written outside it")
     d.set_defaults(func=_cmd_design)
     b = sub.add_parser("build", help="design and package FMUs (default: every observer and plant)")
-    b.add_argument("names", nargs="*")
-    b.add_argument("--vehicle", type=_vehicle)
+    b.add_argument("names", nargs="*", metavar="NAME",
+                   help="observer designs and plants to build (see `latobs list`; default: all of them)")
+    b.add_argument("--vehicle", type=_vehicle, metavar="V",
+                   help="a shipped vehicle set or a vehicle .toml file (default: each FMU's own); a vehicle "
+                        "other than an FMU's default names it NAME_V.fmu, V the set's `name`")
     b.add_argument("--backend", choices=("auto", "c", "python"), default="auto",
-                   help="c: native FMUs (a C compiler is needed), python: pythonfmu FMUs, auto (default): "
-                        "c where possible, else python with a message")
-    b.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+                   help="c: native FMUs (a C compiler is needed), python: pythonfmu FMUs, auto (default): the "
+                        "backend of the FMU already in --out, else c where possible, else python with a message. "
+                        "An FMU of the other backend already in --out is not replaced (exit 2): one folder per "
+                        "backend")
+    b.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
+                   help="folder written (default: build): NAME.fmu and, for observers, NAME.design.json. An FMU "
+                        "already there is reused only if built from identical inputs, else rebuilt; the folder "
+                        "is locked while a build writes it (another build waits)")
     b.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
                    help="a machine-readable summary of the FMUs built (name, kind, paper, vehicle, path, "
                         "sha256, size; gamma and certificate of observers): written atomically to FILE "
                         "(*.json), or to stdout without FILE (or with '-'; progress goes to stderr then)")
     b.set_defaults(func=_cmd_build)
     v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
-    v.add_argument("scenario")
-    v.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable)")
-    v.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+    v.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")
+    v.add_argument("--observer", action="append", default=None,
+                   help="observer FMU name (repeatable; default: paper 000's observers beside CarPlant, every "
+                        "observer of the scenario's plant otherwise)")
+    v.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
+                   help="writes DIR/SCENARIO[_TAG]/ (metrics.json and figures; default: build)")
     v.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
     v.add_argument("--plant-param", action="append", default=[], metavar="NAME=VALUE",
                    help="CarPlant parameter, e.g. scale_f=0.8 or mu=0.3 (repeatable)")
@@ -370,7 +415,8 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--observer", required=True, help="observer FMU name (see `latobs list`)")
     r.add_argument("--vehicle", type=_vehicle,
                    help="vehicle of the FMU: NAME_V.fmu for a non-default vehicle (built if missing)")
-    r.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, help="writes OUT/replay_<csv stem>_<FMU name>/")
+    r.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
+                   help="writes DIR/replay_<csv stem>_<FMU name>/ (default: build)")
     r.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
     r.add_argument("--split", default="auto", metavar="T",
                    help="also score t < T and t >= T separately (s); 'none', or 'auto' (default: 425 s for the "
@@ -395,7 +441,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--workers", type=_positive_int, default=None, metavar="N",
                    help="processes of the local cluster (default: the number of cores)")
     c.add_argument("--seed", type=_seed, default=None, help="campaign seed (default: the campaign's)")
-    c.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, help="writes OUT/campaign_NAME[_TAG]/")
+    c.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
+                   help="writes DIR/campaign_NAME[_TAG]/ (default: build)")
     c.add_argument("--fmu-dir", default=str(DEFAULT_OUT), type=_fmu_dir, help="where the FMUs are (built if missing)")
     c.add_argument("--tag", default="", type=_tag, help="suffix of the output folder")
     c.add_argument("--rerun", type=_seed, default=None, metavar="SEED",
@@ -407,12 +454,13 @@ def parser() -> argparse.ArgumentParser:
                    help="serve the local cluster's Dask dashboard (default address :8787); none without it")
     c.set_defaults(func=_cmd_campaign)
     m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
-    m.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir)
+    m.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
+                   help="folder written: the FMUs, DIR/report/index.md and its figures (default: build)")
     m.add_argument("--verbose", action="store_true", help="print every run's tables (default: a summary, one line "
                                                           "per observer and scenario; the rest is in the report)")
     m.set_defaults(func=_cmd_demo)
     x = sub.add_parser("export-ssp", help="write a scenario's co-simulation as an SSP 1.0 package (.ssp)")
-    x.add_argument("scenario")
+    x.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")
     x.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable; default: "
                                                                       "those of `latobs validate SCENARIO`)")
     x.add_argument("--out", default=None, type=_out_file, metavar="FILE",
@@ -435,6 +483,7 @@ def parser() -> argparse.ArgumentParser:
 # exception is an internal error (exit 1).
 USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.packaging", "PackagingError"), ("latobs.synthesis.designs", "CertificateError"),
+               ("latobs.synthesis.designs", "ArtefactNameError"), ("latobs.atomic", "FolderBusy"),
                ("latobs.synthesis.pi_hinf_000", "DesignError"), ("latobs.synthesis.interval_001", "DesignError"),
                ("latobs.synthesis.fixed_order_002", "DesignError"), ("latobs.synthesis.kalman_baseline", "DesignError"),
                ("latobs.synthesis.pi_switched_003", "DesignError"),

@@ -21,9 +21,15 @@ An FMU is assembled here file by file, not by pythonfmu's ``FmuBuilder``, so tha
 * **reproducible**: the zip has sorted entries, fixed timestamps and permissions, and the model
   description has no generation date: two builds from the same inputs are byte-identical.
 
+* **identified by its inputs**: ``resources/latobs-identity.json`` holds the identity of what the
+  FMU is made from (``latobs.identity``: design or plant inputs, backend, code, toolchain), which
+  ``latobs build`` and every command that builds a missing FMU compare before reusing one; the
+  design copy inside has no wall-clock figures (``design_file.reproducible``).
+
 A design file is re-certified (``latobs.synthesis.certificate``) before packaging; an uncertified
 design is never packaged. The FMU is checked with ``fmpy validate`` and then moved into place
-atomically. The gains live in the FMU's own resources folder, read per instance, and an instance
+atomically, under the output folder's lock, together with the design file beside it when one is
+written (:func:`install`). The gains live in the FMU's own resources folder, read per instance, and an instance
 refuses to run if that file's hash is not the one its entry script was built with.
 """
 from __future__ import annotations
@@ -36,10 +42,10 @@ from importlib import import_module
 from pathlib import Path
 from typing import Callable, Mapping
 
-from . import __version__
-from .atomic import atomic_path
-from .synthesis import design_file
-from .synthesis.params import load_vehicle
+from . import __version__, identity
+from .atomic import atomic_paths, locked_folder
+from .synthesis import design_file, designs
+from .synthesis.params import Vehicle, load_vehicle
 
 from . import fmu_src as _fmu_src  # the runtime's sources are copied, not run, here
 from .fmu_src import framework as _framework  # model description only (standard library)
@@ -90,10 +96,10 @@ def runtime_sources() -> list[Path]:
     return files
 
 
-def plant_data(vehicle: str) -> dict:
+def plant_data(vehicle: str | Vehicle) -> dict:
     """The data file of a plant FMU: the validated vehicle parameter set (and, for a motorcycle,
     the equations derived from it: ``structure``, see ``motorcycle_data``)."""
-    veh = load_vehicle(vehicle)
+    veh = vehicle if isinstance(vehicle, Vehicle) else load_vehicle(vehicle)
     data = {"schema": "latobs.plant/1", "vehicle": veh.as_dict()}
     if veh.kind == "motorcycle":
         data.update(motorcycle_data(veh))
@@ -110,9 +116,12 @@ def motorcycle_data(veh) -> dict:
 
 def pythonfmu_binaries() -> dict[str, bytes]:
     """pythonfmu's native libraries by platform folder: {"linux64/.so": bytes, "win64/.dll": ...}."""
-    import pythonfmu  # packaging only: the FMUs carry its binaries, not its Python code
+    from importlib.util import find_spec  # the FMUs carry its binaries, not its Python code: not imported
 
-    root = Path(pythonfmu.__file__).resolve().parent / "resources" / "binaries"
+    spec = find_spec("pythonfmu")
+    if spec is None or not spec.submodule_search_locations:
+        raise PackagingError("pythonfmu is not installed (its binaries make the pythonfmu backend's FMUs)")
+    root = Path(list(spec.submodule_search_locations)[0]).resolve() / "resources" / "binaries"
     out = {}
     for f in sorted(root.rglob("*")):
         if f.is_file() and f.suffix in (".so", ".dll", ".dylib"):
@@ -229,10 +238,47 @@ def seal_fmu(files: dict[str, bytes], model_identifier: str, model_description: 
     return validate_fmu(str(path))
 
 
-def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path:
-    """Build ``out_dir/<class_name>.fmu`` from the runtime and ``data``; returns its path."""
-    if not class_name.isidentifier():
-        raise PackagingError(f"FMU name {class_name!r} is not a valid identifier")
+def check_name(class_name: str) -> str:
+    """An FMU's name (its modelIdentifier and file name): ArtefactNameError unless it is an FMI
+    modelIdentifier (ASCII letters, digits, underscores, not starting with a digit)."""
+    if not isinstance(class_name, str) or not designs.MODEL_IDENTIFIER.match(class_name):
+        raise designs.ArtefactNameError(f"FMU name {class_name!r} is not an FMI modelIdentifier (ASCII letters, "
+                                        "digits and underscores, not starting with a digit)")
+    return class_name
+
+
+def identity_file(data: dict, backend: str, base: identity.Identity | None = None) -> dict[str, bytes]:
+    """The FMU member holding the identity of the FMU of ``backend`` made from ``data``, whose
+    own identity is ``base`` (default: the one ``data`` carries, else its content)."""
+    ident = identity.of_fmu(base or identity.of_data(data), backend)
+    return {identity.FMU_MEMBER: identity.fmu_bytes(ident)}
+
+
+def install(out_dir: Path, class_name: str, seal: Callable[[Path], list[str]],
+            beside: Mapping[str, bytes] | None = None) -> Path:
+    """Write ``out_dir/<class_name>.fmu`` and the files ``beside`` it ({file name: bytes}, e.g. its
+    design file) as one unit, under the folder's lock: all to temporaries, then renamed, the FMU
+    last. ``seal(tmp)`` writes the FMU to ``tmp`` and returns fmpy validate's problems (any:
+    PackagingError, nothing is written)."""
+    out_dir = Path(out_dir)
+    final = out_dir / f"{check_name(class_name)}.fmu"
+    beside = dict(beside or {})
+    with locked_folder(out_dir, "build"), atomic_paths([*(out_dir / n for n in beside), final]) as tmps:
+        for tmp, raw in zip(tmps, beside.values()):
+            tmp.write_bytes(raw)
+        problems = seal(tmps[-1])
+        if problems:
+            raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
+    return final
+
+
+def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
+              base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None) -> Path:
+    """Build ``out_dir/<class_name>.fmu`` from the runtime and ``data``; returns its path.
+    ``base``: the identity of ``data`` (:func:`identity_file`); ``beside``: files written with the
+    FMU as one unit (:func:`install`)."""
+    check_name(class_name)
+    data = design_file.reproducible(data)       # no wall-clock figure enters an FMU
     out_dir = Path(out_dir)
     # the runtime must accept its data now, not when a user initialises the FMU
     spec = import_module(f"{_fmu_src.__name__}.models.{kind.model_module}").SPEC
@@ -260,6 +306,7 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
     files[f"resources/{module}.py"] = entry.encode("utf-8")
     files[f"resources/{data_name}"] = data_bytes
     files["resources/slavemodule.txt"] = module.encode("utf-8")
+    files.update(identity_file(data, "python", base))
     binaries = pythonfmu_binaries()
     for key, raw in binaries.items():
         platform, suffix = key.split("/")
@@ -283,13 +330,7 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path) -> Path
     guard_variables = [(vr, typ, caus in ("input", "parameter"))
                        for vr, typ, caus, _ in _framework.variable_table(spec)]
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    final = out_dir / f"{class_name}.fmu"
-    with atomic_path(final, suffix=".fmu") as tmp_fmu:
-        problems = seal_fmu(files, class_name, md, guard_variables, tmp_fmu)
-        if problems:
-            raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
-    return final
+    return install(out_dir, class_name, lambda tmp: seal_fmu(files, class_name, md, guard_variables, tmp), beside)
 
 
 BACKENDS = ("c", "python")
@@ -309,40 +350,58 @@ def resolve_backend(requested: str, kind: FmuKind) -> tuple[str, str | None]:
     return ("python", why) if why else ("c", None)
 
 
-def _build(kind: FmuKind, class_name: str, data: dict, out_dir: Path, backend: str) -> Path:
+def _build(kind: FmuKind, class_name: str, data: dict, out_dir: Path, backend: str,
+           base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None) -> Path:
     if backend == "c":
         from . import cbackend
 
         try:
-            return cbackend.build_c_fmu(kind, class_name, data, out_dir)
+            return cbackend.build_c_fmu(kind, class_name, data, out_dir, base=base, beside=beside)
         except cbackend.NativeBuildError as exc:
             raise PackagingError(str(exc)) from exc
-    return build_fmu(kind, class_name, data, out_dir)
+    return build_fmu(kind, class_name, data, out_dir, base=base, beside=beside)
 
 
 def package_design(design_path: Path, out_dir: Path, backend: str = "python") -> Path:
     """Re-certify a design file and package its observer FMU (never an uncertified one) with
     ``backend`` "python" (pythonfmu) or "c" (native, ``latobs.cbackend``)."""
+    return package_design_data(design_file.read(design_path), out_dir, backend, origin=str(design_path))
+
+
+def package_design_data(data: dict, out_dir: Path, backend: str = "python", write_design: bool = False,
+                        origin: str | None = None) -> Path:
+    """:func:`package_design` of a design dict; with ``write_design`` its design file
+    ``out_dir/NAME.design.json`` is written with the FMU, as one unit (:func:`install`)."""
     from .synthesis import certificate  # scipy: only when packaging a design
 
-    data = design_file.read(design_path)
+    origin = origin or f"design {data.get('name')!r}"
     ok, checks = certificate.certify(data)
     if not ok or not data.get("certified"):
         failed = [c.name for c in checks if not c.passed]
-        raise PackagingError(f"{design_path}: design is not certified ({', '.join(failed) or 'flag false'}); "
+        raise PackagingError(f"{origin}: design is not certified ({', '.join(failed) or 'flag false'}); "
                              "refusing to package it")
     kind = OBSERVERS.get(data.get("design", ""))
     if kind is None:
-        raise PackagingError(f"{design_path}: no FMU model for design {data.get('design')!r} "
+        raise PackagingError(f"{origin}: no FMU model for design {data.get('design')!r} "
                              f"(known: {', '.join(OBSERVERS)})")
-    return _build(kind, data["name"], data, out_dir, backend)
+    beside = {design_file.path_of(data, out_dir).name: design_file.dumps(data).encode("utf-8")} if write_design \
+        else None
+    return _build(kind, data["name"], data, out_dir, backend, beside=beside)
 
 
-def package_plant(name: str, vehicle: str | None, out_dir: Path, backend: str = "python") -> Path:
+def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, Vehicle, str, identity.Identity]:
+    """(kind, vehicle, FMU name, identity of its data) of the plant ``name`` for ``vehicle`` (a
+    set's name, a TOML file, a Vehicle, or None: the plant's default vehicle); known before the
+    data is derived. The FMU is ``PLANT`` for the default vehicle, ``PLANT_V`` otherwise (V the
+    set's ``name``, whatever file it came from)."""
     kind = PLANTS.get(name)
     if kind is None:
         raise PackagingError(f"unknown plant {name!r}; known: {', '.join(PLANTS)}")
-    data = plant_data(vehicle or kind.default_vehicle)
-    veh = data["vehicle"]["name"]       # a set by name or a TOML file by path: named after its `name`
-    class_name = name if veh == kind.default_vehicle else f"{name}_{veh}"
-    return _build(kind, class_name, data, out_dir, backend)
+    veh = vehicle if isinstance(vehicle, Vehicle) else load_vehicle(vehicle or kind.default_vehicle)
+    class_name = designs.fmu_name(name, veh.name, kind.default_vehicle)
+    return kind, veh, class_name, identity.of_plant(name, class_name, veh)
+
+
+def package_plant(name: str, vehicle: str | Vehicle | None, out_dir: Path, backend: str = "python") -> Path:
+    kind, veh, class_name, base = plant_artefact(name, vehicle)
+    return _build(kind, class_name, plant_data(veh), out_dir, backend, base=base)

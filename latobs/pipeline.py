@@ -1,8 +1,10 @@
 """The whole pipeline, as the CLI and the demo run it: design -> FMU -> validation."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
+from .identity import Identity
 from .synthesis import designs  # the catalogue only: it imports the solver stack when designing
 
 # Sensor noise and bias of ``latobs validate --noise``: (std, bias) per measured signal, SI units.
@@ -32,19 +34,18 @@ class PipelineError(RuntimeError):
     pass
 
 
-def design_one(name: str, vehicle: str | None, out: Path, quiet: bool = False) -> Path:
-    """Design, certify and write ``out/NAME[_V].design.json``; prints the headline figures."""
-    from .synthesis import certificate, design_file
+def solve(name: str, vehicle: str | None, quiet: bool = False) -> dict:
+    """Design and certify (``designs.run``); prints the headline figures."""
+    from .synthesis import certificate
 
     data = designs.run(name, vehicle)
-    path = design_file.write(data, out)
     if not quiet:
         s = certificate.summary(data)    # its keys depend on the paper: print those present
         extra = "".join(f", {label} = {s[key]:{fmt}}" for key, label, fmt in
                         (("cond_P", "cond(P)", ".3g"), ("iss_gain", "ISS gain", ".4g"))
                         if isinstance(s.get(key), (int, float)))
         print(f"{data['name']}: certified ({len(data['checks'])} checks), gamma = {s['gamma']:.4g}{extra}, "
-              f"{data['solver']['name']} {data['solver']['status']} in {data['solver']['seconds']:.2f} s -> {path}")
+              f"{data['solver']['name']} {data['solver']['status']} in {data['solver']['seconds']:.2f} s")
         for m in s["per_mode"]:
             at = (f"{m['speed_kmh']:5.1f} km/h" if "speed_kmh" in m else
                   f"{m['speed_ms']:5.2f} m/s" if isinstance(m.get("speed_ms"), (int, float)) else
@@ -56,14 +57,123 @@ def design_one(name: str, vehicle: str | None, out: Path, quiet: bool = False) -
                       ("gamma_grid", "certified grid worst case", ".4g"))
                      if isinstance(m.get(key), (int, float)) and not (key == "slowest_pole" and "slowest_bank_pole" in m)]
             print(f"  mode {m['mode']}{' @ ' + at if at else ''}: {', '.join(parts)}")
+    return data
+
+
+def design_one(name: str, vehicle: str | None, out: Path, quiet: bool = False) -> Path:
+    """Design, certify and write ``out/NAME[_V].design.json``; prints the headline figures."""
+    from .synthesis import design_file
+
+    data = solve(name, vehicle, quiet)
+    path = design_file.write(data, out)
+    if not quiet:
+        print(f"wrote {path}")
     return path
 
 
-def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "auto") -> list[Path]:
+BACKEND_LABEL = {"c": "native C", "python": "pythonfmu"}
+
+
+@dataclass
+class _Artefact:
+    """One FMU of a build, planned before anything is solved or written."""
+    model: str                  # catalogue design or plant
+    name: str                   # the FMU's name (NAME or NAME_V)
+    vehicle: object             # as given (a set's name, a TOML path, None), for the solver
+    base: Identity              # identity of its design or plant data
+    backend: str                # "c" or "python"
+    why: str | None             # why "auto" fell back to pythonfmu
+    fmu: Path
+
+    @property
+    def design_path(self) -> Path | None:
+        return self.fmu.with_name(f"{self.name}.design.json") if self.model in designs.DESIGNS else None
+
+    def current(self, design_file_needed: bool = True) -> tuple[bool, str]:
+        """(True, "") if the FMU (and the design file beside it) is what this build would make,
+        else (False, what to say). A design file beside an observer FMU that is not the design
+        inside it is never current; a missing one only when ``design_file_needed``."""
+        import json
+        import zipfile
+
+        from . import identity
+        from .synthesis import design_file
+
+        if not self.fmu.is_file():
+            return False, f"building {self.fmu.name}"
+        expected = identity.of_fmu(self.base, self.backend)
+        found = identity.read_fmu(self.fmu)
+        if found is None or found.sha256 != expected.sha256:
+            return False, f"rebuilding {self.fmu.name}: {expected.changes(found)}"
+        if self.design_path is not None and (design_file_needed or self.design_path.exists()):
+            try:
+                with zipfile.ZipFile(self.fmu) as z:
+                    inner = json.loads(z.read(f"resources/{self.name}.design.json"))
+                beside = json.loads(self.design_path.read_text(encoding="utf-8"))
+            except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+                inner = beside = None
+            if beside is None or design_file.reproducible(beside) != inner:
+                return False, (f"rebuilding {self.fmu.name}: {self.design_path.name} beside it is missing or is not "
+                               "the design inside it")
+        return True, ""
+
+
+def _plan(names: list[str], vehicle, out: Path, backend: str) -> list[_Artefact]:
+    """The artefacts of a build: names checked, identities known, backends chosen. "auto" keeps
+    the backend of an FMU already in ``out`` (when it can be built here); an explicit backend
+    that differs from an existing FMU's is refused (a folder never mixes two backends' FMUs of one
+    name unnoticed): PipelineError before anything is written."""
+    from . import cbackend, identity, packaging
+    from .synthesis.params import load_vehicle
+
+    plans, conflicts = [], []
+    veh = load_vehicle(vehicle) if vehicle is not None else None
+    for name in names:
+        kind = packaging.OBSERVERS.get(name) or packaging.PLANTS[name]
+        if name in designs.DESIGNS:
+            base = identity.of_design(name, veh)
+            artefact = base.parts["artefact"]
+        else:
+            _, _, artefact, base = packaging.plant_artefact(name, veh)
+        fmu = out / f"{artefact}.fmu"
+        existing = identity.fmu_backend(fmu) if fmu.is_file() else None
+        if existing is not None and backend != "auto" and existing != backend:
+            conflicts.append(f"{fmu} is a {BACKEND_LABEL[existing]} FMU")
+        if backend == "auto" and existing is not None and (
+                existing == "python" or cbackend.unavailable_reason(kind.model_module) is None):
+            chosen, why = existing, None
+        else:
+            chosen, why = packaging.resolve_backend(backend, kind)
+        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu))
+    if conflicts:
+        raise PipelineError(f"{'; '.join(conflicts)}: refusing to replace {'it' if len(conflicts) == 1 else 'them'} "
+                            f"with {BACKEND_LABEL[backend]} FMUs of the same name; build into another --out "
+                            "(one folder per backend), or delete the FMU(s) first")
+    return plans
+
+
+def current(name: str, vehicle: str | None, out: Path, backend: str = "auto") -> bool:
+    """Whether ``out`` holds the FMU ``name`` (catalogue design or plant) for ``vehicle`` as
+    :func:`build` would make it now (and would reuse it)."""
+    return _plan([name], vehicle, Path(out), backend)[0].current(design_file_needed=False)[0]
+
+
+def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "auto",
+          design_files: bool = True) -> list[Path]:
     """Design + package the named FMUs (default: every observer and plant) with ``backend``:
-    "c" (native, ``latobs.cbackend``), "python" (pythonfmu) or "auto" (C where a C compiler is
-    present and the runtime has a C model, else pythonfmu, saying why)."""
+    "c" (native, ``latobs.cbackend``), "python" (pythonfmu) or "auto" (the backend of the FMU
+    already there, else C where a C compiler is present and the runtime has a C model, else
+    pythonfmu, saying why).
+
+    An FMU already in ``out`` is reused only when it carries the identity of what would be built
+    now (``latobs.identity``: design or plant inputs, backend, code, toolchain) and, for an
+    observer, its design file beside it is the design inside it (or, without ``design_files``,
+    is absent: an FMU carries its design); otherwise it is rebuilt, saying what changed. A
+    design file whose identity matches is packaged without solving again. The folder is locked
+    while anything is written (``latobs.atomic.locked_folder``); each design file and its FMU
+    are written as one unit (``latobs.packaging.install``)."""
     from . import packaging
+    from .atomic import locked_folder
 
     if backend not in ("auto", *packaging.BACKENDS):
         raise PipelineError(f"unknown backend {backend!r}; known: auto, {', '.join(packaging.BACKENDS)}")
@@ -72,19 +182,47 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
     if unknown:
         raise PipelineError(f"unknown FMU(s) {', '.join(unknown)}; known: "
                             f"{', '.join([*designs.DESIGNS, *packaging.PLANTS])}")
+    out = Path(out)
+    plans = _plan(names, vehicle, out, backend)
+    if all(p.current(design_files)[0] for p in plans):       # nothing to write: no lock to wait for
+        for p in plans:
+            print(f"reusing {p.fmu.name} (identical inputs)")
+        return [p.fmu for p in plans]
     built = []
-    for name in names:
-        kind = packaging.OBSERVERS.get(name) or packaging.PLANTS[name]
-        chosen, why = packaging.resolve_backend(backend, kind)
-        if why:
-            print(f"{name}: pythonfmu backend ({why})")
-        if name in designs.DESIGNS:
-            path = packaging.package_design(design_one(name, vehicle, out), out, chosen)
-        else:
-            path = packaging.package_plant(name, vehicle, out, chosen)
-        print(f"built {path} ({'native C' if chosen == 'c' else 'pythonfmu'})")
-        built.append(path)
+    with locked_folder(out, "build"):
+        plans = _plan(names, vehicle, out, backend)     # again: another build may have written meanwhile
+        for p in plans:
+            ok, what = p.current(design_files)
+            if ok:
+                print(f"reusing {p.fmu.name} (identical inputs)")
+                built.append(p.fmu)
+                continue
+            if p.why:
+                print(f"{p.name}: pythonfmu backend ({p.why})")
+            print(what)
+            if p.design_path is None:
+                path = packaging.package_plant(p.model, p.vehicle, out, p.backend)
+            else:
+                data = _current_design(p) or solve(p.model, p.vehicle)
+                path = packaging.package_design_data(data, out, p.backend, write_design=True,
+                                                     origin=str(p.design_path))
+            print(f"built {path} ({BACKEND_LABEL[p.backend]})")
+            built.append(path)
     return built
+
+
+def _current_design(p: _Artefact) -> dict | None:
+    """The design file beside ``p``'s FMU if it was made from the same inputs (not solved again)."""
+    from .synthesis import design_file
+
+    try:
+        data = design_file.read(p.design_path)
+    except ValueError:
+        return None
+    if (data.get("identity") or {}).get("sha256") != p.base.sha256 or not data.get("certified"):
+        return None
+    print(f"{p.name}: {p.design_path.name} was made from the same inputs: packaged without solving again")
+    return data
 
 
 #: ``schema`` of :func:`build_summary`'s document (``latobs build --json``).
@@ -100,18 +238,20 @@ def build_summary(fmus: list[Path]) -> dict:
             "vehicle": vehicle set name, "path": str, "sha256": hex of the .fmu, "size": bytes,
             "backend": "c" (native) | "python" (pythonfmu),
             # observers (null for plants), read from NAME.design.json beside the FMU:
-            "design_file": str, "design_sha256": hex, "gamma": the design's "gamma",
+            "design_file": str, "design_sha256": hex of that file, "gamma": the design's "gamma",
             "model_error_gamma": its "model_error"."gamma" (paper 000's default designs) | null,
             "certificate": {"certified": bool, "passed": int, "total": int}}, ...]}
 
-    The design file beside an observer FMU must be the one inside it (same bytes), else
-    PipelineError: a summary never describes a design the FMU does not carry."""
+    The design file beside an observer FMU must be the one inside it (the same but for its
+    wall-clock figures, ``design_file.reproducible``), else PipelineError: a summary never
+    describes a design the FMU does not carry."""
     import hashlib
     import json
     import zipfile
 
     from . import __version__
     from .packaging import PLANTS
+    from .synthesis.design_file import reproducible
 
     def sha(raw: bytes) -> str:
         return hashlib.sha256(raw).hexdigest()
@@ -129,13 +269,18 @@ def build_summary(fmus: list[Path]) -> dict:
         inner = members.get(f"resources/{fmu.stem}.design.json")
         if inner is not None:
             design_path = fmu.with_name(f"{fmu.stem}.design.json")
-            if not design_path.is_file() or design_path.read_bytes() != inner:
-                raise PipelineError(f"{design_path} is missing or is not the design file inside {fmu}")
             d = json.loads(inner)
+            try:
+                raw_beside = design_path.read_bytes()
+                beside = json.loads(raw_beside)
+            except (OSError, ValueError):
+                beside = None
+            if beside is None or reproducible(beside) != d:
+                raise PipelineError(f"{design_path} is missing or is not the design file inside {fmu}")
             me = d.get("model_error")
             entry.update(kind="observer", model=d.get("design"), paper=d.get("paper"),
                          vehicle=(d.get("vehicle") or {}).get("name"), design_file=str(design_path),
-                         design_sha256=sha(inner), gamma=d.get("gamma"),
+                         design_sha256=sha(raw_beside), gamma=d.get("gamma"),
                          model_error_gamma=me.get("gamma") if isinstance(me, dict) else None,
                          certificate={"certified": bool(d.get("certified")),
                                       "passed": sum(bool(c.get("passed")) for c in d.get("checks", [])),
@@ -156,35 +301,29 @@ def build_summary(fmus: list[Path]) -> dict:
 
 
 def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
-    """Paths of the named FMUs in ``fmu_dir``, building the missing ones."""
-    missing = [n for n in names if not (fmu_dir / f"{n}.fmu").is_file()]
-    if missing:
-        print(f"building missing FMU(s): {', '.join(missing)}")
-        for n in missing:                     # NAME or NAME_VEHICLE (a design for another vehicle)
+    """Paths of the named observer FMUs in ``fmu_dir``: ``NAME`` or ``NAME_V`` (V a shipped
+    vehicle set), each reused if current, else built (:func:`build` says which). An FMU of
+    another name found there (made by hand) is used as it is."""
+    fmu_dir = Path(fmu_dir)
+    out = {}
+    for n in names:
+        try:
             design, vehicle = designs.parse_artefact(n)
-            build([design], vehicle, fmu_dir)
-    return {n: fmu_dir / f"{n}.fmu" for n in names}
+        except KeyError:
+            if not (fmu_dir / f"{n}.fmu").is_file():
+                raise
+            print(f"using {n}.fmu as found (not a catalogue design: its inputs cannot be checked)")
+            out[n] = fmu_dir / f"{n}.fmu"
+            continue
+        out[n], = build([design], vehicle, fmu_dir, design_files=False)
+    return out
 
 
 def ensure_plant(plant: str, vehicle: str | None, fmu_dir: Path) -> Path:
     """Path of the plant FMU ``plant`` for ``vehicle`` (a name or a TOML file; None: the plant's
-    default vehicle) in ``fmu_dir``, built if missing: ``PLANT.fmu`` for the default vehicle,
-    ``PLANT_VEHICLE.fmu`` otherwise."""
-    from . import packaging
-
-    kind = packaging.PLANTS[plant]
-    vehicle = vehicle or kind.default_vehicle
-    if str(vehicle).endswith(".toml"):   # a TOML file by path: its FMU is named after its `name`
-        from .synthesis.params import load_vehicle
-
-        vehicle_name = load_vehicle(vehicle).name
-    else:
-        vehicle_name = vehicle
-    name = plant if vehicle_name == kind.default_vehicle else f"{plant}_{vehicle_name}"
-    path = fmu_dir / f"{name}.fmu"
-    if not path.is_file():
-        print(f"building missing FMU: {name}")
-        build([plant], vehicle, fmu_dir)
+    default vehicle) in ``fmu_dir``: ``PLANT.fmu`` for the default vehicle, ``PLANT_VEHICLE.fmu``
+    otherwise (VEHICLE the set's ``name``), reused if current, else built (:func:`build`)."""
+    path, = build([plant], vehicle, fmu_dir, design_files=False)
     return path
 
 
@@ -257,11 +396,7 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
         print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
               f"{veh.name!r} (use --vehicle {rp.MBDS_VEHICLE} for the dataset's own parameters)")
     name = designs.artefact_name(observer, veh.name)   # a TOML path: named after the set's `name`
-    fmu_dir = Path(fmu_dir)
-    fmu = fmu_dir / f"{name}.fmu"
-    if not fmu.is_file():
-        print(f"building missing FMU {name}")
-        build([observer], vehicle, fmu_dir)
+    fmu, = build([observer], vehicle, Path(fmu_dir), design_files=False)   # reused if current, else built
     mass = veh.parameters["m"].value if "m" in veh.parameters else None
     out_dir = Path(out) / f"replay_{rp.csv_stem(path)}_{name}"
     metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,

@@ -791,7 +791,7 @@ def export_ssp(scenario, observers: list[str] | None = None, out: Path | None = 
     ``scenario`` is a registered name or a :class:`~latobs.validation.scenarios.Scenario` (e.g.
     ``get_scenario("bank-braking", duration=3.0)``). Returns the path written."""
     from . import packaging
-    from .pipeline import build, ensure_fmus
+    from .pipeline import ensure_fmus, ensure_plant
     from .synthesis import designs
     from .validation import get_scenario
 
@@ -825,11 +825,7 @@ def export_ssp(scenario, observers: list[str] | None = None, out: Path | None = 
         raise SspError(f"step {dt} s must be > 0")
 
     fmus = ensure_fmus(observers, fmu_dir)
-    plant_name = sc.plant if vehicle_name == kind.default_vehicle else f"{sc.plant}_{vehicle_name}"
-    plant_path = fmu_dir / f"{plant_name}.fmu"
-    if not plant_path.is_file():
-        print(f"building missing FMU: {plant_name}")
-        build([sc.plant], plant_vehicle, fmu_dir)
+    plant_path = ensure_plant(sc.plant, plant_vehicle, fmu_dir)     # reused if current, else built
     plant = FmuInterface.read(plant_path, PLANT_LABEL)
     obs = {n: FmuInterface.read(fmus[n], n) for n in observers}
 

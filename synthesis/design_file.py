@@ -1,9 +1,14 @@
 """The design file ``NAME.design.json``: the one thing that crosses from design time to the FMU.
 
-Keys (CONTRACT.md): name, paper, vehicle (name and every parameter), modes (scheduling value or
-range, gain matrices), gamma, certified, checks [{name, value, limit, passed}], solver {name,
-status, seconds}; plus what the runtime needs (``runtime``) and the certificate's inputs.
-Writes are atomic (temporary file in the same folder, then ``os.replace``).
+Keys: name, paper, vehicle (name and every parameter), modes (scheduling value or range, gain
+matrices), gamma, certified, checks [{name, value, limit, passed}], solver {name, status,
+seconds}; plus what the runtime needs (``runtime``), the certificate's inputs and ``identity``
+(what the design is made from, ``latobs.identity``). Writes are atomic (temporary file in the same
+folder, then ``os.replace``), under the folder's lock (``latobs.atomic.locked_folder``).
+
+Wall-clock figures are keys named ``seconds`` or ending in ``_seconds``: they vary run to run,
+so the copy of a design that enters an FMU is :func:`reproducible` (without them) and two builds
+from the same inputs give byte-identical FMUs; the file beside the FMU keeps them.
 """
 from __future__ import annotations
 
@@ -13,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write_text
+from ..atomic import atomic_write_text, locked_folder
 
 SCHEMA = "latobs.design/1"
 
@@ -36,8 +41,37 @@ def dumps(data: dict) -> str:
     return json.dumps(_plain(data), indent=1, sort_keys=False) + "\n"
 
 
+def is_wall_time(key: str) -> bool:
+    """A key holding a wall-clock measurement (run-dependent)."""
+    return key == "seconds" or key.endswith("_seconds")
+
+
+def reproducible(data):
+    """``data`` without its wall-clock figures (:func:`is_wall_time`), at any depth: what an FMU
+    carries of its design."""
+    if isinstance(data, dict):
+        return {k: reproducible(v) for k, v in data.items() if not is_wall_time(str(k))}
+    if isinstance(data, (list, tuple)):
+        return [reproducible(v) for v in data]
+    return data
+
+
+def path_of(data: dict, out_dir: Path) -> Path:
+    """``out_dir/NAME.design.json``; ArtefactNameError if NAME is not an FMI modelIdentifier
+    (a name never makes a path outside ``out_dir``)."""
+    from .designs import ArtefactNameError, MODEL_IDENTIFIER
+
+    name = str(data.get("name", ""))
+    if not MODEL_IDENTIFIER.match(name):
+        raise ArtefactNameError(f"design name {name!r} is not an FMI modelIdentifier (ASCII letters, digits and "
+                                "underscores, not starting with a digit)")
+    return Path(out_dir) / f"{name}.design.json"
+
+
 def write(data: dict, out_dir: Path) -> Path:
-    return atomic_write_text(Path(out_dir) / f"{data['name']}.design.json", dumps(data))
+    path = path_of(data, out_dir)
+    with locked_folder(out_dir, "design"):
+        return atomic_write_text(path, dumps(data))
 
 
 def read(path: Path) -> dict:

@@ -5,6 +5,7 @@
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -16,6 +17,37 @@ from .params import Vehicle, load_vehicle
 
 class CertificateError(RuntimeError):
     """A design solved but failed its independent certificate; it must not be packaged."""
+
+
+class ArtefactNameError(ValueError):
+    """A name that cannot name an FMU (and its files): not an FMI modelIdentifier."""
+
+
+#: an FMI modelIdentifier (and so an FMU's file name): ASCII letters, digits and underscores, not
+#: starting with a digit. A vehicle's name is appended to a model's after "_" (``NAME_V``).
+MODEL_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+_NAME_PART = re.compile(r"[A-Za-z0-9_]+\Z")
+
+
+def check_vehicle_name(vehicle: str, origin: str = "") -> str:
+    """``vehicle`` (a parameter set's ``name``) if it can name an FMU, else ArtefactNameError."""
+    if not _NAME_PART.match(vehicle):
+        raise ArtefactNameError(f"{origin + ': ' if origin else ''}vehicle name {vehicle!r} cannot name an FMU "
+                                "(FMU names NAME_VEHICLE are FMI modelIdentifiers: ASCII letters, digits and "
+                                "underscores only)")
+    return vehicle
+
+
+def fmu_name(model: str, vehicle: str | None, default_vehicle: str) -> str:
+    """The FMU (artefact) name of ``model`` for the vehicle named ``vehicle``: ``model`` for its
+    default vehicle (or None), else ``model_vehicle``; ArtefactNameError if that is not an FMI
+    modelIdentifier (so no name ever reaches a file name outside its folder)."""
+    if not MODEL_IDENTIFIER.match(model):
+        raise ArtefactNameError(f"model name {model!r} is not an FMI modelIdentifier (ASCII letters, digits and "
+                                "underscores, not starting with a digit)")
+    if vehicle in (None, default_vehicle):
+        return model
+    return f"{model}_{check_vehicle_name(vehicle)}"
 
 
 @dataclass(frozen=True)
@@ -137,7 +169,7 @@ DESIGNS: dict[str, DesignEntry] = {
     "MotorcycleFaultObserver": DesignEntry(
         "MotorcycleFaultObserver", "003", "sharp_motorcycle",
         "switched H-inf PI observer of a motorcycle's roll angle and rider torque (unknown inputs), one "
-        "Lyapunov matrix per speed mode 10..30 m/s, LMIs (20)-(23) with ERRATA's corrections",
+        "Lyapunov matrix per speed mode 10..30 m/s, LMIs (20)-(23) with their misprints corrected",
         _options_003, _solve_003, plant="MotorcyclePlant"),
 }
 
@@ -149,9 +181,8 @@ def get(name: str) -> DesignEntry:
 
 
 def artefact_name(name: str, vehicle: str | None) -> str:
-    """CONTRACT: a build for a vehicle other than the design's default is named NAME_V."""
-    entry = get(name)
-    return name if vehicle in (None, entry.default_vehicle) else f"{name}_{vehicle}"
+    """A build for a vehicle other than the design's default is named NAME_V."""
+    return fmu_name(name, vehicle, get(name).default_vehicle)
 
 
 def parse_artefact(artefact: str) -> tuple[str, str | None]:
@@ -173,13 +204,16 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     Raises ``pi_hinf_000.DesignError`` when the LMIs are infeasible and ``CertificateError``
     (carrying the failed checks) when the certificate fails.
     """
+    from ..identity import of_design
     from . import certificate
 
     entry = get(name)
     veh = load_vehicle(vehicle or entry.default_vehicle)
+    ident = of_design(name, veh, overrides)   # what it is made from; checks the artefact name first
     opts = replace(entry.options(artefact_name(name, veh.name)), **overrides)
     data = entry.solve(veh, opts)
     data["design"] = name          # the catalogue entry (the FMU model), whatever the artefact name
+    data["identity"] = ident.as_dict()
     ok, checks = certificate.certify(data)
     data["certified"] = ok
     data["checks"] = certificate.as_dicts(checks)

@@ -88,7 +88,7 @@ def test_validate_loads_no_design_stack_and_can_skip_plots(tmp_path, fmu_dir):
     proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     rc, heavy = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert rc == 0 and heavy == []
+    assert rc == 0 and heavy == [], proc.stdout[:3000]
     out = tmp_path / "double-lane-change"
     assert (out / "metrics.json").is_file() and not list(out.glob("*.png"))
 
@@ -163,7 +163,7 @@ def _setup_files(tmp_path: Path) -> dict[str, Path]:
 
 # (id, argv with {placeholders} of _setup_files, command, culprits named in the line)
 CHEAP_ERRORS = [
-    ("no-command", [], "", ["required: command"]),
+    ("no-command", [], "", ["required: COMMAND"]),
     ("unknown-command", ["frobnicate"], "", ["'frobnicate'"]),
     ("design-no-name", ["design"], "design", ["name"]),
     ("unknown-design", ["design", "NoSuchObserver"], "design", ["unknown design 'NoSuchObserver'"]),
@@ -260,17 +260,18 @@ def test_a_design_that_fails_is_one_line_and_exit_2(values, culprit, tmp_path, c
 
 
 def _broken_fmu_dir(fmu_dir: Path, tmp_path: Path) -> Path:
-    """CarPlant, a truncated SideslipBankObserver, a zip that is no FMU as SideslipBankObserverTire,
-    and a text file as SideslipBankObserverPaper."""
+    """CarPlant, a truncated SideslipBankObserver as MyTruncated, a zip that is no FMU as MyZip, and
+    a text file as MyText: FMUs found under names that are not a catalogue design's are used as
+    they are (a catalogue design's would be rebuilt: it carries no identity)."""
     import zipfile
 
     bad = tmp_path / "broken_fmus"
     bad.mkdir()
     shutil.copy(fmu_dir / "CarPlant.fmu", bad)
-    (bad / "SideslipBankObserver.fmu").write_bytes((fmu_dir / "SideslipBankObserver.fmu").read_bytes()[:5000])
-    with zipfile.ZipFile(bad / "SideslipBankObserverTire.fmu", "w") as z:
+    (bad / "MyTruncated.fmu").write_bytes((fmu_dir / "SideslipBankObserver.fmu").read_bytes()[:5000])
+    with zipfile.ZipFile(bad / "MyZip.fmu", "w") as z:
         z.writestr("hello.txt", "not an FMU")
-    (bad / "SideslipBankObserverPaper.fmu").write_text("garbage")
+    (bad / "MyText.fmu").write_text("garbage")
     return bad
 
 
@@ -281,14 +282,12 @@ FMU_ERRORS = [
                          "scale_f=100"], "validate", ["CarPlant", "'scale_f' = 100.0", "declared range"]),
     ("param-unknown", ["validate", "bank-braking", "--plant-param", "foo=1"], "validate",
      ["CarPlant", "no parameter 'foo'", "mu"]),
-    ("fmu-truncated", ["validate", "bank-braking", "--observer", "SideslipBankObserver", "--fmu-dir", "{bad}"],
-     "validate", ["SideslipBankObserver.fmu", "not a readable FMU"]),
-    ("fmu-not-a-zip", ["validate", "bank-braking", "--observer", "SideslipBankObserverPaper", "--fmu-dir", "{bad}"],
-     "validate", ["SideslipBankObserverPaper.fmu", "not a readable FMU"]),
-    ("zip-not-an-fmu", ["validate", "bank-braking", "--observer", "SideslipBankObserverTire", "--fmu-dir", "{bad}"],
-     "validate", ["SideslipBankObserverTire.fmu", "modelDescription.xml"]),
-    ("replay-fmu-truncated", ["replay", "{full_csv}", "--observer", "SideslipBankObserver", "--fmu-dir", "{bad}"],
-     "replay", ["SideslipBankObserver.fmu", "cannot open FMU"]),
+    ("fmu-truncated", ["validate", "bank-braking", "--observer", "MyTruncated", "--fmu-dir", "{bad}"],
+     "validate", ["MyTruncated.fmu", "not a readable FMU"]),
+    ("fmu-not-a-zip", ["validate", "bank-braking", "--observer", "MyText", "--fmu-dir", "{bad}"],
+     "validate", ["MyText.fmu", "not a readable FMU"]),
+    ("zip-not-an-fmu", ["validate", "bank-braking", "--observer", "MyZip", "--fmu-dir", "{bad}"],
+     "validate", ["MyZip.fmu", "modelDescription.xml"]),
     ("replay-csv-lacks-inputs", ["replay", "{csv}", "--observer", "SideslipBankObserver"], "replay",
      ["SideslipBankObserver", "'vx', 'yaw_rate', 'roll_angle', 'roll_rate'", "cannot run on", "t_delta.csv"]),
     ("out-subfolder-is-a-file", ["validate", "double-lane-change", "--observer", "SideslipBankObserver",
@@ -302,12 +301,10 @@ def test_an_fmu_level_user_error_is_one_line_and_exit_2(argv, command, culprits,
     record without the FMU's inputs, an output folder taken by a file), with the session's FMUs."""
     csv = tmp_path / "t_delta.csv"
     csv.write_text("t,delta\n0,0\n0.01,0.001\n0.02,0.002\n")
-    full_csv = tmp_path / "t_all.csv"        # every input of SideslipBankObserver
-    full_csv.write_text("t,delta,vx,yaw_rate,roll_angle,roll_rate\n0,0,20,0,0,0\n0.01,0.001,20,0,0,0\n")
     out = tmp_path / "out"
     out.mkdir()
     (out / "double-lane-change").write_text("a file where validate writes its folder")
-    places = {"bad": _broken_fmu_dir(fmu_dir, tmp_path), "csv": csv, "full_csv": full_csv, "out": out}
+    places = {"bad": _broken_fmu_dir(fmu_dir, tmp_path), "csv": csv, "out": out}
     argv = [a.format(**places) for a in argv]
     if "--fmu-dir" not in argv:
         argv += ["--fmu-dir", str(fmu_dir)]
@@ -329,7 +326,9 @@ def test_the_issue_command_in_a_real_process(fmu_dir, tmp_path):
                            "--fmu-dir", str(fmu_dir), "--out", str(tmp_path), "--no-plots"],
                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
     _assert_one_line(proc.returncode, proc.stderr, "validate", ["CarPlant", "'mu'", "[0.01, 2.0]"])
-    assert proc.stdout == ""
+    # nothing on stdout but the FMUs found current (nothing built)
+    assert all(line.startswith("reusing ") and line.endswith(".fmu (identical inputs)")
+               for line in proc.stdout.splitlines()), proc.stdout
 
 
 def test_a_bug_is_exit_1_with_one_line_and_the_traceback_on_request(capsys, monkeypatch):
@@ -380,8 +379,64 @@ def test_list_describes_tire_mode_2_as_the_secant_not_half_c1(capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out
     assert "0.5 C1" not in out and "0.5*C1" not in out and "0.5·C1" not in out
-    tire = next(line for line in out.splitlines() if line.strip().startswith("SideslipBankObserverTire "))
-    assert "C1 / C2 (secant of the tire curve)" in tire
+    assert "C1 / C2 (secant of the tire curve)" in _list_entries(out)["SideslipBankObserverTire"]
+
+
+def _list_entries(out: str) -> dict[str, str]:
+    """`latobs list`'s entries {name: text}: a name at column 3, its text beside it or below it,
+    wrapped on lines indented deeper."""
+    entries, name = {}, None
+    for line in out.splitlines():
+        if line.startswith("  ") and not line.startswith("   "):
+            name, _, text = line.strip().partition(" ")
+            entries[name] = text.strip()
+        elif line.startswith("   ") and name is not None:
+            entries[name] = (entries[name] + " " + line.strip()).strip()
+        else:
+            name = None
+    return entries
+
+
+def test_list_fits_100_columns_and_names_every_shipped_campaign(capsys):
+    from latobs.campaign import shipped
+    from latobs.synthesis import designs
+    from latobs.validation.scenarios import SCENARIOS
+
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert max(map(len, out.splitlines())) <= 100
+    entries = _list_entries(out)
+    for name in [*designs.DESIGNS, *SCENARIOS, *shipped()]:
+        assert name in entries and entries[name], name
+    assert set(shipped()) >= {"robustness-001", "mbds-bootstrap"}
+    assert "1000 runs" in entries["robustness-001"]
+
+
+def test_version_and_a_help_text_for_every_argument(capsys):
+    """`latobs --version`; every argument of every command has a help text; no help text names
+    the project's internal documents or issue numbers."""
+    import argparse
+    import re
+
+    from latobs import __version__
+    from latobs.cli import parser
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"latobs {__version__}"
+    p = parser()
+    sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
+    missing, texts = [], [p.description or ""]
+    for command, sp in sub.choices.items():
+        texts.append(sp.format_help())
+        for action in sp._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            if not action.help:
+                missing.append(f"{command} {action.option_strings or action.dest}")
+    assert missing == []
+    for text in texts:
+        assert not re.search(r"CONTRACT|ERRATA|\.\./shared|issue ?#?\d", text), text
 
 
 def test_demo_prints_a_summary_unless_verbose():

@@ -35,7 +35,6 @@ from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .. import __version__
-from ..atomic import atomic_path
 from ..fmu_src import framework as _framework
 from ..native_guard import fmi2_headers, find_compiler
 from .emit import CModel, c_array, c_define, c_string
@@ -158,18 +157,19 @@ def _compile(cc: str, sources: dict[str, bytes], c_files: list[str], out_name: s
         return (work / out_name).read_bytes()
 
 
-def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path) -> Path:
+def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None) -> Path:
     """Build ``out_dir/<class_name>.fmu`` with the native C backend; returns its path.
 
     ``kind``: a ``latobs.packaging.FmuKind``. The Python runtime must accept ``data`` (the same
     checks as the pythonfmu backend), then the model's emitter writes its C data. Raises
     NativeBuildError when there is no C compiler or no C model for this runtime (see
-    :func:`unavailable_reason`) or the compiler fails, PackagingError when ``fmpy validate`` does."""
-    from ..packaging import COPYRIGHT, PackagingError, seal_fmu
+    :func:`unavailable_reason`) or the compiler fails, PackagingError when ``fmpy validate`` does.
+    ``base`` and ``beside``: as in ``latobs.packaging.build_fmu`` (identity, files written with it)."""
+    from ..packaging import COPYRIGHT, PackagingError, check_name, identity_file, install, seal_fmu
     from ..synthesis import design_file
 
-    if not class_name.isidentifier():
-        raise NativeBuildError(f"FMU name {class_name!r} is not a valid identifier")
+    check_name(class_name)
+    data = design_file.reproducible(data)       # no wall-clock figure enters an FMU
     why = unavailable_reason(kind.model_module)
     if why:
         raise NativeBuildError(f"{class_name}: {why}")
@@ -194,6 +194,7 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path) -> Path:
     data_name = f"{class_name}.{kind.data_kind}.json"
     files = {f"sources/{name}": raw for name, raw in sources.items()}
     files[f"resources/{data_name}"] = design_file.dumps(data).encode("utf-8")
+    files.update(identity_file(data, "c", base))
 
     native = _framework.NativeInterfaces(cm.states, cm.n_event_indicators, c_files)
     tool = f"latobs {__version__} (native C backend)"
@@ -207,13 +208,9 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path) -> Path:
         return {"sources/fmu_config.h": config, f"binaries/linux64/{class_name}.so": library}
 
     # the compiler's identity is part of what the binary is made from
-    stamp = hashlib.sha256(subprocess.run([*shlex.split(cc), "--version"], capture_output=True).stdout)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    final = out_dir / f"{class_name}.fmu"
-    with atomic_path(final, suffix=".fmu") as tmp_fmu:
-        problems = seal_fmu(files, class_name, md, [], tmp_fmu, native=compiled,
-                            native_sources=stamp.digest() + " ".join(CFLAGS).encode())
-        if problems:
-            raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
-    return final
+    from ..identity import compiler_version
+
+    stamp = hashlib.sha256(compiler_version(cc))
+    return install(Path(out_dir), class_name, lambda tmp: seal_fmu(
+        files, class_name, md, [], tmp, native=compiled, native_sources=stamp.digest() + " ".join(CFLAGS).encode()),
+        beside)

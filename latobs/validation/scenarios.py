@@ -409,7 +409,7 @@ class SteadyTurn(Scenario):
 
     name: str = "steady-turn"
     description: str = (
-        "Paper 000 (issue 9): steady left turn on a flat road (bank 0) at 50 km/h: straight 1 s, road-wheel "
+        "Paper 000: steady left turn on a flat road (bank 0) at 50 km/h: straight 1 s, road-wheel "
         "steer blended in (cosine, 2 s) to the angle holding 0.19 g on the nonlinear CarPlant, held to 25 s; "
         "metrics over the last 10 s. A bank estimate should stay at 0. Open loop."
     )
