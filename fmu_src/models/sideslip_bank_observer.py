@@ -4,7 +4,7 @@ Interface per CONTRACT.md; the maths is in ``pi_observer.py``; the gains come fr
 file baked into the FMU.
 """
 from ..pi_observer import SwitchedPIObserver
-from ..spec import ModelSpec, Var
+from ..spec import ANGLE, RATE, SPEED, ModelSpec, Var, design_speed
 
 
 def _grid_speed(mode: dict):
@@ -48,11 +48,11 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=SwitchedPIObserver,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
-        Var("vx", "m/s", "longitudinal speed"),
-        Var("yaw_rate", "rad/s", "measured yaw rate"),
-        Var("roll_angle", "rad", "measured roll angle"),
-        Var("roll_rate", "rad/s", "measured roll rate"),
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
+        Var("vx", "m/s", "longitudinal speed", **SPEED),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
+        Var("roll_angle", "rad", "measured roll angle", **ANGLE),
+        Var("roll_rate", "rad/s", "measured roll rate", **RATE),
     ),
     outputs=(
         Var("beta_hat", "rad", "estimated sideslip angle at the roll axis below the CG (the design model's beta; "
@@ -77,5 +77,6 @@ SPEC = ModelSpec(
                               "frozen and every estimate held",
             start=1.0, min=0.01, max=10.0),
     ),
+    starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
     stop_time=30.0,
 )
