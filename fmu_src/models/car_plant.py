@@ -49,5 +49,8 @@ SPEC = ModelSpec(
         Var("linear_tires", "1", "1: linear tires mu Fz B C alpha (Magic Formula slope at zero slip, "
             "no saturation); 0: Magic Formula", start=0.0, min=0.0, max=1.0),
     ),
+    # longest communication step (s), measured against 1 ms runs: <= 1 ms Heun substeps inside any step:
+    # identical to 1 ms runs
+    max_step=1.0,
     stop_time=10.0,
 )

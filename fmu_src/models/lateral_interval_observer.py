@@ -59,5 +59,8 @@ SPEC = ModelSpec(
             start=1.0, min=0.01, max=10.0),
     ),
     starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
+    # longest communication step (s): the runtime substeps its enclosure internally, so that the
+    # bounds hold at any step up to here (see interval_observer.py)
+    max_step=1.0,
     stop_time=20.0,
 )

@@ -46,5 +46,8 @@ SPEC = ModelSpec(
         Var("mf_C", "1", "Magic Formula shape factor C (0 < C < 2)", start=1.3, min=0.01, max=1.99),
         Var("mf_E", "1", "Magic Formula curvature factor E (<= 1)", start=0.0, min=-5.0, max=1.0),
     ),
+    # longest communication step (s), measured against 1 ms runs: <= 1 ms RK4 substeps inside any step:
+    # identical to 1 ms runs
+    max_step=1.0,
     stop_time=16.0,
 )

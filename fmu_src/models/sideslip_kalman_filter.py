@@ -49,5 +49,8 @@ SPEC = ModelSpec(
         Var("vy_hat", "m/s", "estimated lateral velocity at the centre of gravity"),
         Var("yaw_rate_hat", "rad/s", "estimated yaw rate"),
     ),
+    # longest communication step (s), measured against 1 ms runs: a discrete filter over the communication
+    # step (its gain depends on the step, its error does not grow with it): bounded at every step to 1 s
+    max_step=1.0,
     stop_time=20.0,
 )
