@@ -47,7 +47,7 @@ import sys
 import traceback
 from xml.etree.ElementTree import Element, SubElement, tostring
 
-from .spec import ModelSpec, input_starts, max_step, var_bounds
+from .spec import ModelSpec, input_starts, max_step, refused_above, var_bounds
 
 # FMI 2.0 status codes (fmi2Status)
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
@@ -178,7 +178,9 @@ class Fmi2Slave:
         # (name, min, max) of every input, None -> +-inf: checked at every doStep (a NaN fails too)
         self._in_range = tuple((n, -math.inf if lo is None else float(lo), math.inf if hi is None else float(hi))
                                for n, (lo, hi) in var_bounds(spec, data, spec.inputs).items())
-        self._max_step = max_step(spec, data) if data or not callable(spec.max_step) else math.inf
+        known = data or not callable(spec.max_step)
+        self._max_step = max_step(spec, data) if known else math.inf
+        self._refused_above = refused_above(spec, data) if known else math.inf
         # value reference -> (store, name) per type; settable Real references -> store
         self._get = {"Real": {}, "Integer": {}}
         self._set_in, self._set_par = {}, {}
@@ -362,7 +364,7 @@ class Fmi2Slave:
             if not (step_size > 0 and math.isfinite(step_size)):
                 self.log(f"step refused: communication step {step_size!r} must be finite and > 0 s", ERROR)
                 return False
-            if step_size > self._max_step:
+            if step_size > self._refused_above:
                 self.log(f"step refused at t = {float(current_time)!r}: communication step {float(step_size)!r} s "
                          f"exceeds this FMU's longest step {self._max_step!r} s (declared in its model "
                          "description); state held", ERROR)

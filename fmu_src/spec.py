@@ -99,10 +99,20 @@ class ModelSpec:
     max_step: "float | Callable[[dict], float]" = 1.0
 
 
+#: relative slack on the longest step: a host computing its step as a difference of communication
+#: points (t_next - t) exceeds the nominal step by a few ulps
+STEP_SLACK = 1e-9
+
+
 def max_step(spec: ModelSpec, data: dict) -> float:
-    """The model's longest accepted communication step (s) for this data file."""
+    """The model's longest communication step (s) for this data file, as declared."""
     m = spec.max_step(data) if callable(spec.max_step) else spec.max_step
     return float(m)
+
+
+def refused_above(spec: ModelSpec, data: dict) -> float:
+    """The step (s) above which both FMI layers refuse a step: ``max_step`` plus ``STEP_SLACK``."""
+    return max_step(spec, data) * (1.0 + STEP_SLACK)
 
 
 def input_starts(spec: ModelSpec, data: dict) -> dict[str, float]:

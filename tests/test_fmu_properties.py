@@ -386,8 +386,8 @@ def test_every_fmu_runs_unconnected_from_its_start_values_with_ok(variant, built
     path = built_fmus.get(*variant)
     md = read_model_description(str(path))
     worst: list = []
-    res = simulate_fmu(str(path), stop_time=float(md.defaultExperiment.stopTime), step_size=0.005,
-                       output_interval=0.1,
+    res = simulate_fmu(str(path), stop_time=float(md.defaultExperiment.stopTime),
+                       output_interval=float(md.defaultExperiment.stepSize),
                        logger=lambda c, name, status, cat, msg: worst.append((status, msg.decode())))
     assert not [m for s, m in worst if s >= 1], f"{path.name}: {worst[:3]}"
     for v in md.modelVariables:

@@ -722,7 +722,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         say(inst, LOG_ERROR, "step refused: communication step %g must be finite and > 0 s", communicationStepSize);
         return fmi2Error;
     }
-    if (communicationStepSize > MAX_STEP) {
+    if (communicationStepSize > MAX_STEP_REFUSED_ABOVE) {
         char t[32], h[32], m[32];
         say(inst, LOG_ERROR, "step refused at t = %s: communication step %s s exceeds this FMU's longest step %s s "
             "(declared in its model description); state held", py_repr(currentCommunicationPoint, t),

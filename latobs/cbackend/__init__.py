@@ -38,7 +38,7 @@ from .. import __version__
 from ..atomic import atomic_path
 from ..fmu_src import framework as _framework
 from ..native_guard import fmi2_headers, find_compiler
-from ..fmu_src.spec import input_starts, max_step, var_bounds
+from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
 from .emit import CModel, c_array, c_define, c_string
 
 C_SRC = Path(_framework.__file__).resolve().parent / "c"
@@ -103,7 +103,8 @@ def _config_header(spec, data: dict, model_identifier: str, guid: str, cm: CMode
                         ("N_OUTPUTS", len(spec.outputs)), ("N_INT_OUTPUTS", len(spec.integer_outputs)),
                         ("N_STATES", len(cm.states)), ("N_EVENT_INDICATORS", cm.n_event_indicators)):
         out.append(c_define(name, count))
-    out.append(c_define("MAX_STEP", max_step(spec, data)))   # s, the longest step the layer accepts
+    out.append(c_define("MAX_STEP", max_step(spec, data)))   # s, the longest step, as declared
+    out.append(c_define("MAX_STEP_REFUSED_ABOVE", refused_above(spec, data)))   # with its slack
     for prefix, variables in groups:
         for k, v in enumerate(variables):
             if not v.name.isidentifier():
