@@ -34,8 +34,9 @@ from typing import Callable, Optional
 # runtimes' own documented clamps to stay reachable inside it, narrow enough that no arithmetic
 # of a runtime can overflow (a MotorcycleFaultObserver fed 1e155 rad once computed inf - inf and
 # stayed NaN for good). A step with an input outside them is refused by both FMI layers.
-SPEED_MAX = 150.0                # m/s (540 km/h): above any road vehicle's top speed; >= -SPEED_MAX
-#                                  for reversing (the observers freeze below vx_hold)
+SPEED_MAX = 250.0                # m/s (900 km/h): above any road vehicle's top speed and the
+#                                  runtimes' own speed clamps (the Kalman filter's default 200 m/s);
+#                                  >= -SPEED_MAX for reversing (the observers freeze below vx_hold)
 ANGLE_MAX = 0.5 * math.pi        # rad: road-wheel and handlebar steering, roll and bank angles; beyond
 #                                  90 deg no vehicle is on its wheels (the plants clamp far inside)
 RATE_MAX = 35.0                  # rad/s (2000 deg/s): the largest full scale of common MEMS gyroscopes

@@ -106,6 +106,19 @@ def run_libcosim(spec: dict) -> dict:
     return {"outputs": out}
 
 
+def declared_max_step(path) -> float:
+    """The longest communication step an FMU accepts (s), from its model description."""
+    import zipfile
+    from xml.etree import ElementTree
+
+    with zipfile.ZipFile(path) as z:
+        root = ElementTree.fromstring(z.read("modelDescription.xml"))
+    el = root.find("VendorAnnotations/Tool[@name='latobs']/CommunicationStep")
+    if el is None:
+        raise ValueError(f"{path}: no declared longest communication step")
+    return float(el.get("max"))
+
+
 # ---------------------------------------------------------------------------------------------
 # property worker
 # ---------------------------------------------------------------------------------------------

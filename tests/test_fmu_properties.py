@@ -40,9 +40,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-import zipfile
-from xml.etree import ElementTree
-
 import pytest
 from fmpy import read_model_description, simulate_fmu
 from hypothesis import HealthCheck, given, settings
@@ -54,6 +51,7 @@ pytestmark = pytest.mark.slow
 RUNNER = Path(__file__).with_name("conformance_runs.py")
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
 from conftest import C_NAMES, FMU_VARIANTS  # noqa: E402  (every FMU, pythonfmu and native C)
+from conformance_runs import declared_max_step  # noqa: E402
 #: examples per FMU and property; LATOBS_PROPERTY_EXAMPLES=500 for a deeper (local) search
 EXAMPLES = int(os.environ.get("LATOBS_PROPERTY_EXAMPLES", "25"))
 SETTINGS = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
@@ -216,15 +214,6 @@ def clean_runs(draw, w: Worker):
 # ---------------------------------------------------------------------------------------------
 # properties
 # ---------------------------------------------------------------------------------------------
-def declared_max_step(path: Path) -> float:
-    """The longest communication step an FMU accepts, from its model description (s)."""
-    with zipfile.ZipFile(path) as z:
-        root = ElementTree.fromstring(z.read("modelDescription.xml"))
-    el = root.find("VendorAnnotations/Tool[@name='latobs']/CommunicationStep")
-    assert el is not None, f"{path.name}: no declared longest communication step"
-    return float(el.get("max"))
-
-
 def check_outputs(w: Worker, program: list, result: dict):
     """Every get: status OK/warning; finite Reals and in-range Integers unless the step before it
     was refused (fmi2Discard or worse). Every call within CALL_SECONDS."""
