@@ -327,8 +327,8 @@ def bad_steps(draw, w: Worker):
         x = draw(st.one_of(st.sampled_from(HUGE), st.floats(hi, 1e300, exclude_min=True),
                            st.floats(-1e300, lo, exclude_max=True)).filter(lambda v: not lo <= v <= hi))
         return {name: x}, draw(st.sampled_from([1e-9, 0.001, 0.005]))
-    h = draw(st.one_of(st.sampled_from([1e300, 1e4, 2.0 * w.max_step]),
-                       st.floats(w.max_step, 1e300, exclude_min=True)))
+    m = min(w.max_step, 1e299)
+    h = draw(st.one_of(st.sampled_from([1e300, 1e4, 2.0 * m]), st.floats(m, 1e300, exclude_min=True)))
     return {}, h
 
 
@@ -395,6 +395,7 @@ def test_the_longest_step_is_declared_and_refused_alike_in_both_backends(name, b
         w = Worker(built_fmus.get(name, backend))
         try:
             m = w.max_step
+            assert m <= 1.0, f"{name} [{backend}]: declared longest step {m} s"
             first = w.inputs[0]
             lo, hi = w.in_range[first]
             program = [["new"], ["setup", 0.0], ["enter"], ["exit"], ["step", 0.0, 0.005], ["get"],
