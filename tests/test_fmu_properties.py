@@ -77,8 +77,8 @@ class Worker:
                        if v.causality == "parameter" and v.type == "Real"}
         self.int_range = {v.name: (v.min, v.max) for v in md.modelVariables
                           if v.causality == "output" and v.type == "Integer"}
-        self.in_range = {v.name: (float(v.min), float(v.max)) for v in md.modelVariables
-                         if v.causality == "input"}
+        self.in_range = {v.name: (-math.inf if v.min is None else float(v.min), math.inf if v.max is None
+                                  else float(v.max)) for v in md.modelVariables if v.causality == "input"}
         self.starts = {v.name: float(v.start) for v in md.modelVariables if v.causality == "input"}
         self.max_step = declared_max_step(path)
 
