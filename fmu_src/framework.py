@@ -20,9 +20,12 @@ A generated entry script binds a ``ModelSpec`` (``spec.py``) and a data file to 
 The host never sees a Python exception (pythonfmu 0.7.0 turns one into fmi2Fatal, and after a
 few of them its log buffer handling crashes the host). Every failure is logged and reported as a
 status, as documented here:
-  * a non-finite input or step size, or doStep before exitInitializationMode: the step is
-    refused, the state is kept, an error is logged and doStep returns fmi2Discard (pythonfmu
-    maps a refused step to fmi2Discard; it has no way to return fmi2Error);
+  * a step size that is not finite and > 0 or exceeds the model's ``max_step``, an input outside
+    its declared [min, max] (non-finite ones included; fmi2SetReal stores any value, the step
+    checks it), or doStep before exitInitializationMode: the step is refused, the state is kept,
+    an error naming the culprit is logged and doStep returns fmi2Discard (pythonfmu maps a
+    refused step to fmi2Discard; it has no way to return fmi2Error). The native C layer
+    (``c/fmi2_layer.c``) refuses the same steps with the same messages (fmi2Error);
   * an unknown value reference, or one of another type, in a get/set call: an error is logged,
     a set is ignored, a get returns 0 for it. (With the native guard of ``latobs.native_guard``,
     which the linux64 binary has when a C compiler was present at build time, such a call never
@@ -44,7 +47,7 @@ import sys
 import traceback
 from xml.etree.ElementTree import Element, SubElement, tostring
 
-from .spec import ModelSpec
+from .spec import ModelSpec, input_starts, max_step, refused_above, var_bounds
 
 # FMI 2.0 status codes (fmi2Status)
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
@@ -177,11 +180,18 @@ class Fmi2Slave:
         self._fault = ""
         self._rt = None
         self._data = self._load_data()
-        self._u = {v.name: float(v.start) for v in spec.inputs}
-        self._p = start_values(spec, self._data if not self._fault else {})
+        data = self._data if not self._fault else {}
+        self._u = input_starts(spec, data)
+        self._p = start_values(spec, data)
         self._y = {v.name: float(v.start) for v in spec.outputs}
         self._y.update({v.name: int(v.start) for v in spec.integer_outputs})
-        self._bounds = {v.name: (v.min, v.max) for v in spec.parameters}
+        self._bounds = var_bounds(spec, data, spec.parameters)
+        # (name, min, max) of every input, None -> +-inf: checked at every doStep (a NaN fails too)
+        self._in_range = tuple((n, -math.inf if lo is None else float(lo), math.inf if hi is None else float(hi))
+                               for n, (lo, hi) in var_bounds(spec, data, spec.inputs).items())
+        known = data or not callable(spec.max_step)
+        self._max_step = max_step(spec, data) if known else math.inf
+        self._refused_above = refused_above(spec, data) if known else math.inf
         # value reference -> (store, name) per type; settable Real references -> store
         self._get = {"Real": {}, "Integer": {}}
         self._set_in, self._set_par = {}, {}
@@ -357,11 +367,15 @@ class Fmi2Slave:
                 return
             self._rt = self.spec.runtime(self._data, dict(self._p))
             if hasattr(self._rt, "initialize"):
-                if all(map(math.isfinite, self._u.values())):
+                bad = self._bad_inputs()
+                if not bad:
                     self._rt.initialize(dict(self._u))
-                else:
+                elif bad[0]:
                     self.log("non-finite inputs at initialisation: the runtime starts from the first step",
                              WARNING)
+                else:
+                    self.log(f"input(s) outside the declared range at initialisation: {bad[1]}; the runtime "
+                             "starts from the first step", WARNING)
             self._y.update(self._rt.y)
             self._drain()
             self._phase = "stepping"
@@ -379,12 +393,16 @@ class Fmi2Slave:
             if not (step_size > 0 and math.isfinite(step_size)):
                 self.log(f"step refused: communication step {step_size!r} must be finite and > 0 s", ERROR)
                 return False
-            u = self._u
-            if not all(map(math.isfinite, u.values())):
-                bad = [f"{k} = {v!r}" for k, v in u.items() if not math.isfinite(v)]
-                self.log(f"step refused at t = {current_time}: non-finite input(s) {', '.join(bad)}; state held",
-                         ERROR)
+            if step_size > self._refused_above:
+                self.log(f"step refused at t = {float(current_time)!r}: communication step {float(step_size)!r} s "
+                         f"exceeds this FMU's longest step {self._max_step!r} s (declared in its model "
+                         "description); state held", ERROR)
                 return False
+            u = self._u
+            for name, lo, hi in self._in_range:
+                if not lo <= u[name] <= hi:       # a NaN fails too
+                    self._refuse_inputs(current_time)
+                    return False
             rt = self._rt
             rt.step(step_size, u)
             if rt.events:
@@ -398,6 +416,26 @@ class Fmi2Slave:
             except Exception:
                 pass
             return False
+
+    def _bad_inputs(self):
+        """None if every input is inside its declared range; else (any non-finite, "name = value, ..."
+        listing the non-finite inputs if any, else those outside their range)."""
+        u = self._u
+        out = [(n, float(u[n]), lo, hi) for n, lo, hi in self._in_range if not lo <= u[n] <= hi]
+        if not out:
+            return None
+        nonfinite = [f"{n} = {x!r}" for n, x, _, _ in out if not math.isfinite(x)]
+        if nonfinite:
+            return True, ", ".join(nonfinite)
+        return False, ", ".join(f"{n} = {x!r} (declared range [{lo!r}, {hi!r}])" for n, x, lo, hi in out)
+
+    def _refuse_inputs(self, current_time):
+        nonfinite, text = self._bad_inputs()
+        if nonfinite:
+            self.log(f"step refused at t = {current_time}: non-finite input(s) {text}; state held", ERROR)
+        else:
+            self.log(f"step refused at t = {float(current_time)!r}: input(s) outside the declared range: {text}; "
+                     "state held", ERROR)
 
     def terminate(self):
         self._phase = "terminated"
@@ -431,6 +469,9 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     measurement through).
     """
     description = spec.description + (f" -- {spec.describe(data)}" if spec.describe else "")
+    longest = max_step(spec, data)
+    description += (f" -- communication steps up to {_num(longest)} s (longer ones are refused: the accuracy "
+                    "is measured up to there); inputs outside their declared min/max are refused")
     root = Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model_identifier, "guid": guid, "description": description,
         "author": author, "version": version, "copyright": copyright, "license": license,
@@ -472,9 +513,16 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
                        ("logStatusError", "errors: refused steps, bad value references, bad parameters"),
                        ("logAll", "all other messages")):
         SubElement(cats, "Category", name=name, description=desc)
-    SubElement(root, "DefaultExperiment", startTime="0", stopTime=_num(spec.stop_time), stepSize=repr(DEFAULT_STEP))
+    SubElement(root, "DefaultExperiment", startTime="0", stopTime=_num(spec.stop_time),
+               stepSize=repr(min(DEFAULT_STEP, longest)))
+    # the longest communication step both FMI layers accept (FMI 2.0 has no attribute for it)
+    va = SubElement(SubElement(root, "VendorAnnotations"), "Tool", name="latobs")
+    SubElement(va, "CommunicationStep", max=repr(longest), unit="s")
     starts = start_values(spec, data)
-    bounds = spec.bounds(data) if spec.bounds else {}
+    in_starts = input_starts(spec, data)
+    bounds = {}
+    for group in (spec.parameters, spec.inputs, spec.outputs, spec.integer_outputs):
+        bounds.update(var_bounds(spec, data, group))
     mv = SubElement(root, "ModelVariables")
     for vr, typ, caus, v in table:
         attrs = {"name": v.name, "valueReference": str(vr),
@@ -505,7 +553,7 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
         if caus == "parameter":
             tattrs["start"] = repr(starts[v.name])
         elif caus == "input":
-            tattrs["start"] = _num(v.start)
+            tattrs["start"] = _num(in_starts[v.name])
         elif caus == "derivative":
             tattrs = {"derivative": str(vr - len(states) + 1)}     # the state's 1-based index
             if v.unit in DERIVATIVE_UNITS:

@@ -13,8 +13,11 @@ maths; the runtime classes know nothing of FMI. A runtime class follows this pro
                                  # level in {"warning", "error"}; drained by the framework
     Runtime.parameter_defaults(data)   # optional: data-dependent parameter start values
 
-``step`` receives only finite inputs (the framework rejects the others) and must not raise for
-any finite value: out-of-range inputs are clamped as documented by the runtime, with a warning.
+``step`` receives only inputs inside their declared [min, max] (the FMI layers of both backends
+refuse a step with any other input, non-finite ones included, with an error and the state kept)
+and a step 0 < h <= the model's ``max_step`` (longer steps are refused likewise); it must not
+raise for such values. Within the declared range a runtime may still clamp an input to the range
+its maths is meant for, as it documents, with a warning.
 Outputs change only in ``initialize`` and ``step``: the model description declares that no
 output depends directly on an input (no direct feedthrough), and the tests check it.
 """
@@ -26,11 +29,37 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 
+# Physical bounds of the signals every FMU takes as inputs (SI). Each is a value no road vehicle
+# or sensor produces, wide enough for any real record (noise and reversing included) and for the
+# runtimes' own documented clamps to stay reachable inside it, narrow enough that no arithmetic
+# of a runtime can overflow (a MotorcycleFaultObserver fed 1e155 rad once computed inf - inf and
+# stayed NaN for good). A step with an input outside them is refused by both FMI layers.
+SPEED_MAX = 250.0                # m/s (900 km/h): above any road vehicle's top speed and the
+#                                  runtimes' own speed clamps (the Kalman filter's default 200 m/s);
+#                                  >= -SPEED_MAX for reversing (the observers freeze below vx_hold)
+ANGLE_MAX = 0.5 * math.pi        # rad: road-wheel and handlebar steering, roll and bank angles; beyond
+#                                  90 deg no vehicle is on its wheels (the plants clamp far inside)
+RATE_MAX = 35.0                  # rad/s (2000 deg/s): the largest full scale of common MEMS gyroscopes
+ACCEL_MAX = 160.0                # m/s2 (16 g): the largest full scale of common MEMS accelerometers
+TORQUE_MAX = 1000.0              # N m: rider steering torque, ~5x the strongest rider's
+SCALE_MAX = 100.0                # 1: a cornering stiffness scale factor is >= 0 (no grip); the car
+#                                  plant clamps it to [0.1, 10] with a warning
+# the keyword arguments of Var declaring them
+SPEED = {"min": -SPEED_MAX, "max": SPEED_MAX}
+ANGLE = {"min": -ANGLE_MAX, "max": ANGLE_MAX}
+RATE = {"min": -RATE_MAX, "max": RATE_MAX}
+ACCEL = {"min": -ACCEL_MAX, "max": ACCEL_MAX}
+TORQUE = {"min": -TORQUE_MAX, "max": TORQUE_MAX}
+SCALE = {"min": 0.0, "max": SCALE_MAX}
+
+
 @dataclass(frozen=True)
 class Var:
     """One variable. ``unit`` is an FMI unit name ("1" for dimensionless); ``min``/``max`` are the
-    physical bounds declared in the model description (a parameter outside them is refused at
-    initialisation, an input outside them is the runtime's business)."""
+    physical bounds declared in the model description: a parameter outside them is refused at
+    initialisation, a step with an input outside them is refused (error, state kept). Every input
+    declares both (the tests check it): values no sensor or vehicle can produce, so that no finite
+    input can overflow a runtime's arithmetic."""
 
     name: str
     unit: str
@@ -48,7 +77,14 @@ class ModelSpec:
                   file makes of it (e.g. speed or tire switching), appended to the description
     bounds        optional ``bounds(data) -> {variable name: (min, max)}`` for bounds that depend
                   on the data file (e.g. the number of modes)
+    starts        optional ``starts(data) -> {input name: start value}`` for input start values that
+                  depend on the data file (e.g. a speed inside the design's grid), so that the FMU
+                  run unconnected from its start values steps with fmi2OK
     stop_time     s, the DefaultExperiment's stop time (a sensible first run)
+    max_step      s, the longest communication step the model keeps its accuracy at (measured:
+                  outputs bounded and close to small-step results); a number, or
+                  ``max_step(data) -> s``. Both FMI layers refuse a longer step (error, state kept),
+                  and the model description declares it (see ``framework.model_description``)
     """
 
     description: str
@@ -59,7 +95,55 @@ class ModelSpec:
     parameters: tuple[Var, ...] = field(default_factory=tuple)
     describe: Optional[Callable[[dict], str]] = None
     bounds: Optional[Callable[[dict], dict]] = None
+    starts: Optional[Callable[[dict], dict]] = None
     stop_time: float = 10.0
+    max_step: "float | Callable[[dict], float]" = 1.0
+
+
+#: relative slack on the longest step: a host computing its step as a difference of communication
+#: points (t_next - t) exceeds the nominal step by a few ulps
+STEP_SLACK = 1e-9
+
+
+def max_step(spec: ModelSpec, data: dict) -> float:
+    """The model's longest communication step (s) for this data file, as declared."""
+    m = spec.max_step(data) if callable(spec.max_step) else spec.max_step
+    return float(m)
+
+
+def refused_above(spec: ModelSpec, data: dict) -> float:
+    """The step (s) above which both FMI layers refuse a step: ``max_step`` plus ``STEP_SLACK``."""
+    return max_step(spec, data) * (1.0 + STEP_SLACK)
+
+
+def input_starts(spec: ModelSpec, data: dict) -> dict[str, float]:
+    """Input start values: the spec's, overridden by the data-dependent ones (``starts``)."""
+    u = {v.name: float(v.start) for v in spec.inputs}
+    if spec.starts is not None and data:
+        u.update({k: float(x) for k, x in spec.starts(data).items() if k in u})
+    return u
+
+
+def design_speed(data: dict) -> dict:
+    """``{"vx": speed}`` with a speed (m/s) in the middle of the design's speed grid (the middle of
+    its central band: switching edges, or scheduled estimators' bands, or the central mode's model
+    speed range), or {} if the data file has none: the start value of the observers' vx input, so
+    that an FMU run unconnected runs inside its grid (above vx_hold) without a warning."""
+    bands = data.get("switching", {}).get("edges")
+    if not bands and data.get("estimators"):
+        bands = [e["vx_band"][0] for e in data["estimators"]] + [data["estimators"][-1]["vx_band"][1]]
+    if not bands and data.get("modes"):
+        bands = data["modes"][(len(data["modes"]) - 1) // 2].get("model_speed", {}).get("range")
+    if not bands or len(bands) < 2:
+        return {}
+    k = (len(bands) - 2) // 2
+    return {"vx": 0.5 * (float(bands[k]) + float(bands[k + 1]))}
+
+
+def var_bounds(spec: ModelSpec, data: dict, variables) -> dict[str, tuple]:
+    """{name: (min, max)} of ``variables``: declared, or data-dependent (``bounds``); None = none."""
+    extra = spec.bounds(data) if (spec.bounds and data) else {}
+    return {v.name: tuple(extra.get(v.name, (v.min, v.max))) for v in variables}
 
 
 def runtime_parameters(model: str, known, defaults: dict, params: dict | None) -> dict[str, float]:

@@ -958,12 +958,10 @@ def simulate_fmpy(ssp: Path) -> dict[str, np.ndarray]:
 
 def fmpy_equivalent(scenario):
     """The scenario as fmpy's ``simulate_ssp`` runs its package: every signal 0.0 at the start
-    time t_0 (and the plant and observers initialised with zero inputs), the scenario's values
-    from t_1 on. The harness on this scenario takes the steps ``simulate_ssp`` takes: the plant
-    initialised with its inputs at their start values (0 for every input a scenario drives) and
-    stepped from t_0 with 0.0, the observers initialised and stepped from t_0 with 0.0, and every
-    later step as in the harness. (A driven input whose start value is not 0, none so far, would
-    differ at initialisation only.)"""
+    time t_0, the scenario's values from t_1 on. The harness on this scenario takes the steps
+    ``simulate_ssp`` takes: the plant and the observers initialised with their inputs at their
+    start values (``initialise_at_start_values``; the plant's initial state does not depend on
+    them) and stepped from t_0 with 0.0, and every later step as in the harness."""
     from .validation.scenarios import Scenario, get_scenario
 
     base = get_scenario(scenario)
@@ -990,6 +988,7 @@ def fmpy_equivalent(scenario):
     sc = ZeroAtStart(name=base.name, description=base.description, duration=base.duration, plant=base.plant,
                      settle_time=base.settle_time, signal_names=base.signal_names)
     object.__setattr__(sc, "optional_plant_inputs", tuple(getattr(base, "optional_plant_inputs", ())))
+    object.__setattr__(sc, "initialise_at_start_values", True)
     return sc
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 import shutil
 import sys
 import tempfile
@@ -105,6 +106,18 @@ def run_libcosim(spec: dict) -> dict:
     return {"outputs": out}
 
 
+def declared_max_step(path) -> float:
+    """The longest communication step an FMU accepts (s), from its model description (inf if it
+    declares none)."""
+    import zipfile
+    from xml.etree import ElementTree
+
+    with zipfile.ZipFile(path) as z:
+        root = ElementTree.fromstring(z.read("modelDescription.xml"))
+    el = root.find("VendorAnnotations/Tool[@name='latobs']/CommunicationStep")
+    return float("inf") if el is None else float(el.get("max"))
+
+
 # ---------------------------------------------------------------------------------------------
 # property worker
 # ---------------------------------------------------------------------------------------------
@@ -152,17 +165,20 @@ def run_program(w: _Worker, program: list) -> dict:
     Calls: ``["new"]`` (instantiate a new instance, freeing the previous one), ``["setup", t0]``,
     ``["enter"]``, ``["exit"]``, ``["set", {input: value}]``, ``["step", t, h]``, ``["get"]``
     (every Real and Integer output), ``["terminate"]``, ``["reset"]``. The last instance is freed
-    at the end. Only these calls exist: a program cannot call into a freed instance."""
+    at the end. Only these calls exist: a program cannot call into a freed instance. ``seconds``:
+    the wall time of every call, in order."""
     from fmpy.fmi2 import fmi2False, fmi2Integer, fmi2Real, fmi2True, fmi2ValueReference
 
     fmu = None
     log = []
     messages: list[str] = []
+    seconds: list[float] = []
     rvr = (fmi2ValueReference * len(w.real_out))(*[v.valueReference for v in w.real_out])
     ivr = (fmi2ValueReference * len(w.int_out))(*[v.valueReference for v in w.int_out])
     try:
         for call in program:
             op = call[0]
+            t0 = time.perf_counter()
             if op == "new":
                 if fmu is not None:
                     messages = list(fmu.logs)
@@ -199,15 +215,17 @@ def run_program(w: _Worker, program: list) -> dict:
                 values = {v.name: float(x) for v, x in zip(w.real_out, rbuf)}
                 values.update({v.name: int(x) for v, x in zip(w.int_out, ibuf)})
                 log.append(["get", st, values])
+                seconds.append(time.perf_counter() - t0)
                 continue
             else:
                 raise ValueError(f"unknown call {op!r}")
             log.append([op, st])
+            seconds.append(time.perf_counter() - t0)
     finally:
         if fmu is not None:
             messages = list(fmu.logs)
             fmu.slave.freeInstance()
-    return {"calls": log, "logs": messages[-20:]}
+    return {"calls": log, "logs": messages[-20:], "seconds": seconds}
 
 
 def serve(path: Path) -> int:

@@ -91,7 +91,7 @@ def test_stiffness_inputs_extend_the_interface(plant_fmu):
     assert outs == ["beta", "vy", "yaw_rate", "ay", "roll_angle", "roll_rate", "Fyf", "Fyr", "alpha_f",
                     "alpha_r", "vy_cg", "beta_cg"]
     for v in ins[3:]:
-        assert (v.unit, float(v.start), float(v.min), float(v.max)) == ("1", 1.0, 0.1, 10.0)
+        assert (v.unit, float(v.start), float(v.min), float(v.max)) == ("1", 1.0, 0.0, 100.0)   # refused outside
 
 
 # ------------------------------------------------------------------------------------------
@@ -246,13 +246,13 @@ def test_nan_and_nonpositive_stiffness_inputs(plant_fmu):
         with pytest.raises(Exception, match="discard"):
             fmu.slave.doStep(20 * H, H)
         assert fmu.get_outputs() == before                       # refused step: state held
-        fmu.set_inputs({**u, "stiffness_scale_r": -2.0})         # clamped to 0.1
+        fmu.set_inputs({**u, "stiffness_scale_r": 0.0})          # clamped to 0.1
         fmu.slave.doStep(20 * H, H)
         clamped = fmu.get_outputs()
     finally:
         fmu.close()
     assert any("non-finite input(s) stiffness_scale_r" in m and m.startswith("[ERROR]") for m in fmu.logs)
-    assert any("stiffness_scale_r = -2.0 clamped to 0.1" in m and m.startswith("[WARNING]") for m in fmu.logs)
+    assert any("stiffness_scale_r = 0.0 clamped to 0.1" in m and m.startswith("[WARNING]") for m in fmu.logs)
     rt = CarPlantModel(DATA)
     for _ in range(20):
         rt.step(H, u)

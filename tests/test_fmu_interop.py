@@ -191,8 +191,9 @@ def test_outputs_declare_no_direct_feedthrough_and_it_is_true(fmus):
         names = [v.name for v in fmu.inputs]
         fmu.start({n: {"vx": 20.0}.get(n, 0.01) for n in names})
         try:
+            base = {"vx": 20.0, "stiffness_scale_f": 1.0, "stiffness_scale_r": 1.0}    # inside the declared ranges
             for i in range(20):
-                fmu.set_inputs({n: {"vx": 20.0}.get(n, 0.02 * math.sin(i + len(n))) for n in names})
+                fmu.set_inputs({n: base.get(n, 0.0) + 0.02 * math.sin(i + len(n)) for n in names})
                 fmu.slave.doStep(i * H, H)
                 before = fmu.get_outputs()
                 for scale in (10.0, -3.0, 0.0):

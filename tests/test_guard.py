@@ -284,7 +284,7 @@ def fmpy_host(fmu: Path, work: Path) -> int:
     n_logged = sum(1 for s, m in log if s == 3 and "9999" in m)
     check(statuses == ["error"] * 20 and n_logged == 20,
           f"10 x getReal(9999) and 10 x setReal(9999): fmi2Error, {n_logged} errors logged")
-    slave.setReal(info["in_vrs"], [20.0] * len(info["in_vrs"]))
+    slave.setReal(info["in_vrs"], [1.5] * len(info["in_vrs"]))   # inside every declared range
     slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.005)
     y = slave.getReal([info["out_vr"]])
     check(len(y) == 1 and y[0] != 0.0, f"doStep and getReal after the errors: {y}")
@@ -298,7 +298,7 @@ def fmpy_host(fmu: Path, work: Path) -> int:
         slave = open_slave(folder, info["guid"])
         start(slave)
         for k in range(20):
-            slave.setReal(info["in_vrs"], [20.0] * len(info["in_vrs"]))
+            slave.setReal(info["in_vrs"], [1.5] * len(info["in_vrs"]))   # inside every declared range
             slave.doStep(currentCommunicationPoint=k * 0.005, communicationStepSize=0.005)
         y = slave.getReal([info["out_vr"]])
         refused = _raw_status(slave.getReal, [9999]) == "error"

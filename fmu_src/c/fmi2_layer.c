@@ -22,9 +22,12 @@
  *     fmi2ExitInitializationMode, and the instance refuses to step until fmi2Reset;
  *   - a call in the wrong state (fmi2DoStep before fmi2ExitInitializationMode, a
  *     ModelExchange function in a co-simulation instance and vice versa): fmi2Error;
- *   - a non-finite or non-positive communication step, or a non-finite input at fmi2DoStep or
- *     at a ModelExchange evaluation: fmi2Error, the state kept (a later call with finite
- *     values proceeds);
+ *   - a non-finite or non-positive communication step, one longer than the model's MAX_STEP (its
+ *     ModelSpec's max_step, declared in the model description), or an input outside its declared
+ *     [min, max] (IN_MIN, IN_MAX; non-finite ones included) at fmi2DoStep or at a ModelExchange
+ *     evaluation: fmi2Error, the state kept (a later call with valid values proceeds);
+ *     fmi2SetReal stores any value, the call that uses it checks it. The pythonfmu framework
+ *     (fmu_src/framework.py) refuses the same steps with the same messages (as fmi2Discard);
  *   - warnings of the model (clamps, excursions): fmi2Warning for that call.
  * fmi2GetFMUstate/fmi2SetFMUstate and their serialisation copy the whole instance state (the
  * model holds no pointers).
@@ -39,6 +42,7 @@
 
 #define FMU_CONFIG_TABLES /* the variable tables of fmu_config.h: this file only */
 #include "model.h"
+#include "model_util.h"
 
 /* signed, so that a group of none (e.g. no parameters) compares without warnings */
 #define VR_PAR0 0L
@@ -167,17 +171,47 @@ static int all_finite(const double *x, int n)
     return 1;
 }
 
-/* 1 if the inputs are finite; else an error naming them, for the call `what` */
+/* 1 if every input is inside its declared [IN_MIN, IN_MAX] (so finite) */
+static int inputs_valid(const double *u)
+{
+    for (int i = 0; i < N_INPUTS; i++)
+        if (!(u[i] >= IN_MIN[i] && u[i] <= IN_MAX[i])) return 0;
+    return 1;
+}
+
+/* the inputs outside their range, "name = value, ..." in `list`: the non-finite ones if any
+ * (returns 1), else those outside their range with it (returns 0); the framework's _bad_inputs */
+static int bad_inputs(const double *u, char *list, size_t size)
+{
+    char a[32], b[32], c[32];
+    size_t len = 0;
+    int nonfinite = 0;
+    list[0] = '\0';
+    for (int i = 0; i < N_INPUTS; i++) nonfinite |= !isfinite(u[i]);
+    for (int i = 0; i < N_INPUTS; i++) {
+        if (u[i] >= IN_MIN[i] && u[i] <= IN_MAX[i]) continue;
+        if (nonfinite && isfinite(u[i])) continue;
+        if (len + 160 > size) break;
+        len += (size_t)snprintf(list + len, size - len, "%s%s = %s", len ? ", " : "",
+                                var_name((fmi2ValueReference)(VR_IN0 + i)), py_repr(u[i], a));
+        if (!nonfinite)
+            len += (size_t)snprintf(list + len, size - len, " (declared range [%s, %s])", py_repr(IN_MIN[i], b),
+                                    py_repr(IN_MAX[i], c));
+    }
+    return nonfinite;
+}
+
+/* 1 if the inputs are inside their declared ranges; else an error naming them, for the call `what` */
 static int inputs_ok(Instance *inst, const char *what)
 {
-    if (all_finite(inst->v.u, N_INPUTS)) return 1;
-    char list[MSG_MAX] = "";
-    size_t len = 0;
-    for (int i = 0; i < N_INPUTS; i++)
-        if (!isfinite(inst->v.u[i]) && len < sizeof list - 64)
-            len += (size_t)snprintf(list + len, sizeof list - len, "%s%s = %g", len ? ", " : "",
-                                    var_name((fmi2ValueReference)(VR_IN0 + i)), inst->v.u[i]);
-    say(inst, LOG_ERROR, "%s refused at t = %g: non-finite input(s) %s; state held", what, inst->v.time, list);
+    if (inputs_valid(inst->v.u)) return 1;
+    char list[MSG_MAX / 2], t[32];
+    if (bad_inputs(inst->v.u, list, sizeof list))
+        say(inst, LOG_ERROR, "%s refused at t = %s: non-finite input(s) %s; state held", what,
+            py_repr(inst->v.time, t), list);
+    else
+        say(inst, LOG_ERROR, "%s refused at t = %s: input(s) outside the declared range: %s; state held", what,
+            py_repr(inst->v.time, t), list);
     return 0;
 }
 
@@ -219,7 +253,7 @@ static void refresh_outputs(Instance *inst)
 {
 #if N_STATES > 0
     if (inst->type == fmi2ModelExchange && (inst->v.phase == PHASE_EVENT || inst->v.phase == PHASE_CONTINUOUS) &&
-        all_finite(inst->v.u, N_INPUTS))
+        inputs_valid(inst->v.u))
         model_me_outputs(inst->model, inst->v.u, inst->v.y, inst->v.yi);
 #else
     (void)inst;
@@ -351,10 +385,14 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
         return fmi2Error;
     }
     inst->v.ready = 1;
-    if (all_finite(inst->v.u, N_INPUTS))
+    char list[MSG_MAX / 2];
+    if (inputs_valid(inst->v.u))
         model_initialize(inst->model, inst->v.u, &inst->log);
-    else
+    else if (bad_inputs(inst->v.u, list, sizeof list))
         say(inst, LOG_WARNING, "non-finite inputs at initialisation: the model starts from the first step");
+    else
+        say(inst, LOG_WARNING, "input(s) outside the declared range at initialisation: %s; the model starts from "
+            "the first step", list);
     model_outputs(inst->model, inst->v.y, inst->v.yi);
     inst->v.phase = inst->type == fmi2CoSimulation ? PHASE_STEP : PHASE_EVENT;
     return status_of(inst);
@@ -420,8 +458,9 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
             value[i] = x[r - VR_STATE0];
         } else if (r >= VR_DER0 && r < N_VR) {
             if (!have_dx) {
-                if (!all_finite(inst->v.u, N_INPUTS)) {
-                    say(inst, LOG_ERROR, "fmi2GetReal: derivative %s needs finite inputs", var_name(vr[i]));
+                if (!inputs_valid(inst->v.u)) {
+                    say(inst, LOG_ERROR, "fmi2GetReal: derivative %s needs inputs inside their declared range",
+                        var_name(vr[i]));
                     continue;
                 }
                 model_me_derivatives(inst->model, inst->v.u, dx), have_dx = 1;
@@ -681,6 +720,13 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
     if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
         say(inst, LOG_ERROR, "step refused: communication step %g must be finite and > 0 s", communicationStepSize);
+        return fmi2Error;
+    }
+    if (communicationStepSize > MAX_STEP_REFUSED_ABOVE) {
+        char t[32], h[32], m[32];
+        say(inst, LOG_ERROR, "step refused at t = %s: communication step %s s exceeds this FMU's longest step %s s "
+            "(declared in its model description); state held", py_repr(currentCommunicationPoint, t),
+            py_repr(communicationStepSize, h), py_repr(MAX_STEP, m));
         return fmi2Error;
     }
     if (!inputs_ok(inst, "step")) return fmi2Error;

@@ -9,13 +9,17 @@
  *                 N_PARAMETERS, N_INPUTS, N_OUTPUTS (Real), N_INT_OUTPUTS, N_STATES (ModelExchange
  *                 continuous states, 0 = co-simulation only), N_EVENT_INDICATORS, and one index
  *                 macro per variable in the order of the model file's ModelSpec:
- *                 PAR_<name>, IN_<name>, OUT_<name>, INT_<name> (0-based within its group).
+ *                 PAR_<name>, IN_<name>, OUT_<name>, INT_<name> (0-based within its group);
+ *                 MAX_STEP (s, the ModelSpec's max_step) and, for the layer, the start values
+ *                 and declared [min, max] of the parameters and inputs.
  *   model_data.h  the design (certified gains, discretisation, tables) as static const data,
  *                 written by the model's emitter (latobs/cbackend/<runtime>.py); included by the
  *                 model file only.
  *
- * Every function below receives only finite inputs and (for model_do_step) a finite h > 0: the
- * layer refuses the others with fmi2Error before calling. A model function never aborts, never
+ * Every function below receives only inputs inside their declared [min, max] (IN_MIN, IN_MAX of
+ * fmu_config.h, from the ModelSpec: finite) and (for model_do_step) 0 < h <= the model's longest
+ * step (MAX_STEP, plus a relative slack of 1e-9): the layer refuses the others with fmi2Error
+ * before calling. A model function never aborts, never
  * allocates after model_setup, and reports through the Log:
  *   log_event(log, LOG_WARNING, "...")   clamps, excursions (the layer returns fmi2Warning)
  *   log_event(log, LOG_ERROR, "...")     a refused call (with a nonzero return)
@@ -55,7 +59,7 @@ int model_setup(Model *m, const double *p, const Log *log);
  * consistent with them (the Python runtime's ``initialize``). */
 void model_initialize(Model *m, const double *u, const Log *log);
 
-/* Co-simulation: advance h seconds (finite, > 0), inputs u[N_INPUTS] held (finite). Returns 0;
+/* Co-simulation: advance h seconds (0 < h <= MAX_STEP), inputs u[N_INPUTS] held (in range). Returns 0;
  * -1 = refused with an error logged, the state unchanged. */
 int model_do_step(Model *m, double h, const double *u, const Log *log);
 

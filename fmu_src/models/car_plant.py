@@ -5,25 +5,25 @@ the plant data file baked into the FMU. The inputs stiffness_scale_f/r extend th
 inputs (delta, vx, bank_angle): hosts that do not drive them leave them at their start value 1.0.
 """
 from ..car_plant import CarPlantModel
-from ..spec import ModelSpec, Var
+from ..spec import ANGLE, SCALE, SPEED, ModelSpec, Var
 
 SPEC = ModelSpec(
     description="Nonlinear two-track lateral/yaw/roll car model with Magic Formula (optionally linear) tires, "
                 "load transfer and tire relaxation (latobs truth model)",
     runtime=CarPlantModel,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
-        Var("vx", "m/s", "prescribed longitudinal speed"),
-        Var("bank_angle", "rad", "road bank angle (> 0: gravity pulls towards -y)"),
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
+        Var("vx", "m/s", "prescribed longitudinal speed", start=20.0, **SPEED),
+        Var("bank_angle", "rad", "road bank angle (> 0: gravity pulls towards -y)", **ANGLE),
         # optional inputs (added for paper 002's validation; start 1.0 = the plant without them)
         Var("stiffness_scale_f", "1", "multiplies the front cornering stiffness on top of the parameter "
             "scale_f (Magic Formula B; peak force unchanged); sampled and held per communication step; "
-            "clamped to [0.1, 10] with a warning (non-positive values included); a non-finite value "
-            "refuses the step (fmi2Discard, error logged, state held)", start=1.0, min=0.1, max=10.0),
+            "clamped to [0.1, 10] with a warning (0 included); a value outside [0, 100], or non-finite, "
+            "refuses the step (error logged, state held)", start=1.0, **SCALE),
         Var("stiffness_scale_r", "1", "multiplies the rear cornering stiffness on top of the parameter "
             "scale_r (Magic Formula B; peak force unchanged); sampled and held per communication step; "
-            "clamped to [0.1, 10] with a warning (non-positive values included); a non-finite value "
-            "refuses the step (fmi2Discard, error logged, state held)", start=1.0, min=0.1, max=10.0),
+            "clamped to [0.1, 10] with a warning (0 included); a value outside [0, 100], or non-finite, "
+            "refuses the step (error logged, state held)", start=1.0, **SCALE),
     ),
     outputs=(
         Var("beta", "rad", "sideslip angle atan(vy/vx) at the roll axis below the CG"),
@@ -49,5 +49,8 @@ SPEC = ModelSpec(
         Var("linear_tires", "1", "1: linear tires mu Fz B C alpha (Magic Formula slope at zero slip, "
             "no saturation); 0: Magic Formula", start=0.0, min=0.0, max=1.0),
     ),
+    # longest communication step (s), measured against 1 ms runs: <= 1 ms Heun substeps inside any step:
+    # identical to 1 ms runs
+    max_step=1.0,
     stop_time=10.0,
 )

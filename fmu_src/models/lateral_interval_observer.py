@@ -4,7 +4,7 @@ Interface per CONTRACT.md; the maths is in ``interval_observer.py``; the gains, 
 box and the speed modes come from the design file baked into the FMU.
 """
 from ..interval_observer import IntervalObserver
-from ..spec import ModelSpec, Var
+from ..spec import ACCEL, ANGLE, RATE, SPEED, ModelSpec, Var, design_speed
 
 
 def _variant(data: dict) -> str:
@@ -36,10 +36,10 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=IntervalObserver,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
-        Var("vx", "m/s", "longitudinal speed"),
-        Var("yaw_rate", "rad/s", "measured yaw rate"),
-        Var("ay", "m/s2", "measured lateral acceleration"),
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
+        Var("vx", "m/s", "longitudinal speed", **SPEED),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
+        Var("ay", "m/s2", "measured lateral acceleration", **ACCEL),
     ),
     outputs=(
         Var("vy_lower", "m/s", "lower bound of the lateral velocity at the CG"),
@@ -64,5 +64,9 @@ SPEC = ModelSpec(
         Var("vx_hold", "m/s", "below this speed the observer is frozen and its bounds held",
             start=1.0, min=0.01, max=10.0),
     ),
+    starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
+    # longest communication step (s): the longest at which the design's bounds contract (stored in
+    # the design file; see IntervalObserver.max_communication_step)
+    max_step=max_communication_step,
     stop_time=20.0,
 )

@@ -5,7 +5,7 @@ design file baked into the FMU. Signs are those of the design model (``synthesis
 Sharp's SAE axes: y to the right, z down): roll, steer, yaw rate, vy, forces and torque > 0 to the right.
 """
 from ..motorcycle_observer import MotorcycleFaultObserver
-from ..spec import ModelSpec, Var
+from ..spec import ANGLE, RATE, SPEED, ModelSpec, Var, design_speed
 
 
 def _variant(data: dict) -> str:
@@ -20,10 +20,10 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=MotorcycleFaultObserver,
     inputs=(
-        Var("vx", "m/s", "longitudinal speed (schedules the mode)"),
-        Var("steer_angle", "rad", "measured steering (handlebar) angle, > 0 steers right"),
-        Var("yaw_rate", "rad/s", "measured yaw rate, > 0 turning right"),
-        Var("roll_rate", "rad/s", "measured roll rate, > 0 leaning further right"),
+        Var("vx", "m/s", "longitudinal speed (schedules the mode)", **SPEED),
+        Var("steer_angle", "rad", "measured steering (handlebar) angle, > 0 steers right", **ANGLE),
+        Var("yaw_rate", "rad/s", "measured yaw rate, > 0 turning right", **RATE),
+        Var("roll_rate", "rad/s", "measured roll rate, > 0 leaning further right", **RATE),
     ),
     outputs=(
         Var("roll_angle_hat", "rad", "estimated roll angle (unknown input f1), > 0 leaning right"),
@@ -41,5 +41,9 @@ SPEC = ModelSpec(
         Var("vx_hold", "m/s", "below this |vx| the observer is frozen and its estimates held",
             start=1.0, min=0.01, max=10.0),
     ),
+    starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
+    # longest communication step (s), measured against 1 ms runs: exact step maps (matrix exponential):
+    # identical to 1 ms runs to 1e-11
+    max_step=1.0,
     stop_time=16.0,
 )

@@ -9,7 +9,7 @@ nonlinear parts of the tyre forces that paper 003's observer estimates) and alph
 Axes are Sharp's (SAE): x forward, y RIGHT, z down.
 """
 from ..motorcycle_plant import MotorcyclePlantModel
-from ..spec import ModelSpec, Var
+from ..spec import SPEED, TORQUE, ModelSpec, Var
 
 SPEC = ModelSpec(
     description="Nonlinear Sharp (1971) motorcycle: rear frame with rider, steered front frame, wheel "
@@ -18,9 +18,9 @@ SPEC = ModelSpec(
     runtime=MotorcyclePlantModel,
     inputs=(
         Var("rider_torque", "N.m", "rider steering torque about the steering axis, > 0 turns the handlebar "
-            "to the right; clamped to +-200 N m with a warning"),
+            "to the right; clamped to +-200 N m with a warning", **TORQUE),
         Var("vx", "m/s", "prescribed forward speed (model meant for >= 5 m/s; < 1 m/s regularised, "
-            "clamped to [0, 60] with a warning)"),
+            "clamped to [0, 60] with a warning)", start=15.0, **SPEED),
     ),
     outputs=(
         Var("steer_angle", "rad", "steering angle about the steering axis, > 0 steers right"),
@@ -46,5 +46,8 @@ SPEC = ModelSpec(
         Var("mf_C", "1", "Magic Formula shape factor C (0 < C < 2)", start=1.3, min=0.01, max=1.99),
         Var("mf_E", "1", "Magic Formula curvature factor E (<= 1)", start=0.0, min=-5.0, max=1.0),
     ),
+    # longest communication step (s), measured against 1 ms runs: <= 1 ms RK4 substeps inside any step:
+    # identical to 1 ms runs
+    max_step=1.0,
     stop_time=16.0,
 )

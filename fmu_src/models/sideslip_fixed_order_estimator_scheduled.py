@@ -3,7 +3,7 @@
 One paper-002 estimator per speed band, switched on vx (the state is kept across a switch). The
 maths is in ``tf_estimator.py``; the estimators come from the design file baked into the FMU.
 """
-from ..spec import ModelSpec, Var
+from ..spec import RATE, SPEED, ModelSpec, Var, design_speed
 from ..tf_estimator import TfEstimator
 from .sideslip_fixed_order_estimator import describe_estimator
 
@@ -13,9 +13,9 @@ SPEC = ModelSpec(
     describe=describe_estimator,
     runtime=TfEstimator,
     inputs=(
-        Var("yaw_rate", "rad/s", "measured yaw rate"),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
         Var("vx", "m/s", "longitudinal speed (selects the band; outside the grid the nearest band, with a "
-                         "warning)"),
+                         "warning)", **SPEED),
     ),
     outputs=(
         Var("beta_hat", "rad", "estimated sideslip angle at the CG"),
@@ -24,5 +24,9 @@ SPEC = ModelSpec(
         Var("mode", "1", "active speed band, 1-based", start=1, min=1),
     ),
     bounds=lambda data: {"mode": (1, len(data.get("estimators", [1])))},
+    starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
+    # longest communication step (s), measured against 1 ms runs: exact step maps: identical to 1 ms runs
+    # to 1e-14
+    max_step=1.0,
     stop_time=20.0,
 )

@@ -8,7 +8,7 @@ vehicle, the noise covariances and the speed clamp come from the design file bak
 the certified design.
 """
 from ..kalman_observer import KalmanObserver
-from ..spec import ModelSpec, Var
+from ..spec import ACCEL, ANGLE, RATE, SPEED, ModelSpec, Var
 
 
 def _diag(M) -> str:
@@ -38,16 +38,19 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=KalmanObserver,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left"),
+        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
         Var("vx", "m/s", "longitudinal speed (the model is evaluated at vx clamped to [vx_min, vx_max])",
-            start=20.0),
-        Var("yaw_rate", "rad/s", "measured yaw rate"),
-        Var("ay", "m/s2", "measured lateral acceleration at the centre of gravity"),
+            start=20.0, **SPEED),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
+        Var("ay", "m/s2", "measured lateral acceleration at the centre of gravity", **ACCEL),
     ),
     outputs=(
         Var("beta_hat", "rad", "estimated sideslip angle atan(vy_hat/vx) at the centre of gravity"),
         Var("vy_hat", "m/s", "estimated lateral velocity at the centre of gravity"),
         Var("yaw_rate_hat", "rad/s", "estimated yaw rate"),
     ),
+    # longest communication step (s), measured against 1 ms runs: a discrete filter over the communication
+    # step (its gain depends on the step, its error does not grow with it): bounded at every step to 1 s
+    max_step=1.0,
     stop_time=20.0,
 )

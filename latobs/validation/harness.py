@@ -618,9 +618,10 @@ class CoSimulation:
         fill_bus(0, call(plant, "initialisation", 0, plant.start, u0, self.plant_parameters, t0, stop))
         if held:
             plant.prepare_io(plant_in)   # only the driven inputs are set from now on
+        at_start = getattr(sc, "initialise_at_start_values", False)   # as fmpy's simulate_ssp (ssp.py)
         for lab, f in observers.items():
-            y0 = call(f, "initialisation", 0, f.start, meas(0, obs_in[lab]), self.observer_parameters.get(lab, {}),
-                      t0, stop)
+            m0 = {v.name: float(v.start) for v in f.inputs} if at_start else meas(0, obs_in[lab])
+            y0 = call(f, "initialisation", 0, f.start, m0, self.observer_parameters.get(lab, {}), t0, stop)
             for name, val in y0.items():
                 obs_rec[lab][name][0] = val
 

@@ -170,7 +170,7 @@ int main(int argc, char **argv)
     guid = argv[4];
     for (p = argv[5]; *p && n_in < 64; p += (*p == ',')) {
         in_vrs[n_in] = (fmi2ValueReference)strtoul(p, &p, 10);
-        in_values[n_in++] = 20.0;
+        in_values[n_in++] = 1.5; /* every input inside its declared range (angles up to pi/2) */
     }
     out_vr = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
 
