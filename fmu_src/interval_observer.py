@@ -26,10 +26,20 @@ N ~ -7 I, turned that into a width feedback of ~1000 h /s: the bounds diverged a
 near the band edges. With the delayed correction the vy width decays at 5.5 /s (h = 1 ms),
 5 /s (5 ms), 4 /s (10 ms), 2-3 /s (20 ms) in every band and just outside the grid.)
 The remainders of y between the samples still grow with the bounds' width, times h^2 |J|: above
-some step the decay of exp(N h) loses and the bounds diverge (sedan: from ~30 ms at 10 m/s; 1e30
-m/s at 50 ms). No substep can help there, since no measurement arrives inside a step, so a step
-longer than ``max_communication_step()`` (decided from the design, the same constant in the native C model) is
-refused with an error, the state kept.
+some step the decay of exp(N h) loses and this correction alone diverges (sedan: from ~30 ms at
+10 m/s; 1e30 m/s at 50 ms).
+So a second, SAMPLED-MEASUREMENT correction (a continuous-discrete interval observer; not in the
+paper) runs beside it and the two are intersected (both enclose x, so the intersection does, and
+it is never wider than either): between two samples x is propagated by the model alone, without
+output injection, over internal substeps of at most ``SAMPLED_SUBSTEP`` (the model's transition
+exp(A s) from the box at t in midpoint-radius form, the stiffness part bounded over each
+substep's a priori enclosure: ``_sampled_predict``), and at the sample the measurement enters
+through gains L with x = (I - L C) x + L y, exact for any L (``_sampled_correct``; the gains that
+let the two samples determine vy and x4: ``sampled_maps``). Its width does not feed back through
+the remainders of y, so it stays bounded far longer: the vy width decays at ~320 /s at 5 ms,
+~78 /s at 20 ms, ~29 /s at 50 ms, 3-7 /s at 200 ms (sedan, zero inputs). A step longer than
+``max_communication_step()`` (0.452 s for the sedan: where even this one stops contracting; decided
+from the design, the same constant in the native C model) is refused with an error, the state kept.
 
 One call of ``step(h, u)``, u the inputs at t (held over [t, t + h]):
  1. measurement intersection: the published box of the measured states (x2, x3) at t is
@@ -1374,25 +1384,25 @@ class IntervalObserver:
         """The longest communication step (s) this design accepts: ``step`` refuses a longer one.
 
         The measurements arrive only at the communication points. Between two of them the
-        correction (``_source_correct``) bounds y(s) by the samples at both ends and a remainder
-        that grows with the bounds' own width (through the enclosure of the step), and the
-        output-injection gains J multiply it: the width feedback grows like h^2 |J| (ERRATA 001's
-        Theorem 1 remark: Omega grows with the width), and above some step it beats the decay of
-        exp(N h). Substeps cannot help there (no measurement arrives inside a step), so such steps
-        are refused. The bound is decided from the design itself, by running this runtime: from
+        continuous correction (``_source_correct``) bounds y(s) by the samples at both ends and a
+        remainder that grows with the bounds' own width, times the output-injection gains J (the
+        width feedback grows like h^2 |J|); the sampled-measurement correction intersected with it
+        (``_sampled_correct``) has no such feedback, but over a long step the enclosures of the
+        trajectory, hence the stiffness part, grow with h, and from some step on (sedan: ~0.45 s at
+        10 m/s) even the intersection stops forgetting an initial error: longer steps are refused.
+        The bound is decided from the design itself, by running this runtime: from
         the initial box (+-x0_halfwidth on vy and x4) at zero inputs (then the width map is
         positively homogeneous: its decay rate is the rate at which any initial error is forgotten,
         the signals only add constant terms), at every band edge (both sides) and grid speed, the
         widths of vy and x4 must decay at >= ``MAX_COMM_STEP_DECAY`` (1/s) between
         MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE seconds. The decay rate falls with h (sedan,
-        +-20 %: 5.5 /s at 1 ms, 2.3 /s at 20 ms, < 0 from 30 ms at 10 m/s); the largest step on a
+        +-20 %, the slowest probed speed: ~320 /s at 5 ms, ~78 /s at 20 ms, ~3 /s at 200 ms,
+        0.7 /s at 0.5 s, < 0 at 1 s); the largest step on a
         ``MAX_COMM_STEP_RESOLUTION`` grid up to ``MAX_COMM_STEP_CEILING`` that passes is found by
-        bisection (0.0: none, every step refused). This is a measured decay, not a proof; it holds
-        inside the design grid: outside it (the nearest mode, a warning) the speed mismatch slows
-        the decay (sedan at 20 ms: 1.4 /s at 8 m/s, < 0 at 5 m/s).
+        bisection (0.0: none, every step refused). This is a measured decay, not a proof (the
+        enclosure itself is guaranteed at any accepted step; the decay is what keeps it narrow).
         The design stores it (runtime.max_communication_step, from the synthesis, which calls
-        this); a design file without it gets it computed here once per process (0.4 s for the
-        sedan's 3 modes, 2 s for 13). The native C model gets the same value as a constant
+        this); a design file without it gets it computed here once per process. The native C model gets the same value as a constant
         (IV_MAX_COMM_STEP, from the emitter)."""
         if self._max_comm_step is not None:
             return self._max_comm_step
@@ -1484,8 +1494,8 @@ class IntervalObserver:
         if not h <= hmax:     # refused before anything changes: the state is kept
             raise ValueError(f"communication step {h:g} s refused: longer than {hmax:g} s, the longest step at "
                              "which this design's bounds contract (the measurements arrive only at the "
-                             "communication points, so substeps cannot replace them); use a step <= "
-                             f"{hmax:g} s")
+                             "communication points: over a longer step the bounds of the trajectory grow "
+                             f"faster than one sample narrows them); use a step <= {hmax:g} s")
         self._advance(h, u)
 
     def _advance(self, h: float, u: dict) -> None:

@@ -706,8 +706,9 @@ def _state(obs):
 def test_long_communication_steps_stay_bounded_and_tight(design, h):
     """Constant steady-turn inputs (15 m/s): a 50 ms step once made the vy width 1e30 m/s within 10 s
     (1e98 at 100 ms), then such steps were refused. With the sampled-measurement correction every
-    step up to 200 ms is accepted, stays consistent and its vy width settles (here < 0.3 m/s: 0.13
-    at 100 ms, 0.21 at 200 ms; no growth over the last 5 s)."""
+    step up to 200 ms is accepted, stays consistent and its vy width settles (< 0.1 m/s up to 50 ms,
+    where the continuous correction alone gave 0.15 at 20 ms; 0.13 at 100 ms, 0.21 at 200 ms; no
+    growth over the last 5 s)."""
     u = _steady_turn(design, 15.0, 0.1)
     obs = IntervalObserver(design, {})
     obs.initialize(u)
@@ -717,7 +718,7 @@ def test_long_communication_steps_stay_bounded_and_tight(design, h):
         assert obs.y["consistent"] == 1
         widths.append(obs.y["vy_upper"] - obs.y["vy_lower"])
     half = len(widths) // 2
-    assert max(widths[half:]) < 0.3 and max(widths[-3:]) <= 1.01 * max(widths[half:-3] or widths[-3:]), widths
+    assert max(widths[half:]) < (0.1 if h <= 0.05 else 0.3) and max(widths[-3:]) <= 1.01 * max(widths[half:-3] or widths[-3:]), widths
 
 
 @pytest.mark.parametrize("h", [0.5, 1.0, 1e300])

@@ -23,9 +23,15 @@
  * The step maps (Phi, Gam, Gam1, Gam2) of (mode, h) are the runtime's ``phi_gamma``: from the
  * emitter for the default step IV_H0, otherwise computed here by the same algorithm; the
  * correction's coefficients derived from them are cached per mode (one step size at a time).
+ * Beside the correction of step 2, the sampled-measurement correction (the runtime's
+ * ``_sampled_predict`` at step 5 and ``_sampled_correct`` at step 2; not in the paper): x propagated
+ * by the model alone over IV_SAMPLED_SUBSTEP substeps, the measurement entering only at the samples
+ * through gains L (x = (I - L C) x + L y, exact for any L); both boxes are intersected (the
+ * predicted one too). Its maps (``sampled_fill``: the runtime's ``sampled_maps``, same order of
+ * operations) are computed here per (model speed, step), the model speed vx rounded to
+ * IV_SAMPLED_DV (the mismatch bounded exactly), and cached (SM_CACHE entries).
  * A step longer than IV_MAX_COMM_STEP (the runtime's ``max_communication_step``: the longest at
- * which the design's bounds contract; the measurements arrive only at the communication points,
- * so substeps cannot replace them), whose step maps are not finite (|vx| near the double range) or that would need
+ * which the design's bounds contract), whose step maps are not finite (|vx| near the double range) or that would need
  * more than MAX_SUBSTEPS enclosure substeps is refused with an error, the state unchanged.
  *
  * Model exchange: the paper's continuous-time observer eq. (23) itself,
@@ -1222,8 +1228,9 @@ static int step(Model *m, double h, const double *u, const Log *log)
     double vx = u[IN_vx], d = u[IN_delta], hold = m->vx_hold, y[NY];
     if (!(h <= IV_MAX_COMM_STEP)) {     /* ``max_communication_step``: the bounds would not contract */
         log_event(log, LOG_ERROR, "communication step %g s refused: longer than %g s, the longest step at which "
-                  "this design's bounds contract (the measurements arrive only at the communication points, so "
-                  "substeps cannot replace them); use a step <= %g s", h, IV_MAX_COMM_STEP, IV_MAX_COMM_STEP);
+                  "this design's bounds contract (the measurements arrive only at the communication points: over a "
+                  "longer step the bounds of the trajectory grow faster than one sample narrows them); use a step "
+                  "<= %g s", h, IV_MAX_COMM_STEP, IV_MAX_COMM_STEP);
         return -1;
     }
     if (!s->started) start(m, u, log);

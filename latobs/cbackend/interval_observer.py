@@ -22,7 +22,9 @@ Python runtime's data:
     IV_MAPS_H0[mode]             (Phi, Gam, Gam1, Gam2) = ``phi_gamma(N, IV_H0, eta, order=3)``, the
                                  runtime's own maps at the default step IV_H0 = 0.005 s; for another
                                  step the C model computes them by the same algorithm
-and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H), and
+and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H, and SAMPLED,
+SAMPLED_SUBSTEP, SAMPLED_MAX_SUBSTEPS, SAMPLED_DV of the sampled-measurement correction, whose maps
+the C model computes per speed and step by the runtime's algorithm, ``sampled_maps``), and
 
     IV_MAX_COMM_STEP             the longest communication step the design accepts (s): the runtime's
                                  ``max_communication_step()`` (runtime.max_communication_step, which
