@@ -36,8 +36,13 @@ exp(A s) from the box at t in midpoint-radius form, the stiffness part bounded o
 substep's a priori enclosure: ``_sampled_predict``), and at the sample the measurement enters
 through gains L with x = (I - L C) x + L y, exact for any L (``_sampled_correct``; the gains that
 let the two samples determine vy and x4: ``sampled_maps``). Its width does not feed back through
-the remainders of y, so it stays bounded far longer: the vy width decays at ~320 /s at 5 ms,
-~78 /s at 20 ms, ~29 /s at 50 ms, 3-7 /s at 200 ms (sedan, zero inputs). A step longer than
+the remainders of y, so it stays bounded far longer: the vy width decays at ~150 /s at 10 ms,
+~78 /s at 20 ms, ~29 /s at 50 ms, 3-7 /s at 200 ms (sedan, zero inputs). It is used from
+``SAMPLED_MIN_STEP`` (10 ms) on: its gains grow like 1/h^2 and amplify the departures of a real
+plant from the model (a four-wheel plant with atan slip angles and cos(delta) left the bounds by
+0.1-0.4 mm/s at 5 ms, once in 200 runs), where the continuous correction alone is tight enough
+(sedan, 200 plants x 60 s: mean vy width 0.067 m/s at 5 ms, 0.040 at 20 ms, 0.16 at 200 ms; the
+continuous one alone: 0.160 at 20 ms and divergence from ~30 ms). A step longer than
 ``max_communication_step()`` (0.452 s for the sedan: where even this one stops contracting; decided
 from the design, the same constant in the native C model) is refused with an error, the state kept.
 
@@ -968,6 +973,10 @@ class IntervalObserver:
     # with the continuous one; its substep (s)
     SAMPLED = True
     SAMPLED_SUBSTEP = 0.005
+    # below this step (s) the sampled correction is not used: its gains grow like 1/h^2 and
+    # amplify the plant's departures from the model (a four-wheel plant with atan slip angles left
+    # its bounds by 0.1-0.4 mm/s at 5 ms), where the continuous correction alone is tight
+    SAMPLED_MIN_STEP = 0.01
     SAMPLED_MAX_SUBSTEPS = 32
     SAMPLED_DV = 0.1         # m/s: the model speed of the sampled maps, vx rounded to this grid
     SAMPLED_CACHE = 128      # (speed, step) maps kept per process
@@ -1396,7 +1405,7 @@ class IntervalObserver:
         the signals only add constant terms), at every band edge (both sides) and grid speed, the
         widths of vy and x4 must decay at >= ``MAX_COMM_STEP_DECAY`` (1/s) between
         MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE seconds. The decay rate falls with h (sedan,
-        +-20 %, the slowest probed speed: ~320 /s at 5 ms, ~78 /s at 20 ms, ~3 /s at 200 ms,
+        +-20 %, the slowest probed speed: ~5 /s at 5 ms, ~150 /s at 10 ms, ~78 /s at 20 ms, ~3 /s at 200 ms,
         0.7 /s at 0.5 s, < 0 at 1 s); the largest step on a
         ``MAX_COMM_STEP_RESOLUTION`` grid up to ``MAX_COMM_STEP_CEILING`` that passes is found by
         bisection (0.0: none, every step refused). This is a measured decay, not a proof (the
@@ -1426,7 +1435,7 @@ class IntervalObserver:
         (the slower of the two, between MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE; -inf if they do not
         stay finite or the bounds restart). ``probe``: an instance of this design to run (reset)."""
         if probe is None:
-            probe = type(self)(self._data, {"vx_hold": 0.0})
+            probe = type(self)(self._probe_data(), {"vx_hold": 0.0})
         probe.events.clear()
         probe._holding = probe._outside = probe._inconsistent = probe._fallback_episode = False
         u = {"delta": 0.0, "vx": vx, "yaw_rate": 0.0, "ay": 0.0}
@@ -1448,10 +1457,19 @@ class IntervalObserver:
                 rate = min(rate, math.log(a / b) / ((n - half) * h))
         return rate
 
+    def _probe_data(self) -> dict:
+        """The design file without its disturbance bound (runtime.disturbance_bound = 0): the probes
+        of ``decay_rate`` measure how fast an initial error is forgotten, which the width map at
+        zero inputs shows when it is positively homogeneous; a disturbance bound adds a constant
+        floor that a fast correction reaches within the probe (then no decay is left to measure)."""
+        data = dict(self._data)
+        data["runtime"] = {**self._data["runtime"], "disturbance_bound": [0.0] * _N}
+        return data
+
     def _find_max_communication_step(self) -> float:
         res = self.MAX_COMM_STEP_RESOLUTION
         speeds = self._probe_speeds()
-        probe = type(self)(self._data, {"vx_hold": 0.0})
+        probe = type(self)(self._probe_data(), {"vx_hold": 0.0})
 
         def ok(k: int) -> bool:
             for i, v in enumerate(speeds):
@@ -1605,7 +1623,7 @@ class IntervalObserver:
         else:
             xi = self._xi if (self._xi is not None and self._xi_mode == mode) else _NO_XI
             sampled = None
-            if self.SAMPLED:             # the box by the model alone, intersected
+            if self.SAMPLED and h >= self.SAMPLED_MIN_STEP:     # the box by the model alone, intersected
                 try:
                     Bs, sampled = self._sampled_predict(h, vx, d, X)
                 except (ValueError, OverflowError):   # no finite step map (|vx| near the double range): skipped

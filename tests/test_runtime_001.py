@@ -757,7 +757,8 @@ def test_max_communication_step_is_where_the_bounds_stop_contracting(design):
     assert min(obs.decay_rate(hmax + res, v) for v in speeds) < obs.MAX_COMM_STEP_DECAY
     assert min(obs.decay_rate(1.0, v) for v in speeds) < 0.0       # 1 s: the widths grow
     assert min(obs.decay_rate(0.05, v) for v in speeds) > 20.0     # the sampled correction: ~29 /s
-    assert obs.decay_rate(0.005, 15.0) > 100.0            # ~320 /s at the default step
+    assert obs.decay_rate(0.005, 15.0) > 4.0              # ~5 /s at the default step (continuous only)
+    assert obs.decay_rate(0.01, 15.0) > 100.0             # the sampled correction from 10 ms: ~150 /s
     bare = copy.deepcopy(design)
     del bare["runtime"]["max_communication_step"]
     assert IntervalObserver(bare, {}).max_communication_step() == hmax

@@ -27,7 +27,7 @@
  * ``_sampled_predict`` at step 5 and ``_sampled_correct`` at step 2; not in the paper): x propagated
  * by the model alone over IV_SAMPLED_SUBSTEP substeps, the measurement entering only at the samples
  * through gains L (x = (I - L C) x + L y, exact for any L); both boxes are intersected (the
- * predicted one too). Its maps (``sampled_fill``: the runtime's ``sampled_maps``, same order of
+ * predicted one too), for steps h >= IV_SAMPLED_MIN_STEP. Its maps (``sampled_fill``: the runtime's ``sampled_maps``, same order of
  * operations) are computed here per (model speed, step), the model speed vx rounded to
  * IV_SAMPLED_DV (the mismatch bounded exactly), and cached (SM_CACHE entries).
  * A step longer than IV_MAX_COMM_STEP (the runtime's ``max_communication_step``: the longest at
@@ -1292,7 +1292,7 @@ static int step(Model *m, double h, const double *u, const Log *log)
             p->xi[NX + i] = s->xi_mode == mode ? s->xi[NX + i] : INFINITY;
         }
         p->has_sm = 0;
-        if (IV_SAMPLED) {              /* the box by the model alone, intersected */
+        if (IV_SAMPLED && h >= IV_SAMPLED_MIN_STEP) {      /* the box by the model alone, intersected */
             double Bs[NB];
             p->has_sm = sampled_predict(m, h, vx, d, X, Bs, p) == 0;
             if (p->has_sm) intersect_box(B, Bs);

@@ -23,7 +23,7 @@ Python runtime's data:
                                  runtime's own maps at the default step IV_H0 = 0.005 s; for another
                                  step the C model computes them by the same algorithm
 and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H, and SAMPLED,
-SAMPLED_SUBSTEP, SAMPLED_MAX_SUBSTEPS, SAMPLED_DV of the sampled-measurement correction, whose maps
+SAMPLED_SUBSTEP, SAMPLED_MIN_STEP, SAMPLED_MAX_SUBSTEPS, SAMPLED_DV of the sampled-measurement correction, whose maps
 the C model computes per speed and step by the runtime's algorithm, ``sampled_maps``), and
 
     IV_MAX_COMM_STEP             the longest communication step the design accepts (s): the runtime's
@@ -83,6 +83,7 @@ def emit(data: dict) -> CModel:
         c_define("IV_MAX_COMM_STEP", float(rt.max_communication_step())),
         c_define("IV_SAMPLED", bool(rt.SAMPLED)),
         c_define("IV_SAMPLED_SUBSTEP", float(rt.SAMPLED_SUBSTEP)),
+        c_define("IV_SAMPLED_MIN_STEP", float(rt.SAMPLED_MIN_STEP)),
         c_define("IV_SAMPLED_MAX_SUBSTEPS", int(rt.SAMPLED_MAX_SUBSTEPS)),
         c_define("IV_SAMPLED_DV", float(rt.SAMPLED_DV)),
         c_define("IV_M", md["m"]), c_define("IV_IZ", md["Iz"]), c_define("IV_LF", md["lf"]),
