@@ -826,6 +826,9 @@ def _addv(a, b):
     return [x + y for x, y in zip(a, b)]
 
 
+SAMPLED_MAX_NORM = 1e6   # ||A hs||_inf above which ``sampled_maps`` gives up (vx ~ 1e8 m/s at 5 ms)
+
+
 class _Sampled:
     """The maps of the sampled-measurement correction at one (speed, step): see
     ``IntervalObserver._sampled_maps``."""
@@ -851,6 +854,9 @@ def sampled_maps(model, meas, vx: float, h: float, substep: float, max_substeps:
     Bv = [vx * b for b in model["B1"]]
     n = min(max(1, math.ceil(h / substep - 1e-9)), max_substeps)
     hs = h / n
+    norm = max(sum(abs(x) for x in row) for row in A) * hs
+    if not norm <= SAMPLED_MAX_NORM:        # |vx| far beyond any vehicle: no useful map, and slow
+        raise ValueError(f"no sampled step map at vx = {vx!r} m/s (||A hs|| = {norm:g})")
     phid, gamd = expm_gamma(A, hs)
     Mj = [[A[i][j] if i == j else abs(A[i][j]) for j in range(n_x)] for i in range(n_x)]
     shift = max(0.0, max(-Mj[i][i] for i in range(n_x)))

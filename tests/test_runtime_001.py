@@ -831,3 +831,16 @@ def test_step_time(design):
         best = min(best, (time.perf_counter() - t0) / len(us))
     print(f"\nLateralIntervalObserver runtime: {best * 1e6:.1f} us per step (warm, h = 5 ms)")
     assert best < 200e-6            # generous: shared CI machines
+
+
+@pytest.mark.parametrize("vx", [1e8, 1e150, 1e300])
+def test_a_huge_speed_at_a_long_step_returns_at_once(design, vx):
+    """The sampled-measurement correction's maps at an absurd speed would need ~1000 squarings
+    (about 1 s per call in Python): it is skipped there (||A hs|| > SAMPLED_MAX_NORM), both backends."""
+    obs = IntervalObserver(design, {})
+    obs.initialize(_u())
+    obs.step(0.2, _u())                 # the maps of an ordinary step, cached
+    t0 = time.perf_counter()
+    for _ in range(3):
+        obs.step(0.2, _u(vx=vx, delta=0.01, r=0.01, ay=0.1))
+    assert time.perf_counter() - t0 < 0.5

@@ -700,7 +700,13 @@ static int sampled_fill(Sampled *sm, double vq, double h)
     }
     double nd = ceil(h / IV_SAMPLED_SUBSTEP - 1e-9);
     int n = !(nd >= 1.0) ? 1 : nd > IV_SAMPLED_MAX_SUBSTEPS ? IV_SAMPLED_MAX_SUBSTEPS : (int)nd;
-    double hs = h / n;
+    double hs = h / n, norm = 0.0;
+    for (int i = 0; i < NX; i++) {
+        double row = 0.0;
+        for (int j = 0; j < NX; j++) row += fabs(A[i][j]);
+        norm = py_max(norm, row);
+    }
+    if (!(norm * hs <= IV_SAMPLED_MAX_NORM)) return -1;     /* |vx| far beyond any vehicle */
     if (expm_gamma(A, hs, phid, gamd) != 0) return -1;
     for (int i = 0; i < NX; i++)
         for (int j = 0; j < NX; j++) Mj[i][j] = i == j ? A[i][j] : fabs(A[i][j]);

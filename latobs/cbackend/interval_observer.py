@@ -36,7 +36,7 @@ The C model implements the runtime's default bounds (``STIFFNESS = "structured"`
 from __future__ import annotations
 
 from ..fmu_src.framework import DEFAULT_STEP
-from ..fmu_src.interval_observer import IntervalObserver, _damped_rows, _smooth_rows, phi_gamma
+from ..fmu_src.interval_observer import SAMPLED_MAX_NORM, IntervalObserver, _damped_rows, _smooth_rows, phi_gamma
 from ..fmu_src.spec import Var
 from .emit import CModel, c_array, c_define
 
@@ -86,6 +86,7 @@ def emit(data: dict) -> CModel:
         c_define("IV_SAMPLED_MIN_STEP", float(rt.SAMPLED_MIN_STEP)),
         c_define("IV_SAMPLED_MAX_SUBSTEPS", int(rt.SAMPLED_MAX_SUBSTEPS)),
         c_define("IV_SAMPLED_DV", float(rt.SAMPLED_DV)),
+        c_define("IV_SAMPLED_MAX_NORM", float(SAMPLED_MAX_NORM)),
         c_define("IV_M", md["m"]), c_define("IV_IZ", md["Iz"]), c_define("IV_LF", md["lf"]),
         c_define("IV_LR", md["lr"]),
         c_define("IV_K3", sk["k3"]), c_define("IV_K4F", sk["k4f"]), c_define("IV_K4R", sk["k4r"]),
