@@ -154,6 +154,27 @@ def _matvec(A, v):
     return [sum([a * b for a, b in zip(row, v)]) for row in A]
 
 
+def _expm_taylor(M):
+    """exp(M) of a square matrix (lists of rows): scaling X = M / 2^s with ||X||_inf <= 1/2, Horner's
+    Taylor series of degree 16 (truncation < 0.5^17/17! ~ 2e-20 relative), s squarings. ValueError
+    if ||M||_inf is not finite or above 1e300. Pure Python; the native C model's ``expm_taylor``
+    runs the same operations in the same order."""
+    m = len(M)
+    norm = max(sum(abs(x) for x in row) for row in M)
+    if not norm <= 1e300:
+        raise ValueError(f"no finite step map (||M h|| = {norm!r})")
+    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
+    scale = 0.5 ** s
+    X = [[x * scale for x in row] for row in M]
+    E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
+    for k in range(16, 0, -1):                       # Horner: I + X/1 (I + X/2 (... (I + X/16)))
+        XE = _matmul(X, E)
+        E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
+    for _ in range(s):
+        E = _matmul(E, E)
+    return E
+
+
 def phi_gamma(N, h: float, eta: float, order: int = 1):
     """(Phi, Gam) = (exp(N h), int_0^h exp(N s) ds) for a Metzler N with N + eta I >= 0, h > 0;
     ``order`` = 3 adds Gam1 = int_0^h exp(N (h - s)) s ds and Gam2 = int_0^h exp(N (h - s)) s^2/2 ds
@@ -182,16 +203,7 @@ def phi_gamma(N, h: float, eta: float, order: int = 1):
             M[b * n + i][b * n + i] = eta * h
     if min(min(row) for row in M) < 0:
         raise ValueError("phi_gamma needs N + eta I >= 0 elementwise (N Metzler, eta large enough)")
-    norm = max(sum(row) for row in M)
-    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
-    scale = 0.5 ** s
-    X = [[x * scale for x in row] for row in M]
-    E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
-    for k in range(16, 0, -1):                       # Horner: I + X/1 (I + X/2 (... (I + X/16)))
-        XE = _matmul(X, E)
-        E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
-    for _ in range(s):
-        E = _matmul(E, E)
+    E = _expm_taylor(M)
     damp = math.exp(-eta * h)
     return tuple([[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb))
 
@@ -793,9 +805,7 @@ def _source_correct(model, mode, h, maps, meas, product: str) -> str:
 # -- the sampled-measurement (continuous-discrete) correction --------------------------------------
 def expm_gamma(A, h: float):
     """(Phi, Gam) = (exp(A h), int_0^h exp(A s) ds) for ANY square A (no sign condition), h > 0:
-    exp of the block matrix [[A, I], [0, 0]] h by scaling (||X||_inf <= 1/2), Horner's Taylor
-    series of degree 16 (truncation < 2e-20 relative) and squaring. Pure Python; the native C
-    model runs the same algorithm in the same order."""
+    the top blocks of exp([[A, I], [0, 0]] h) (``_expm_taylor``)."""
     n = len(A)
     m = 2 * n
     M = [[0.0] * m for _ in range(m)]
@@ -803,18 +813,7 @@ def expm_gamma(A, h: float):
         for j in range(n):
             M[i][j] = A[i][j] * h
         M[i][n + i] = h
-    norm = max(sum(abs(x) for x in row) for row in M)
-    if not (math.isfinite(norm) and norm <= 1e300):
-        raise ValueError(f"no finite step map for h = {h!r} s")
-    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
-    scale = 0.5 ** s
-    X = [[x * scale for x in row] for row in M]
-    E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
-    for k in range(16, 0, -1):                       # Horner: I + X/1 (I + X/2 (... (I + X/16)))
-        XE = _matmul(X, E)
-        E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
-    for _ in range(s):
-        E = _matmul(E, E)
+    E = _expm_taylor(M)
     return [row[:n] for row in E[:n]], [row[n:] for row in E[:n]]
 
 

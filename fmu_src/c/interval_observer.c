@@ -62,6 +62,7 @@
 #define NY 2                       /* measured states */
 #define N_MODES IV_N_MODES
 #define N_MAPS 4                   /* Phi, Gam, Gam1, Gam2 */
+#define MAXM (N_MAPS * NX)         /* the largest block matrix of ``expm_taylor`` */
 #define MAX_SUBSTEPS 100000        /* enclosure substeps of one step (h rho / IV_SUBSTEP_RHO_H) */
 #define ME_HYST 1e-6               /* m/s, see model_me_event_indicators */
 
@@ -349,31 +350,15 @@ static void F_hull(double vx, double d, const double X[NB], double F[NB])
 }
 
 /* ------------------------------------------------------------------ step maps */
-/* (Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, ...) for a Metzler N with N + eta I >= 0
- * (the runtime's ``phi_gamma``, nb = order + 1 blocks): exp of the nonnegative block matrix
- * [[N + eta I, I, ..], [0, eta I, I, ..], ..] h by scaling (||X||_inf <= 1/2), Horner's Taylor
- * series of degree 16 and squaring, times exp(-eta h). 0, or -1 if the norm is not finite or an
- * entry is negative (the runtime raises). */
-static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX])
+/* exp(M) of the leading mm x mm block (the runtime's ``_expm_taylor``): scaling X = M / 2^s with
+ * ||X||_inf <= 1/2, Horner's Taylor series of degree 16, s squarings. 0, or -1 if ||M||_inf is not
+ * finite or above 1e300 (the runtime raises). M is scaled in place. */
+static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM])
 {
-    enum { MM = N_MAPS * NX };
-    int mm = nb * NX;
-    double M[MM][MM], E[MM][MM], P[MM][MM];
-    memset(M, 0, sizeof M);
-    for (int i = 0; i < NX; i++)
-        for (int j = 0; j < NX; j++) M[i][j] = (N[i][j] + (i == j ? eta : 0.0)) * h;
-    for (int b = 1; b < nb; b++)
-        for (int i = 0; i < NX; i++) {
-            M[(b - 1) * NX + i][b * NX + i] = h;
-            M[b * NX + i][b * NX + i] = eta * h;
-        }
-    double norm = 0.0;
+    double P[MAXM][MAXM], norm = 0.0;
     for (int i = 0; i < mm; i++) {
         double row = 0.0;
-        for (int j = 0; j < mm; j++) {
-            if (!(M[i][j] >= 0.0)) return -1;
-            row += M[i][j];
-        }
+        for (int j = 0; j < mm; j++) row += fabs(M[i][j]);
         norm = py_max(norm, row);
     }
     if (!(norm <= 1e300)) return -1;
@@ -402,8 +387,33 @@ static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, doubl
                 for (int k = 0; k < mm; k++) t += E[i][k] * E[k][j];
                 P[i][j] = t;
             }
-        memcpy(E, P, sizeof E);
+        for (int i = 0; i < mm; i++)
+            for (int j = 0; j < mm; j++) E[i][j] = P[i][j];
     }
+    return 0;
+}
+
+/* (Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, ...) for a Metzler N with N + eta I >= 0
+ * (the runtime's ``phi_gamma``, nb = order + 1 blocks): exp of the nonnegative block matrix
+ * [[N + eta I, I, ..], [0, eta I, I, ..], ..] h by scaling (||X||_inf <= 1/2), Horner's Taylor
+ * series of degree 16 and squaring, times exp(-eta h). 0, or -1 if the norm is not finite or an
+ * entry is negative (the runtime raises). */
+static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX])
+{
+    int mm = nb * NX;
+    double M[MAXM][MAXM], E[MAXM][MAXM];
+    memset(M, 0, sizeof M);
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) M[i][j] = (N[i][j] + (i == j ? eta : 0.0)) * h;
+    for (int b = 1; b < nb; b++)
+        for (int i = 0; i < NX; i++) {
+            M[(b - 1) * NX + i][b * NX + i] = h;
+            M[b * NX + i][b * NX + i] = eta * h;
+        }
+    for (int i = 0; i < mm; i++)
+        for (int j = 0; j < mm; j++)
+            if (!(M[i][j] >= 0.0)) return -1;
+    if (expm_taylor(M, mm, E) != 0) return -1;
     double damp = exp(-eta * h);
     for (int b = 0; b < nb; b++)
         for (int i = 0; i < NX; i++)
@@ -612,46 +622,13 @@ static int comparison_enclosure(double hs, double vx, double d, const double X[N
  * 0, or -1 if the norm is not finite (the runtime raises). */
 static int expm_gamma(const double A[NX][NX], double h, double Phi[NX][NX], double Gam[NX][NX])
 {
-    enum { MM = 2 * NX };
-    double M[MM][MM], E[MM][MM], P[MM][MM], norm = 0.0;
+    double M[MAXM][MAXM], E[MAXM][MAXM];
     memset(M, 0, sizeof M);
     for (int i = 0; i < NX; i++) {
         for (int j = 0; j < NX; j++) M[i][j] = A[i][j] * h;
         M[i][NX + i] = h;
     }
-    for (int i = 0; i < MM; i++) {
-        double row = 0.0;
-        for (int j = 0; j < MM; j++) row += fabs(M[i][j]);
-        norm = py_max(norm, row);
-    }
-    if (!(norm <= 1e300)) return -1;
-    int s = norm > 0.5 ? (int)ceil(log2(norm / 0.5)) : 0;
-    if (s < 0) s = 0;
-    double scale = ldexp(1.0, -s);
-    for (int i = 0; i < MM; i++)
-        for (int j = 0; j < MM; j++) {
-            M[i][j] *= scale;
-            E[i][j] = i == j ? 1.0 : 0.0;
-        }
-    for (int k = 16; k > 0; k--) {
-        for (int i = 0; i < MM; i++)
-            for (int j = 0; j < MM; j++) {
-                double t = 0.0;
-                for (int q = 0; q < MM; q++) t += M[i][q] * E[q][j];
-                P[i][j] = t;
-            }
-        for (int i = 0; i < MM; i++)
-            for (int j = 0; j < MM; j++) E[i][j] = (i == j ? 1.0 : 0.0) + P[i][j] / k;
-    }
-    for (int q = 0; q < s; q++) {
-        for (int i = 0; i < MM; i++)
-            for (int j = 0; j < MM; j++) {
-                double t = 0.0;
-                for (int k = 0; k < MM; k++) t += E[i][k] * E[k][j];
-                P[i][j] = t;
-            }
-        memcpy(E, P, sizeof E);
-    }
+    if (expm_taylor(M, 2 * NX, E) != 0) return -1;
     for (int i = 0; i < NX; i++)
         for (int j = 0; j < NX; j++) {
             Phi[i][j] = E[i][j];
