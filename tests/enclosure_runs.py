@@ -96,7 +96,7 @@ if __name__ == "__main__":     # python tests/enclosure_runs.py PLANT.fmu OBSERV
     import sys
 
     table, _ = step_table(sys.argv[1], sys.argv[2], int(sys.argv[3]), (0.2, 0.2),
-                          [0.005, 0.02, 0.025, 0.05, 0.1, 0.2], float(sys.argv[4]))
+                          [0.005, 0.02, 0.05, 0.1, 0.2], float(sys.argv[4]))
     print("| h (ms) | runs | refused | violations | mean vy width (m/s) | max vy width after 5 s (m/s) | "
           "growth: max (largest width, last third / before) | growth: median (mean width, last / middle third) |")
     print("|---|---|---|---|---|---|---|---|")

@@ -115,11 +115,14 @@ def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):
     -250 m/s, the declared minimum: beyond it the FMI layers refuse the step, so the runtime's
     non-finite-bounds restart is not reached through an FMU), frozen again, resumed; measurements of the
     nominal model (x' = (A0 + vx A1) x + vx B1 delta) with spikes (inconsistent); step sizes drawn
-    from 1 to 25 ms, at most the design's max_communication_step() (substeps from 20 ms)."""
+    from 1 to 200 ms, at most the design's max_communication_step() (the continuous correction's
+    enclosure substeps from 20 ms; the sampled-measurement correction's substeps from 10 ms, up to
+    its 32 at 200 ms)."""
     rng = np.random.default_rng(seed)
     md = data["model"]
     A0, A1, B1 = (np.array(md[k], float) for k in ("A0", "A1", "B1"))
-    h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.02, 0.025], size=n, p=[0.55, 0.15, 0.12, 0.1, 0.05, 0.03])
+    h = rng.choice([0.005, 0.002, 0.01, 0.001, 0.02, 0.025, 0.05, 0.1, 0.2], size=n,
+                   p=[0.5, 0.15, 0.12, 0.1, 0.05, 0.03, 0.02, 0.02, 0.01])
     h = np.minimum(h, IntervalObserver(data).max_communication_step())   # a longer step is refused
     t = np.concatenate([[0.0], np.cumsum(h)])[:n]
     vx = np.interp(t / t[-1], [0, 0.05, 0.3, 0.45, 0.6, 0.75, 0.85, 0.9, 1.0], [0, 0.5, 12, 15, 25, 80, 30, -5, 14])
@@ -128,8 +131,9 @@ def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):
     x, u = np.zeros(4), np.zeros((n, 4))
     for k in range(n):
         u[k] = delta[k], vx[k], x[1], x[2]
-        for _ in range(20):
-            x = x + h[k] / 20 * ((A0 + vx[k] * A1) @ x + vx[k] * B1 * delta[k])
+        m = max(20, int(np.ceil(h[k] / 0.001)))
+        for _ in range(m):
+            x = x + h[k] / m * ((A0 + vx[k] * A1) @ x + vx[k] * B1 * delta[k])
         if abs(vx[k]) < 1.0 or abs(vx[k]) > 50.0:
             x = np.zeros(4)
     u[::97, 3] += 30.0

@@ -100,9 +100,10 @@ def step_rows(fmus):
 
 
 def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows, capsys):
-    """At every step up to max_communication_step(): zero violations, the vy width after settling bounded and not
-    growing (the last third of a run against the middle third); above it, every run refused at
-    once with the limit named (before, 50 ms made the widths 1e30 m/s, silently)."""
+    """At every step up to max_communication_step() (0.452 s: every step of the table): zero
+    violations, the vy width after settling bounded and not growing (the last third of a run
+    against the middle third); above it, every run refused at once with the limit named (once
+    50 ms made the widths 1e30 m/s, silently; then 50-200 ms were refused)."""
     from latobs.fmu_src.interval_observer import IntervalObserver
     from latobs.synthesis import designs
 
@@ -120,8 +121,9 @@ def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows
             assert all("exceeds this FMU's longest step" in r["refused"] for r in rows if r["h"] == h)
 
 
-@pytest.mark.xfail(strict=True, reason="not reached: at 20 ms the mean vy width is ~2.3 times the 5 ms one (the "
-                                       "remainders of y between the samples, bounded through the width itself)")
 def test_vy_width_at_20_ms_within_25_percent_of_5_ms(step_rows):
+    """The 20 ms bounds are as tight as the 5 ms ones, within 25 % (200 plants x 60 s: 0.040 m/s at
+    20 ms against 0.067 at 5 ms, where the continuous correction alone gave 0.160 at 20 ms): from
+    10 ms the sampled-measurement correction is intersected with the continuous one."""
     table, _ = step_rows
     assert table[0.02]["vy_width_mean"] <= 1.25 * table[0.005]["vy_width_mean"], table

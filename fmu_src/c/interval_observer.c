@@ -23,9 +23,15 @@
  * The step maps (Phi, Gam, Gam1, Gam2) of (mode, h) are the runtime's ``phi_gamma``: from the
  * emitter for the default step IV_H0, otherwise computed here by the same algorithm; the
  * correction's coefficients derived from them are cached per mode (one step size at a time).
+ * Beside the correction of step 2, the sampled-measurement correction (the runtime's
+ * ``_sampled_predict`` at step 5 and ``_sampled_correct`` at step 2; not in the paper): x propagated
+ * by the model alone over IV_SAMPLED_SUBSTEP substeps, the measurement entering only at the samples
+ * through gains L (x = (I - L C) x + L y, exact for any L); both boxes are intersected (the
+ * predicted one too), for steps h >= IV_SAMPLED_MIN_STEP. Its maps (``sampled_fill``: the runtime's ``sampled_maps``, same order of
+ * operations) are computed here per (model speed, step), the model speed vx rounded to
+ * IV_SAMPLED_DV (the mismatch bounded exactly), and cached (SM_CACHE entries).
  * A step longer than IV_MAX_COMM_STEP (the runtime's ``max_communication_step``: the longest at
- * which the design's bounds contract; the measurements arrive only at the communication points,
- * so substeps cannot replace them), whose step maps are not finite (|vx| near the double range) or that would need
+ * which the design's bounds contract), whose step maps are not finite (|vx| near the double range) or that would need
  * more than MAX_SUBSTEPS enclosure substeps is refused with an error, the state unchanged.
  *
  * Model exchange: the paper's continuous-time observer eq. (23) itself,
@@ -56,6 +62,7 @@
 #define NY 2                       /* measured states */
 #define N_MODES IV_N_MODES
 #define N_MAPS 4                   /* Phi, Gam, Gam1, Gam2 */
+#define MAXM (N_MAPS * NX)         /* the largest block matrix of ``expm_taylor`` */
 #define MAX_SUBSTEPS 100000        /* enclosure substeps of one step (h rho / IV_SUBSTEP_RHO_H) */
 #define ME_HYST 1e-6               /* m/s, see model_me_event_indicators */
 
@@ -86,7 +93,32 @@ typedef struct {
     double X[NB];                  /* the box at its start */
     double xi[NB];                 /* the xi bounds at its start (+-inf: none) */
     double Fb[NB];                 /* the hull of F over T */
+    int has_sm;                    /* the sampled-measurement correction (``sampled_predict``): */
+    double sm_vq;                  /* its model speed (m/s), the box at the start (midpoint, radius) */
+    double sm_c0[NX], sm_r0[NX];   /* and the bounds of omega per substep (midpoint, radius) */
+    double sm_mo[IV_SAMPLED_MAX_SUBSTEPS][NX], sm_ro[IV_SAMPLED_MAX_SUBSTEPS][NX];
 } Pending;
+
+/* one gain of the sampled-measurement correction (the runtime's ``sampled_maps``: cands) */
+typedef struct {
+    double L[NX][NY], aL[NX][NY];  /* L, |L| */
+    double kphi[NX][NX], akphi[NX][NX], kgb[NX];    /* K phi[n], |K phi[n]|, K gamb[n]; K = I - L C */
+    double kpg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX];    /* K pg[i] */
+    double akpg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX];   /* |K phi[i]| Gam_M(hs) */
+} SampledGain;
+
+#define SM_GAINS (1 + NY * NY)      /* the deadbeat gain, one column by one measurement */
+#define SM_CACHE 2                  /* (speed, step) maps kept */
+
+/* the maps of the sampled-measurement correction at one (model speed vq, step h) */
+typedef struct {
+    int valid, n, nc;              /* n substeps of hs; nc gains */
+    double vq, h, hs;
+    double phi[IV_SAMPLED_MAX_SUBSTEPS + 1][NX][NX], aphi[IV_SAMPLED_MAX_SUBSTEPS + 1][NX][NX];
+    double gamb[IV_SAMPLED_MAX_SUBSTEPS + 1][NX];
+    double pg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX], apg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX];
+    SampledGain c[SM_GAINS];
+} Sampled;
 
 /* everything a step may change (restored when a step is refused) */
 typedef struct {
@@ -106,6 +138,8 @@ struct Model {
     double vx_hold;                /* m/s */
     State s;
     Core core[N_MODES];            /* cache, one step size per mode */
+    Sampled sm[SM_CACHE];          /* cache of the sampled-measurement maps, round robin */
+    int sm_next;
 };
 
 size_t model_size(void)
@@ -316,31 +350,15 @@ static void F_hull(double vx, double d, const double X[NB], double F[NB])
 }
 
 /* ------------------------------------------------------------------ step maps */
-/* (Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, ...) for a Metzler N with N + eta I >= 0
- * (the runtime's ``phi_gamma``, nb = order + 1 blocks): exp of the nonnegative block matrix
- * [[N + eta I, I, ..], [0, eta I, I, ..], ..] h by scaling (||X||_inf <= 1/2), Horner's Taylor
- * series of degree 16 and squaring, times exp(-eta h). 0, or -1 if the norm is not finite or an
- * entry is negative (the runtime raises). */
-static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX])
+/* exp(M) of the leading mm x mm block (the runtime's ``_expm_taylor``): scaling X = M / 2^s with
+ * ||X||_inf <= 1/2, Horner's Taylor series of degree 16, s squarings. 0, or -1 if ||M||_inf is not
+ * finite or above 1e300 (the runtime raises). M is scaled in place. */
+static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM])
 {
-    enum { MM = N_MAPS * NX };
-    int mm = nb * NX;
-    double M[MM][MM], E[MM][MM], P[MM][MM];
-    memset(M, 0, sizeof M);
-    for (int i = 0; i < NX; i++)
-        for (int j = 0; j < NX; j++) M[i][j] = (N[i][j] + (i == j ? eta : 0.0)) * h;
-    for (int b = 1; b < nb; b++)
-        for (int i = 0; i < NX; i++) {
-            M[(b - 1) * NX + i][b * NX + i] = h;
-            M[b * NX + i][b * NX + i] = eta * h;
-        }
-    double norm = 0.0;
+    double P[MAXM][MAXM], norm = 0.0;
     for (int i = 0; i < mm; i++) {
         double row = 0.0;
-        for (int j = 0; j < mm; j++) {
-            if (!(M[i][j] >= 0.0)) return -1;
-            row += M[i][j];
-        }
+        for (int j = 0; j < mm; j++) row += fabs(M[i][j]);
         norm = py_max(norm, row);
     }
     if (!(norm <= 1e300)) return -1;
@@ -369,8 +387,33 @@ static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, doubl
                 for (int k = 0; k < mm; k++) t += E[i][k] * E[k][j];
                 P[i][j] = t;
             }
-        memcpy(E, P, sizeof E);
+        for (int i = 0; i < mm; i++)
+            for (int j = 0; j < mm; j++) E[i][j] = P[i][j];
     }
+    return 0;
+}
+
+/* (Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, ...) for a Metzler N with N + eta I >= 0
+ * (the runtime's ``phi_gamma``, nb = order + 1 blocks): exp of the nonnegative block matrix
+ * [[N + eta I, I, ..], [0, eta I, I, ..], ..] h by scaling (||X||_inf <= 1/2), Horner's Taylor
+ * series of degree 16 and squaring, times exp(-eta h). 0, or -1 if the norm is not finite or an
+ * entry is negative (the runtime raises). */
+static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX])
+{
+    int mm = nb * NX;
+    double M[MAXM][MAXM], E[MAXM][MAXM];
+    memset(M, 0, sizeof M);
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) M[i][j] = (N[i][j] + (i == j ? eta : 0.0)) * h;
+    for (int b = 1; b < nb; b++)
+        for (int i = 0; i < NX; i++) {
+            M[(b - 1) * NX + i][b * NX + i] = h;
+            M[b * NX + i][b * NX + i] = eta * h;
+        }
+    for (int i = 0; i < mm; i++)
+        for (int j = 0; j < mm; j++)
+            if (!(M[i][j] >= 0.0)) return -1;
+    if (expm_taylor(M, mm, E) != 0) return -1;
     double damp = exp(-eta * h);
     for (int b = 0; b < nb; b++)
         for (int i = 0; i < NX; i++)
@@ -571,6 +614,264 @@ static int comparison_enclosure(double hs, double vx, double d, const double X[N
         T[NX + i] = py_min(S[NX + i], X[NX + i] + py_max(0.0, hs * f[NX + i]));
     }
     return 0;
+}
+
+/* ------------------------------------------------------------------ the sampled-measurement correction */
+/* (Phi, Gam) = (exp(A h), int_0^h exp(A s) ds) for ANY A (the runtime's ``expm_gamma``): exp of
+ * [[A, I], [0, 0]] h by scaling (||X||_inf <= 1/2), Horner's Taylor series of degree 16, squaring.
+ * 0, or -1 if the norm is not finite (the runtime raises). */
+static int expm_gamma(const double A[NX][NX], double h, double Phi[NX][NX], double Gam[NX][NX])
+{
+    double M[MAXM][MAXM], E[MAXM][MAXM];
+    memset(M, 0, sizeof M);
+    for (int i = 0; i < NX; i++) {
+        for (int j = 0; j < NX; j++) M[i][j] = A[i][j] * h;
+        M[i][NX + i] = h;
+    }
+    if (expm_taylor(M, 2 * NX, E) != 0) return -1;
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) {
+            Phi[i][j] = E[i][j];
+            Gam[i][j] = E[i][NX + j];
+        }
+    return 0;
+}
+
+static void mat_abs(const double A[NX][NX], double B[NX][NX])
+{
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) B[i][j] = fabs(A[i][j]);
+}
+
+/* y = A x (sums from the left, the runtime's ``_matvec``) */
+static void matvec(const double A[NX][NX], const double *x, double *y)
+{
+    for (int i = 0; i < NX; i++) {
+        double t = 0.0;
+        for (int j = 0; j < NX; j++) t += A[i][j] * x[j];
+        y[i] = t;
+    }
+}
+
+static void matvec_y(const double A[NX][NY], const double *x, double *y)
+{
+    for (int i = 0; i < NX; i++) {
+        double t = 0.0;
+        for (int j = 0; j < NY; j++) t += A[i][j] * x[j];
+        y[i] = t;
+    }
+}
+
+/* The maps of (vq, h) (the runtime's ``sampled_maps``, same order of operations): 0, or -1 (none). */
+static int sampled_fill(Sampled *sm, double vq, double h)
+{
+    double A[NX][NX], Bv[NX], phid[NX][NX], gamd[NX][NX], Mj[NX][NX], gm[2][NX][NX], gdb[NX], t[NX];
+    double eye[NX][NX], shift = 0.0, top;
+    sm->valid = 0;
+    for (int i = 0; i < NX; i++) {
+        for (int j = 0; j < NX; j++) {
+            A[i][j] = IV_A0[i][j] + vq * IV_A1[i][j];
+            eye[i][j] = i == j ? 1.0 : 0.0;
+        }
+        Bv[i] = vq * IV_B1[i];
+    }
+    double nd = ceil(h / IV_SAMPLED_SUBSTEP - 1e-9);
+    int n = !(nd >= 1.0) ? 1 : nd > IV_SAMPLED_MAX_SUBSTEPS ? IV_SAMPLED_MAX_SUBSTEPS : (int)nd;
+    double hs = h / n, norm = 0.0;
+    for (int i = 0; i < NX; i++) {
+        double row = 0.0;
+        for (int j = 0; j < NX; j++) row += fabs(A[i][j]);
+        norm = py_max(norm, row);
+    }
+    if (!(norm * hs <= IV_SAMPLED_MAX_NORM)) return -1;     /* |vx| far beyond any vehicle */
+    if (expm_gamma(A, hs, phid, gamd) != 0) return -1;
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) Mj[i][j] = i == j ? A[i][j] : fabs(A[i][j]);
+    top = -Mj[0][0];
+    for (int i = 1; i < NX; i++) top = py_max(top, -Mj[i][i]);
+    shift = py_max(0.0, top);
+    if (phi_gamma(Mj, hs, shift, 2, gm) != 0) return -1;
+    matvec(gamd, Bv, gdb);
+    memcpy(sm->phi[0], eye, sizeof eye);
+    for (int i = 0; i < NX; i++) sm->gamb[0][i] = 0.0;
+    for (int m = 1; m <= n; m++) {
+        matvec(sm->phi[m - 1], gdb, t);
+        for (int i = 0; i < NX; i++) sm->gamb[m][i] = sm->gamb[m - 1][i] + t[i];
+        mul_nxx(sm->phi[m - 1], phid, sm->phi[m]);
+    }
+    for (int m = 0; m <= n; m++) mat_abs(sm->phi[m], sm->aphi[m]);
+    for (int m = 0; m < n; m++) {
+        mul_nxx(sm->phi[m], gamd, sm->pg[m]);
+        mul_nxx(sm->aphi[m], gm[1], sm->apg[m]);
+    }
+    /* the gains: the deadbeat one, one column by one measurement (``sampled_maps``) */
+    const double (*ph)[NX] = sm->phi[n];
+    double opts[1 + NY * NY][NY][NY];   /* per option: the unmeasured rows' L (row k = UNMEAS[k]) */
+    int nopt = 0;
+    double D[NY][NY];
+    for (int q = 0; q < NY; q++)
+        for (int k = 0; k < NY; k++) D[q][k] = ph[MEAS[q]][UNMEAS[k]];
+    double det = D[0][0] * D[1][1] - D[0][1] * D[1][0];
+    if (det != 0.0 && isfinite(det)) {
+        double inv[NY][NY] = {{D[1][1] / det, -D[0][1] / det}, {-D[1][0] / det, D[0][0] / det}};
+        for (int r = 0; r < NY; r++)
+            for (int q = 0; q < NY; q++) {
+                double s = 0.0;
+                for (int k = 0; k < NY; k++) s += ph[UNMEAS[r]][UNMEAS[k]] * inv[k][q];
+                opts[nopt][r][q] = s;
+            }
+        nopt++;
+    }
+    for (int kj = 0; kj < NY; kj++) {
+        int j = UNMEAS[kj];
+        for (int q = 0; q < NY; q++) {
+            int jm = MEAS[q];
+            if (ph[jm][j] == 0.0) continue;
+            for (int r = 0; r < NY; r++)
+                for (int qq = 0; qq < NY; qq++) opts[nopt][r][qq] = qq == q ? ph[UNMEAS[r]][j] / ph[jm][j] : 0.0;
+            nopt++;
+        }
+    }
+    sm->nc = 0;
+    for (int o = 0; o < nopt; o++) {
+        SampledGain *g = &sm->c[sm->nc];
+        double K[NX][NX], KP[NX][NX];
+        int finite = 1;
+        memset(g->L, 0, sizeof g->L);
+        for (int q = 0; q < NY; q++) g->L[MEAS[q]][q] = 1.0;
+        for (int r = 0; r < NY; r++)
+            for (int q = 0; q < NY; q++) g->L[UNMEAS[r]][q] = opts[o][r][q];
+        for (int i = 0; i < NX; i++)
+            for (int q = 0; q < NY; q++) finite = finite && isfinite(g->L[i][q]);
+        if (!finite) continue;
+        for (int i = 0; i < NX; i++) {
+            for (int q = 0; q < NY; q++) g->aL[i][q] = fabs(g->L[i][q]);
+            for (int j = 0; j < NX; j++) {
+                double s = 0.0;
+                for (int q = 0; q < NY; q++)
+                    if (MEAS[q] == j) s += g->L[i][q];
+                K[i][j] = eye[i][j] - s;
+            }
+        }
+        mul_nxx(K, ph, g->kphi);
+        mat_abs(g->kphi, g->akphi);
+        matvec(K, sm->gamb[n], g->kgb);
+        for (int m = 0; m < n; m++) {
+            mul_nxx(K, sm->pg[m], g->kpg[m]);
+            mul_nxx(K, sm->phi[m], KP);
+            mat_abs(KP, KP);
+            mul_nxx(KP, gm[1], g->akpg[m]);
+        }
+        sm->nc++;
+    }
+    sm->n = n;
+    sm->hs = hs;
+    sm->vq = vq;
+    sm->h = h;
+    sm->valid = 1;
+    return 0;
+}
+
+/* the maps of (vq, h) from the cache (SM_CACHE entries, the oldest replaced); NULL: none */
+static const Sampled *sampled_get(Model *m, double vq, double h)
+{
+    for (int k = 0; k < SM_CACHE; k++)
+        if (m->sm[k].valid && m->sm[k].vq == vq && m->sm[k].h == h) return &m->sm[k];
+    Sampled *sm = &m->sm[m->sm_next];
+    m->sm_next = (m->sm_next + 1) % SM_CACHE;
+    return sampled_fill(sm, vq, h) == 0 ? sm : NULL;
+}
+
+/* The box of x(t + h) by the model alone from the box X of x(t) (the runtime's ``_sampled_predict``),
+ * and what ``sampled_correct`` needs (p->sm_*). 0, or -1 (skipped: no map or no finite enclosure). */
+static int sampled_predict(Model *m, double h, double vx, double d, const double X[NB], double Bm[NB], Pending *p)
+{
+    double vq = IV_SAMPLED_DV * rint(vx / IV_SAMPLED_DV), dv = vx - vq, adv = fabs(dv);
+    const Sampled *sm = sampled_get(m, vq, h);
+    double c[NX], r[NX], t[NX], T[NB], S[NB];
+    if (sm == NULL) return -1;
+    p->sm_vq = vq;
+    for (int i = 0; i < NX; i++) {
+        p->sm_c0[i] = (X[i] + X[NX + i]) * 0.5;
+        p->sm_r0[i] = (X[NX + i] - X[i]) * 0.5;
+    }
+    for (int k = 0; k <= sm->n; k++) {
+        matvec(sm->phi[k], p->sm_c0, c);
+        for (int i = 0; i < NX; i++) c[i] = c[i] + sm->gamb[k][i] * d;
+        matvec(sm->aphi[k], p->sm_r0, r);
+        for (int i = 0; i < k; i++) {
+            matvec(sm->pg[k - 1 - i], p->sm_mo[i], t);
+            for (int j = 0; j < NX; j++) c[j] = c[j] + t[j];
+            matvec(sm->apg[k - 1 - i], p->sm_ro[i], t);
+            for (int j = 0; j < NX; j++) r[j] = r[j] + t[j];
+        }
+        for (int i = 0; i < NX; i++) {
+            Bm[i] = c[i] - r[i];
+            Bm[NX + i] = c[i] + r[i];
+        }
+        if (k == sm->n) break;
+        if (enclose(sm->hs, vx, d, Bm, T) != 0 && comparison_enclosure(sm->hs, vx, d, Bm, T) != 0) return -1;
+        for (int i = 0; i < NB; i++) S[i] = 0.0;
+        stiffness(T, T + NX, 1, vx * d, S, S + NX);
+        for (int i = 0; i < NX; i++) {
+            double tc = 0.0, tr = 0.0;
+            for (int j = 0; j < NX; j++) tc += IV_A1[i][j] * ((T[j] + T[NX + j]) * 0.5);
+            for (int j = 0; j < NX; j++) tr += fabs(IV_A1[i][j]) * ((T[NX + j] - T[j]) * 0.5);
+            p->sm_mo[k][i] = (S[i] + S[NX + i]) * 0.5 + dv * (tc + IV_B1[i] * d);
+            p->sm_ro[k][i] = (S[NX + i] - S[i]) * 0.5 + IV_W[i] + adv * tr;
+        }
+    }
+    return all_finite(Bm, NB) ? 0 : -1;
+}
+
+/* The box of x(t + h) once the measured states lie in [ylo, yhi] (the runtime's ``_sampled_correct``):
+ * every gain's enclosure, intersected row by row. 0, or -1 (no map). */
+static int sampled_correct(Model *m, const Pending *p, const double ylo[NY], const double yhi[NY], double out[NB])
+{
+    const Sampled *sm = sampled_get(m, p->sm_vq, p->h);
+    double yc[NY], yr[NY], c[NX], r[NX], t[NX];
+    if (sm == NULL) return -1;
+    for (int q = 0; q < NY; q++) {
+        yc[q] = (ylo[q] + yhi[q]) * 0.5;
+        yr[q] = (yhi[q] - ylo[q]) * 0.5;
+    }
+    for (int i = 0; i < NX; i++) {
+        out[i] = -INFINITY;
+        out[NX + i] = INFINITY;
+    }
+    for (int g = 0; g < sm->nc; g++) {
+        const SampledGain *k = &sm->c[g];
+        matvec(k->kphi, p->sm_c0, c);
+        for (int i = 0; i < NX; i++) c[i] = c[i] + k->kgb[i] * p->d;
+        matvec_y(k->L, yc, t);
+        for (int i = 0; i < NX; i++) c[i] = c[i] + t[i];
+        matvec(k->akphi, p->sm_r0, r);
+        matvec_y(k->aL, yr, t);
+        for (int i = 0; i < NX; i++) r[i] = r[i] + t[i];
+        for (int i = 0; i < sm->n; i++) {
+            matvec(k->kpg[sm->n - 1 - i], p->sm_mo[i], t);
+            for (int j = 0; j < NX; j++) c[j] = c[j] + t[j];
+            matvec(k->akpg[sm->n - 1 - i], p->sm_ro[i], t);
+            for (int j = 0; j < NX; j++) r[j] = r[j] + t[j];
+        }
+        for (int i = 0; i < NX; i++) {
+            if (c[i] - r[i] > out[i]) out[i] = c[i] - r[i];
+            if (c[i] + r[i] < out[NX + i]) out[NX + i] = c[i] + r[i];
+        }
+    }
+    return 0;
+}
+
+/* lo/hi of a box intersected with another, row by row, where the intersection is not empty */
+static void intersect_box(double *B, const double *S)
+{
+    for (int i = 0; i < NX; i++) {
+        double lo = py_max(B[i], S[i]), hi = py_min(B[NX + i], S[NX + i]);
+        if (lo <= hi) {
+            B[i] = lo;
+            B[NX + i] = hi;
+        }
+    }
 }
 
 /* The prediction (``_source_predict``): out = [Fbar (8), B (8)], Fbar the hull of F over T and B the
@@ -842,13 +1143,14 @@ static int correct_pending(Model *m, const double y[NY], const Log *log)
 {
     State *s = &m->s;
     const Core *k = core_for(m, s->p.mode, s->p.h, log);
-    double ylo[NY], yhi[NY], out[2 * NB];
+    double ylo[NY], yhi[NY], out[2 * NB], sb[NB];
     if (k == NULL) return -1;
     for (int q = 0; q < NY; q++) {
         ylo[q] = s->box[MEAS[q]];
         yhi[q] = s->box[NX + MEAS[q]];
     }
     correct(k, &s->p, ylo, yhi, s->box, out);
+    if (s->p.has_sm && sampled_correct(m, &s->p, ylo, yhi, sb) == 0) intersect_box(out, sb);
     if (all_finite(out, 2 * NB)) {
         memcpy(s->box, out, sizeof s->box);
         memcpy(s->xi, out + NB, sizeof s->xi);
@@ -909,8 +1211,9 @@ static int step(Model *m, double h, const double *u, const Log *log)
     double vx = u[IN_vx], d = u[IN_delta], hold = m->vx_hold, y[NY];
     if (!(h <= IV_MAX_COMM_STEP)) {     /* ``max_communication_step``: the bounds would not contract */
         log_event(log, LOG_ERROR, "communication step %g s refused: longer than %g s, the longest step at which "
-                  "this design's bounds contract (the measurements arrive only at the communication points, so "
-                  "substeps cannot replace them); use a step <= %g s", h, IV_MAX_COMM_STEP, IV_MAX_COMM_STEP);
+                  "this design's bounds contract (the measurements arrive only at the communication points: over a "
+                  "longer step the bounds of the trajectory grow faster than one sample narrows them); use a step "
+                  "<= %g s", h, IV_MAX_COMM_STEP, IV_MAX_COMM_STEP);
         return -1;
     }
     if (!s->started) start(m, u, log);
@@ -970,6 +1273,12 @@ static int step(Model *m, double h, const double *u, const Log *log)
         for (int i = 0; i < NX; i++) {
             p->xi[i] = s->xi_mode == mode ? s->xi[i] : -INFINITY;
             p->xi[NX + i] = s->xi_mode == mode ? s->xi[NX + i] : INFINITY;
+        }
+        p->has_sm = 0;
+        if (IV_SAMPLED && h >= IV_SAMPLED_MIN_STEP) {      /* the box by the model alone, intersected */
+            double Bs[NB];
+            p->has_sm = sampled_predict(m, h, vx, d, X, Bs, p) == 0;
+            if (p->has_sm) intersect_box(B, Bs);
         }
         s->has_pending = 1;
         memcpy(s->box, B, sizeof B);

@@ -22,7 +22,9 @@ Python runtime's data:
     IV_MAPS_H0[mode]             (Phi, Gam, Gam1, Gam2) = ``phi_gamma(N, IV_H0, eta, order=3)``, the
                                  runtime's own maps at the default step IV_H0 = 0.005 s; for another
                                  step the C model computes them by the same algorithm
-and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H), and
+and the runtime's tuning constants (CONSISTENCY_TOL, ENCLOSURE_*, SUBSTEP_RHO_H, and SAMPLED,
+SAMPLED_SUBSTEP, SAMPLED_MIN_STEP, SAMPLED_MAX_SUBSTEPS, SAMPLED_DV of the sampled-measurement correction, whose maps
+the C model computes per speed and step by the runtime's algorithm, ``sampled_maps``), and
 
     IV_MAX_COMM_STEP             the longest communication step the design accepts (s): the runtime's
                                  ``max_communication_step()`` (runtime.max_communication_step, which
@@ -34,7 +36,7 @@ The C model implements the runtime's default bounds (``STIFFNESS = "structured"`
 from __future__ import annotations
 
 from ..fmu_src.framework import DEFAULT_STEP
-from ..fmu_src.interval_observer import IntervalObserver, _damped_rows, _smooth_rows, phi_gamma
+from ..fmu_src.interval_observer import SAMPLED_MAX_NORM, IntervalObserver, _damped_rows, _smooth_rows, phi_gamma
 from ..fmu_src.spec import Var
 from .emit import CModel, c_array, c_define
 
@@ -79,6 +81,12 @@ def emit(data: dict) -> CModel:
         c_define("IV_ENCLOSURE_MULT", float(rt.ENCLOSURE_MULT)),
         c_define("IV_SUBSTEP_RHO_H", float(rt.SUBSTEP_RHO_H)),
         c_define("IV_MAX_COMM_STEP", float(rt.max_communication_step())),
+        c_define("IV_SAMPLED", bool(rt.SAMPLED)),
+        c_define("IV_SAMPLED_SUBSTEP", float(rt.SAMPLED_SUBSTEP)),
+        c_define("IV_SAMPLED_MIN_STEP", float(rt.SAMPLED_MIN_STEP)),
+        c_define("IV_SAMPLED_MAX_SUBSTEPS", int(rt.SAMPLED_MAX_SUBSTEPS)),
+        c_define("IV_SAMPLED_DV", float(rt.SAMPLED_DV)),
+        c_define("IV_SAMPLED_MAX_NORM", float(SAMPLED_MAX_NORM)),
         c_define("IV_M", md["m"]), c_define("IV_IZ", md["Iz"]), c_define("IV_LF", md["lf"]),
         c_define("IV_LR", md["lr"]),
         c_define("IV_K3", sk["k3"]), c_define("IV_K4F", sk["k4f"]), c_define("IV_K4R", sk["k4r"]),
