@@ -27,6 +27,8 @@
 #ifndef LATOBS_MODEL_H
 #define LATOBS_MODEL_H
 
+#include "fp_contract.h" /* first: no FMA contraction, whatever the compiler's flags */
+
 #include <stddef.h>
 
 #include "fmu_config.h"

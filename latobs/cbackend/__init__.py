@@ -11,8 +11,9 @@ compiles them with the system C compiler at build time:
   pythonfmu backend, then the ModelExchange states and derivatives);
 * compiled with the hand-written sources of ``fmu_src/c``: ``fmi2_layer.c`` (the one FMI layer:
   state machine, variables, logging, statuses; CoSimulation and ModelExchange), ``model.h`` (its
-  interface to the model files), ``<runtime>.c`` (the maths), shared helpers (``linalg.h``), and
-  ``glibc_compat.h`` (the old-glibc baseline, below).
+  interface to the model files), ``<runtime>.c`` (the maths), shared helpers (``linalg.h``),
+  ``fp_contract.h`` (no FMA contraction, stated in the sources for every compiler that rebuilds
+  them; included by ``model.h``) and ``glibc_compat.h`` (the old-glibc baseline, below).
 
 The FMU holds ``binaries/linux64/<id>.so`` (libc and libm only; no symbol newer than GLIBC_2.17
 on x86-64: ``glibc_compat.h`` binds the few libm functions that glibc 2.29 re-versioned to their
@@ -41,7 +42,7 @@ from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
 from .emit import CModel, c_array, c_define, c_string
 
 C_SRC = Path(_framework.__file__).resolve().parent / "c"
-LAYER = ("fmi2_layer.c", "model.h", "glibc_compat.h")
+LAYER = ("fmi2_layer.c", "model.h", "fp_contract.h", "glibc_compat.h")
 SHARED_HEADERS = ("linalg.h", "model_util.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
@@ -58,7 +59,8 @@ EMITTERS = {
 }
 
 # Fixed flags: the library depends only on the compiler and the sources. -ffp-contract=off: no
-# fused multiply-add where the Python runtime rounds twice (platforms that have FMA).
+# fused multiply-add where the Python runtime rounds twice (platforms that have FMA); the sources
+# state it too (fp_contract.h), for the importers that rebuild them without our flags.
 CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-ffp-contract=off",
           "-Wall", "-Wextra", "-s", "-Wl,--build-id=none", "-include", "glibc_compat.h")
 LIBS = ("-lm",)
