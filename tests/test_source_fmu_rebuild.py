@@ -16,7 +16,9 @@ emptied gives different numbers (on a host with FMA), so the comparison can fail
 from __future__ import annotations
 
 import platform
+import re
 import shutil
+import subprocess
 import zipfile
 from pathlib import Path
 
@@ -49,9 +51,24 @@ FMA = _host_fma()
 C_FLAGS = "-mfma" if FMA and platform.machine() == "x86_64" else ""
 
 
-def _rebuild(fmu: Path, tmp: Path, *, contract: bool = True) -> Path:
+#: the fused multiply-add instructions of x86-64 (FMA3: vfmadd..., vfmsub..., vfnmadd..., vfnmsub...,
+#: vfmaddsub..., vfmsubadd...) and aarch64 (fmadd, fmsub, fnmadd, fnmsub, fmla, fmls)
+FMA_INSN = re.compile(r"\s(vfn?m(add|sub)\w*|f(n?m(add|sub)|ml[as])\b)")
+
+
+def _fma_instructions(library: Path) -> int:
+    """How many FMA instructions ``objdump -d`` finds in ``library`` (-1: no objdump)."""
+    objdump = shutil.which("objdump")
+    if objdump is None:
+        return -1
+    text = subprocess.run([objdump, "-d", str(library)], capture_output=True, text=True, check=True).stdout
+    return len(FMA_INSN.findall(text))
+
+
+def _rebuild(fmu: Path, tmp: Path, *, contract: bool = True) -> tuple[Path, int]:
     """fmpy's build_platform_binary on the FMU's own sources/, its binaries removed first; with
-    ``contract=False`` fp_contract.h is emptied (the sources as they were without it)."""
+    ``contract=False`` fp_contract.h is emptied (the sources as they were without it). Returns the
+    rebuilt FMU and the number of FMA instructions in its library."""
     from fmpy.build import build_platform_binary
 
     folder = Path(extract(str(fmu), unzipdir=str(tmp / "x")))
@@ -64,13 +81,15 @@ def _rebuild(fmu: Path, tmp: Path, *, contract: bool = True) -> Path:
     # C host needs it linked
     build_platform_binary(folder, build_dir=tmp / "build", cmake_options={
         "CMAKE_C_FLAGS:STRING": C_FLAGS, "CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm"})
-    assert (folder / "binaries" / "linux64" / f"{fmu.stem}.so").is_file()
+    library = folder / "binaries" / "linux64" / f"{fmu.stem}.so"
+    assert library.is_file()
+    fma = _fma_instructions(library)
     out = tmp / fmu.name
     with zipfile.ZipFile(out, "w") as z:
         for p in sorted(folder.rglob("*")):
             if p.is_file():
                 z.write(p, p.relative_to(folder).as_posix())
-    return out
+    return out, fma
 
 
 @pytest.fixture(scope="module")
@@ -96,12 +115,15 @@ def test_fmpy_rebuild_from_the_sources_gives_the_original_outputs_bit_for_bit(bu
     fmu = built_fmus.c_path(name)
     inputs = scenario[name]
     original = host.run(fmu, inputs, DT)
-    rebuilt = host.run(_rebuild(fmu, tmp_path / "with"), inputs, DT)
-    assert _differences(rebuilt, original) == {}, f"the rebuild (CFLAGS {C_FLAGS!r}) differs from the original"
+    rebuilt, fma = _rebuild(fmu, tmp_path / "with")
+    # every code path (ModelExchange too, which the co-simulation run does not reach): no FMA
+    assert fma <= 0, f"the rebuild (CFLAGS {C_FLAGS!r}) holds {fma} fused multiply-add instruction(s)"
+    assert _differences(host.run(rebuilt, inputs, DT), original) == {}, \
+        f"the rebuild (CFLAGS {C_FLAGS!r}) differs from the original"
     if not FMA:
         return          # no FMA here: without the contract the rebuild could not differ either
     (tmp_path / "without").mkdir()
-    uncontracted = host.run(_rebuild(fmu, tmp_path / "without", contract=False), inputs, DT)
-    diff = _differences(uncontracted, original)
-    print(f"{name}: without the contract (CFLAGS {C_FLAGS!r}) max |diff| per output: {diff}")
-    assert diff, "the control rebuild without the contract should contract to FMA and differ"
+    uncontracted, fma = _rebuild(fmu, tmp_path / "without", contract=False)
+    diff = _differences(host.run(uncontracted, inputs, DT), original)
+    print(f"{name}: without the contract (CFLAGS {C_FLAGS!r}): {fma} FMA instructions, max |diff| per output: {diff}")
+    assert fma != 0 and diff, "the control rebuild without the contract should contract to FMA and differ"

@@ -14,18 +14,25 @@
  * here, in the header every C file includes before any code of its own (through model.h):
  *
  *   GCC      ignores '#pragma STDC FP_CONTRACT' (and warns under -Wall); it honours
- *            '#pragma GCC optimize', which applies -ffp-contract=off to every function defined
- *            after it (verified with GCC 12, -O2/-O3 -mfma, GNU and ISO modes). An ISO mode
- *            (-std=c99, not gnu99) or -ffp-contract=off on the command line does the same.
- *   clang    (also clang-cl, zig cc, Apple clang, icx) honours the C99 pragma (C99 7.12.2).
+ *            '#pragma GCC optimize', which applies its options to every function defined after
+ *            it. -ffp-contract=off is not enough on its own: GCC 12 at -O3 with FMA still fuses
+ *            an SLP-vectorised pair a*b - c, a*d + c into one vfmaddsub (CarPlant's wheel loads;
+ *            measured, also with -ffp-contract=off or -std=c99 on the command line), so the SLP
+ *            vectoriser is off as well. Verified with GCC 12.2 on x86-64, -O1 to -O3, -mfma /
+ *            -march=native / x86-64-v3, GNU and ISO modes, _FORTIFY_SOURCE: no FMA instruction
+ *            in any FMU.
+ *   clang    (also clang-cl, zig cc, Apple clang) honours the C99 pragma (C99 7.12.2); verified
+ *            with zig cc (clang 22) for x86-64 -O3 -mfma, aarch64-linux and aarch64-macos.
  *   MSVC     '#pragma fp_contract (off)' (the default since Visual Studio 2022 17.0; earlier
- *            versions contract with /arch:AVX2 unless told).
+ *            versions contract with /arch:AVX2 unless told); read in Microsoft's documentation,
+ *            not verified here.
+ * Fast-math options (-ffast-math, -Ofast, /fp:fast) reorder sums and are outside this contract.
  */
 #ifndef LATOBS_FP_CONTRACT_H
 #define LATOBS_FP_CONTRACT_H
 
 #if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC optimize ("fp-contract=off")
+#pragma GCC optimize ("fp-contract=off", "no-tree-slp-vectorize")
 #elif defined(_MSC_VER) && !defined(__clang__)
 #pragma fp_contract (off)
 #else
