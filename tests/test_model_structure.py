@@ -1,19 +1,26 @@
 """The ModelStructure ``dependencies`` of every FMU against finite-difference probing of the FMU itself.
 
-Native FMUs with ModelExchange: at ``N_POINTS`` random operating points (inputs drawn around their
-start values, within one mode: the speed inputs stay at their start, inside the design grid and
-above any hold speed; states drawn around the values initialisation gave them), each input (by
-``fmi2SetReal``) and each continuous state (by ``fmi2SetContinuousStates``) is perturbed alone and
-the outputs and derivatives are compared with the unperturbed ones, bit for bit:
+Native FMUs with ModelExchange declare, per Real output and per derivative, the inputs and
+states it depends on directly (``latobs.cbackend.emit.CModel.dependencies``, from each model's
+data at build time). The probe: at ``N_POINTS`` random operating points (inputs drawn around
+their start values; the speed within 10 % of its start, inside the design grid and one mode;
+states a little off the values initialisation gave them) and at one reversing point (vx = -start,
+where the model accepts it), each input (``fmi2SetReal``) and each continuous state
+(``fmi2SetContinuousStates``) is perturbed alone and the outputs and derivatives are compared with
+the unperturbed ones, bit for bit:
 
 * an output or derivative that changes must list the perturbed variable in its ``dependencies``
-  (no undeclared dependency: the assertion that makes an importer's algebraic-loop analysis safe);
+  (no undeclared dependency: what makes an importer's algebraic-loop analysis safe);
 * every declared dependency must change the unknown at one point at least (none is declared that
-  the model does not have). A dependency whose coefficient happens to vanish at one operating point
-  (a saturated tire, a clamp) is caught at another point: it only has to show at one of them.
+  the model does not have). Some dependencies are structurally present but vanish at some
+  operating points: the interval observer's bounds read the lower or the upper bound of a box
+  according to the sign of a coefficient that changes with vx - vx_mode, its sideslip bounds the
+  other vy bound when reversing, the plants' loads the lagged speed only below the ax clamp. They
+  are caught at other points (the speed varied about the mode's, the reversing point, small state
+  offsets); an entry seen at no point fails the test.
 
-The speed inputs switch modes (events) and schedule gains; they are perturbed by a small relative
-amount that stays within the mode, so the probe sees their continuous (in-mode) influence only.
+Mode switches happen at events: the probe stays within a mode (a perturbation of 1e-4 relative),
+so it sees a speed's continuous (in-mode) influence only, as ``dependencies`` state it.
 
 Co-simulation-only FMUs (every pythonfmu FMU, and native ones without continuous states) declare
 that no output depends on an input: after a step, setting any input changes no output until the
