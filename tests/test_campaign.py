@@ -410,7 +410,17 @@ def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_
         procs.append(campaign)
         journal = out / "campaign_robustness-000" / "runs.jsonl"
         deadline = time.monotonic() + 120
-        while (not journal.is_file() or journal.read_text().count("\n") < 12) and time.monotonic() < deadline:
+
+        def both_at_work() -> bool:
+            """12 rows in the journal, and rows from both workers (a loaded machine may start one
+            of them late: the kill must come while both are at work)."""
+            if not journal.is_file():
+                return False
+            text = journal.read_text()
+            rows = [json.loads(x) for x in text.splitlines()[:text.count("\n")]]   # whole lines only
+            return len(rows) >= 12 and len({r["worker"] for r in rows if r["run"] != 0}) == 2
+
+        while not both_at_work() and time.monotonic() < deadline:
             assert campaign.poll() is None, (tmp_path / "campaign.log").read_text()[-3000:]
             time.sleep(0.05)
         done_at_kill = journal.read_text().count("\n")
