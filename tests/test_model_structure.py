@@ -28,13 +28,16 @@ next ``fmi2DoStep``.
 """
 from __future__ import annotations
 
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import C_NAMES, FMU_NAMES
+from conftest import C_NAMES, FMU_NAMES, fmpy_callbacks
 
 pytestmark = pytest.mark.slow
 
@@ -82,7 +85,7 @@ def test_cs_outputs_have_no_direct_feedthrough(built_fmus):
         md = read_model_description(str(path))
         s = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=name,
                       instanceName="probe")
-        s.instantiate()
+        s.instantiate(callbacks=fmpy_callbacks())
         s.setupExperiment(startTime=0.0)
         s.enterInitializationMode()
         s.exitInitializationMode()
@@ -121,6 +124,11 @@ def _probe_me(path, name):
     derivs = [v.valueReference for v in md.modelVariables if v.derivative is not None]
     assert len(states) == len(derivs) == nx
     observed = {}
+    messages = []
+
+    def logger(env, instance, status, category, message):
+        messages.append(message.decode("utf-8", "replace"))
+
     buf = np.zeros(nx)
     ptr = buf.ctypes.data_as(POINTER(fmi2Real))
 
@@ -183,13 +191,13 @@ def _probe_me(path, name):
         m.terminate()
         return seen
 
-    m.instantiate()
+    m.instantiate(callbacks=fmpy_callbacks(logger))
     # N_POINTS points at the start speed, then one reversing (vx = -start), where a model accepts it
     for point, sign in enumerate([1.0] * N_POINTS + [-1.0]):
         try:
             seen = probe(point, sign)
         except FMICallException:
-            assert sign < 0, f"{name}: the probe failed at its start speed"
+            assert sign < 0, f"{name}: the probe failed at its start speed: {messages[-3:]}"
             continue
         for key, changed in seen.items():
             observed[key] = observed.get(key, False) or changed
@@ -225,3 +233,52 @@ def test_me_dependencies_match_probing(built_fmus, name):
     for vr, deps in sections["Outputs"].items():
         if variables[vr][2] != "Real":
             assert deps == [], f"{name}: {variables[vr][0]} (discrete) declares {deps}"
+
+
+#: run in a fresh process: fmpy's logger proxy left holding a logger freed since (the callbacks of a
+#: ``simulate_fmu(logger=...)`` that has returned), then the probe, then fmpy's default callbacks
+_FREED_LOGGER_HOST = """
+import gc, sys
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+import conftest, test_model_structure
+
+path, name = sys.argv[1], sys.argv[2]
+
+def free_a_logger():
+    simulate_fmu(path, stop_time=0.05, logger=lambda *args: None)
+    gc.collect()
+
+free_a_logger()
+md, observed = test_model_structure._probe_me(path, name)
+assert any(observed.values()), observed
+free_a_logger()
+conftest.restore_fmpy_logger()          # what every test starts with
+s = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=name, instanceName="default")
+s.instantiate()                         # fmpy's default callbacks
+s.setupExperiment(startTime=0.0)
+s.enterInitializationMode()
+s.exitInitializationMode()
+try:
+    s.setReal([10 ** 6], [1.0])         # an unknown value reference: the FMU logs an error
+    sys.exit("fmi2SetReal accepted an unknown value reference")
+except FMICallException:
+    pass
+s.terminate()
+s.freeInstance()
+print("survived")
+"""
+
+
+def test_probe_survives_a_logger_freed_before(built_fmus):
+    """fmpy's native logger proxy forwards every message to the last logger registered: after a
+    ``simulate_fmu(logger=...)`` has returned, that one is freed and the next message through the
+    proxy crashed the process (SIGSEGV, in fmpy's ``logMessage``, when the probe ran after other
+    test files). The probe registers callbacks of its own that stay alive, and every test starts
+    with fmpy's printing logger registered again (``conftest.restore_fmpy_logger``)."""
+    name = "SideslipBankObserver"        # logs at its mode switches: the probe crosses them
+    path = built_fmus.c_path(name)
+    r = subprocess.run([sys.executable, "-X", "faulthandler", "-c", _FREED_LOGGER_HOST, str(path), name],
+                       cwd=Path(__file__).parent, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "survived" in r.stdout, (r.returncode, r.stdout[-2000:], r.stderr[-2000:])
