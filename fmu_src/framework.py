@@ -464,9 +464,13 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     ``native`` (the native C backend, ``latobs.cbackend``): a self-contained binary with its
     sources; CoSimulation without an execution tool and with the FMU state, and ModelExchange
     when ``native.states`` is not empty: the states (local, after the other variables) and their
-    derivatives ``der(name)``, the event indicators, and outputs that may depend on the states
-    and inputs (no ``dependencies``: in ModelExchange an estimate such as z + N y feeds the
-    measurement through).
+    derivatives ``der(name)``, the event indicators, and the ModelExchange structure
+    ``native.dependencies``: which inputs and states each Real output and each derivative depends
+    on directly (in ModelExchange an estimate such as z + N y feeds the measurement through; FMI 2.0
+    shares one ModelStructure between the interfaces, and a dependency that is direct in
+    ModelExchange is merely conservative in co-simulation, where outputs change in doStep only).
+    Integer outputs (mode, flags) change at events only: empty dependencies. InitialUnknowns list
+    no dependencies: after initialisation they may depend on every input and parameter.
     """
     description = spec.description + (f" -- {spec.describe(data)}" if spec.describe else "")
     longest = max_step(spec, data)
@@ -562,15 +566,15 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     ms = SubElement(root, "ModelStructure")
     outputs = [vr for vr, _, caus, _ in table if caus == "output"]
     derivatives = [vr for vr, _, caus, _ in table if caus == "derivative"]
+    deps = _me_dependencies(table, native) if states else {}
     if outputs:
         out_el = SubElement(ms, "Outputs")
         for vr in outputs:
-            SubElement(out_el, "Unknown", {"index": str(vr + 1)} if states else {"index": str(vr + 1),
-                                                                                "dependencies": ""})
+            SubElement(out_el, "Unknown", {"index": str(vr + 1), "dependencies": deps.get(vr, "")})
     if derivatives:
         der_el = SubElement(ms, "Derivatives")
         for vr in derivatives:
-            SubElement(der_el, "Unknown", index=str(vr + 1))
+            SubElement(der_el, "Unknown", {"index": str(vr + 1), "dependencies": deps[vr]})
     initial = outputs + [vr for vr, _, caus, _ in table if caus in ("state", "derivative")]
     if initial:
         init_el = SubElement(ms, "InitialUnknowns")
@@ -580,14 +584,37 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="unicode") + "\n").encode("utf-8")
 
 
+def _me_dependencies(table, native: "NativeInterfaces") -> dict[int, str]:
+    """{value reference of a Real output or a derivative: its ``dependencies`` attribute} from
+    ``native.dependencies`` ({name or ``der(state)``: names of inputs and states}); ValueError naming
+    the unknown or known when the declaration does not fit the variables."""
+    declared = native.dependencies
+    if declared is None:
+        raise ValueError("a model with continuous states must declare its ModelExchange dependencies")
+    knowns = {v.name: vr for vr, _, caus, v in table if caus in ("input", "state")}
+    unknowns = {(f"der({v.name})" if caus == "derivative" else v.name): vr for vr, typ, caus, v in table
+                if caus == "derivative" or (caus == "output" and typ == "Real")}
+    if set(declared) != set(unknowns):
+        raise ValueError(f"ModelExchange dependencies: declared for {sorted(declared)}, the model's Real outputs "
+                         f"and derivatives are {sorted(unknowns)}")
+    out = {}
+    for name, names in declared.items():
+        bad = sorted(set(names) - set(knowns))
+        if bad:
+            raise ValueError(f"ModelExchange dependencies of {name}: {bad} are not inputs or states")
+        out[unknowns[name]] = " ".join(str(vr + 1) for vr in sorted(knowns[k] for k in set(names)))
+    return out
+
+
 class NativeInterfaces:
     """What a native (C) FMU adds to its model description (see ``model_description``):
     ``states`` (``Var``s, ModelExchange's continuous states; empty: co-simulation only),
-    ``event_indicators`` (their number) and ``source_files`` (the C files to compile, in
-    ``sources/``)."""
+    ``event_indicators`` (their number), ``source_files`` (the C files to compile, in
+    ``sources/``) and ``dependencies`` (ModelExchange's structure, ``latobs.cbackend.emit.CModel``)."""
 
-    def __init__(self, states=(), event_indicators: int = 0, source_files=()):
+    def __init__(self, states=(), event_indicators: int = 0, source_files=(), dependencies=None):
         self.states, self.event_indicators, self.source_files = tuple(states), int(event_indicators), tuple(source_files)
+        self.dependencies = dependencies
 
 
 def _source_files(interface: Element, names) -> None:

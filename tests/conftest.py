@@ -133,3 +133,63 @@ def fmu_dir(built_fmus, tmp_path_factory):
         except OSError:
             shutil.copy2(src, out / src.name)
     return out
+
+
+# fmpy's logger proxy -------------------------------------------------------------------------
+# fmpy formats an FMU's printf-style messages in a native proxy (``fmpy.logging.addLoggerProxy``)
+# that forwards them to ONE process-wide Python logger: the one of the last callbacks registered.
+# fmpy's default callbacks (``instantiate()`` without ``callbacks``, ``simulate_fmu`` without
+# ``logger``) go through the same proxy. ``simulate_fmu(logger=f)`` registers callbacks that are
+# garbage collected when it returns: from then on, the first message of an FMU instantiated with
+# the defaults calls freed memory and the process dies (SIGSEGV). Callbacks made here stay alive
+# for the process, and every test starts with fmpy's own printing logger registered again.
+
+_LIVE_CALLBACKS: list = []     # every fmpy_callbacks() result, and the default logger: never freed
+
+
+def fmpy_callbacks(logger=None):
+    """fmpy ``fmi2CallbackFunctions`` whose logger, ``logger(env, instance, status, category,
+    message)`` (default: fmpy's printing one), is registered with fmpy's proxy and kept alive for
+    the process: pass them to ``FMU2Slave``/``FMU2Model.instantiate(callbacks=...)``. The proxy
+    sends every fmpy-instantiated FMU's messages to the last logger registered."""
+    from ctypes import byref
+
+    from fmpy import calloc, free
+    from fmpy.fmi1 import printLogMessage
+    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                           fmi2CallbackLoggerTYPE)
+    from fmpy.logging import addLoggerProxy
+
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(printLogMessage if logger is None else logger)
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(cb))
+    _LIVE_CALLBACKS.append(cb)
+    return cb
+
+
+_DEFAULT_LOGGER: list = []     # the one process-lived printing logger restore_fmpy_logger registers
+
+
+def restore_fmpy_logger() -> None:
+    """Register fmpy's printing logger again (one object for the process) with fmpy's proxy, so
+    that fmpy's default callbacks never reach a logger freed since (see above)."""
+    from ctypes import byref
+
+    from fmpy.fmi1 import printLogMessage
+    from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.logging import addLoggerProxy
+
+    if not _DEFAULT_LOGGER:
+        _DEFAULT_LOGGER.append(fmi2CallbackLoggerTYPE(printLogMessage))
+    cb = fmi2CallbackFunctions()
+    cb.logger = _DEFAULT_LOGGER[0]
+    addLoggerProxy(byref(cb))     # the proxy keeps the function pointer only; _DEFAULT_LOGGER owns it
+
+
+@pytest.fixture(autouse=True)
+def _live_fmpy_logger():
+    """Every test starts with a live logger behind fmpy's proxy (a test before may have freed one)."""
+    restore_fmpy_logger()
+    yield

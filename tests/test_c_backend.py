@@ -30,6 +30,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
+from conftest import fmpy_callbacks
 from latobs import cbackend, packaging
 from latobs.cbackend import host
 from latobs.native_guard import find_compiler
@@ -184,26 +185,6 @@ class Logged:
         return [m for s, m in self.messages if s >= 3]
 
 
-_KEEP: list = []   # callbacks stay alive for the process: fmpy's logger proxy keeps a pointer to the last one
-
-
-def _callbacks(log: Logged):
-    from ctypes import byref
-
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                           fmi2CallbackLoggerTYPE)
-    from fmpy.logging import addLoggerProxy
-
-    cb = fmi2CallbackFunctions()
-    cb.logger = fmi2CallbackLoggerTYPE(log)
-    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    addLoggerProxy(byref(cb))
-    _KEEP.append(cb)
-    return cb
-
-
 def _slave(fmu: Path, tmp: Path, log: Logged, guid: str | None = None):
     md = read_model_description(str(fmu))
     if guid is not None:
@@ -213,7 +194,7 @@ def _slave(fmu: Path, tmp: Path, log: Logged, guid: str | None = None):
     unzipped = extract(str(fmu), unzipdir=str(tmp / f"u{len(list(tmp.iterdir()))}"))
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
                       instanceName="test")
-    slave.instantiate(callbacks=_callbacks(log))
+    slave.instantiate(callbacks=fmpy_callbacks(log))
     return md, slave
 
 
@@ -261,7 +242,7 @@ def test_a_wrong_guid_or_a_missing_interface_is_refused_with_a_message(observer,
                   modelIdentifier=md.coSimulation.modelIdentifier, instanceName="k")
     log = Logged()
     with pytest.raises(Exception):           # fmpy raises when fmi2Instantiate returns NULL
-        m.instantiate(callbacks=_callbacks(log))
+        m.instantiate(callbacks=fmpy_callbacks(log))
     assert any("no ModelExchange interface" in msg for msg in log.errors()), log.messages
 
 
@@ -353,7 +334,7 @@ def test_model_exchange_calls_out_of_order_or_with_wrong_sizes_are_fmi2error(obs
     m = FMU2Model(guid=md.guid, unzipDirectory=extract(str(observer), unzipdir=str(tmp_path / "me")),
                   modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
     log = Logged()
-    m.instantiate(callbacks=_callbacks(log))
+    m.instantiate(callbacks=fmpy_callbacks(log))
     x, dx = (c_double * n)(), (c_double * n)()
     assert _status(lambda: m.getDerivatives(dx, n)) == 3
     assert "never initialised" in log.errors()[-1] or "fmi2GetDerivatives" in log.errors()[-1]

@@ -203,7 +203,7 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     files[f"resources/{data_name}"] = design_file.dumps(data).encode("utf-8")
     files.update(identity_file(data, "c", base))
 
-    native = _framework.NativeInterfaces(cm.states, cm.n_event_indicators, c_files)
+    native = _framework.NativeInterfaces(cm.states, cm.n_event_indicators, c_files, cm.dependencies)
     tool = f"latobs {__version__} (native C backend)"
     md = lambda guid: _framework.model_description(  # noqa: E731
         spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT,

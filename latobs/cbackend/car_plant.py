@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from ..fmu_src.car_plant import G, CarPlantModel
 from ..fmu_src.spec import Var
-from .emit import CModel, c_define, c_double
+from .emit import CModel, c_define, c_double, structure
 
 SOURCE = "car_plant.c"
 
@@ -68,4 +68,30 @@ def emit(data: dict) -> CModel:
     lines.append("static const CarVehicle CP_VEHICLE = {\n")
     lines += [f"    .{k} = {c_double(values[k])},\n" for k in VEHICLE_FIELDS]
     lines.append("};\n")
-    return CModel(header="".join(lines), states=STATES, n_event_indicators=N_EVENT_INDICATORS)
+    return CModel(header="".join(lines), states=STATES, n_event_indicators=N_EVENT_INDICATORS,
+                  dependencies=DEPENDENCIES)
+
+
+_BODY = ("x_vy", "x_yaw_rate", "x_roll_angle", "x_roll_rate")
+_FORCES = ("x_Fy_fl", "x_Fy_fr", "x_Fy_rl", "x_Fy_rr")
+#: ModelExchange structure of car_plant.c (model_me_derivatives, model_me_outputs), the same for
+#: every data file: the body (E1-E3) driven by the four wheel-frame forces projected by delta, the
+#: bank and, for vy' (vx r), the speed; each force relaxing (E7, rate vx / sigma) towards the tire
+#: model at its slip (delta, vx, vy, r, the roll terms of the wheel velocities) and load (bank,
+#: load transfer from the lateral forces and from ax = (vx - x_vx_lag) / 5 ms, E5), scaled by its
+#: axle's stiffness input. With algebraic tires (sigma <= 0) the forces are constant: their
+#: dependencies then are conservative.
+DEPENDENCIES = structure({
+    "beta": ("vx", "x_vy"), "vy": ("x_vy",), "yaw_rate": ("x_yaw_rate",), "roll_angle": ("x_roll_angle",),
+    "roll_rate": ("x_roll_rate",), "ay": ("delta", *_FORCES), "Fyf": ("delta", "x_Fy_fl", "x_Fy_fr"),
+    "Fyr": ("x_Fy_rl", "x_Fy_rr"), "alpha_f": ("delta", "vx", "x_vy", "x_yaw_rate"),
+    "alpha_r": ("vx", "x_vy", "x_yaw_rate"), "vy_cg": ("x_vy", "x_roll_angle", "x_roll_rate"),
+    "beta_cg": ("vx", "x_vy", "x_roll_angle", "x_roll_rate"),
+    "der(x_vy)": ("delta", "vx", "bank_angle", "x_yaw_rate", "x_roll_angle", "x_roll_rate", *_FORCES),
+    "der(x_yaw_rate)": ("delta", *_FORCES),
+    "der(x_roll_angle)": ("x_roll_rate",),
+    "der(x_roll_rate)": ("delta", "bank_angle", "x_roll_angle", "x_roll_rate", *_FORCES),
+    **{f"der({f})": ("delta", "vx", "bank_angle", "stiffness_scale_f" if f[-2] == "f" else "stiffness_scale_r",
+                     *_BODY, *_FORCES, "x_vx_lag") for f in _FORCES},
+    "der(x_vx_lag)": ("vx", "x_vx_lag"),
+})

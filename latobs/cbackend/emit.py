@@ -24,11 +24,33 @@ class CModel:
                         not clash with the ModelSpec's variables); empty: co-simulation only
     n_event_indicators  ``model_me_event_indicators``'s count (the C model reports the states'
                         nominal values itself: ``model_me_nominals``)
+    dependencies        ModelExchange's structure, as the C model computes it: {unknown: knowns},
+                        the unknowns being every Real output (by name) and every state's derivative
+                        (``der(<state>)``), the knowns the inputs and states each depends on
+                        directly within a mode (a speed that only selects the mode at events is not
+                        one; Integer outputs change at events only: no dependency). Written into the
+                        model description's ``ModelStructure`` (Outputs, Derivatives);
+                        ``tests/test_model_structure.py`` checks it against finite differences of
+                        the FMU. Required when ``states`` is not empty.
     """
 
     header: str
     states: tuple[Var, ...] = ()
     n_event_indicators: int = 0
+    dependencies: "dict[str, tuple[str, ...]] | None" = None
+
+
+def nonzero(names, *rows) -> set:
+    """The ``names[j]`` whose coefficient is nonzero in any of ``rows`` (equal-length sequences of
+    numbers): the knowns a linear combination with these coefficients (e.g. one row of a matrix, in
+    each mode) depends on."""
+    return {name for j, name in enumerate(names) if any(float(row[j]) != 0.0 for row in rows)}
+
+
+def structure(deps: dict) -> dict[str, tuple[str, ...]]:
+    """``CModel.dependencies`` from {unknown: iterable of knowns}, each tuple sorted and unique (the
+    model description lists them in value-reference order anyway)."""
+    return {k: tuple(sorted(set(v))) for k, v in deps.items()}
 
 
 def c_double(x) -> str:

@@ -38,7 +38,7 @@ from __future__ import annotations
 from ..fmu_src.framework import DEFAULT_STEP
 from ..fmu_src.interval_observer import SAMPLED_MAX_NORM, IntervalObserver, _damped_rows, _smooth_rows, phi_gamma
 from ..fmu_src.spec import Var
-from .emit import CModel, c_array, c_define
+from .emit import CModel, c_array, c_define, nonzero, structure
 
 SOURCE = "interval_observer.c"
 
@@ -105,4 +105,53 @@ def emit(data: dict) -> CModel:
         c_array("IV_J", mode("J")), c_array("IV_H", mode("H")),
         c_array("IV_MAPS_H0", maps),
     ])
-    return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS)
+    return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS,
+                  dependencies=_dependencies(rt))
+
+
+#: the measurement inputs y (measurements() in interval_observer.c)
+MEASURED = ("yaw_rate", "ay")
+#: each output's box bounds (side, column of x) and whether it divides by vx (outputs_of)
+OUTPUT_BOUNDS = {"vy_lower": ("l0",), "vy_upper": ("u0",), "yaw_rate_lower": ("l1",), "yaw_rate_upper": ("u1",),
+                 "Fyf_lower": ("l2", "l3"), "Fyf_upper": ("u2", "u3"), "Fyr_lower": ("l2", "u3"),
+                 "Fyr_upper": ("u2", "l3"),
+                 # atan(vy / vx): the lower vy bound when vx > 0, the upper one when vx < 0 (reversing)
+                 "beta_lower": ("l0", "u0", "vx"), "beta_upper": ("l0", "u0", "vx")}
+
+
+def _dependencies(rt: IntervalObserver) -> dict:
+    """ModelExchange (model_me_derivatives, me_box, omega, stiffness, outputs_of), in every mode.
+    The box X = xi + E y -/+ |E| nu; the bounds' derivatives N xi + J y + H delta + P omega -/+ rad
+    (eq. 23), omega's row i reading the box's columns where A1 is nonzero (times vx - vx_mode), B1
+    (times (vx - vx_mode) delta) and, in the stiffness rows (eq. 9), columns vy and r with vx delta;
+    the centre and radius of a column read both of its bounds."""
+    md, n = rt.model, len(STATES) // 2
+    lower, upper = [s.name for s in STATES[:n]], [s.name for s in STATES[n:]]
+
+    def box(side: str, j: int) -> set:
+        return {(lower if side == "l" else upper)[j]} | nonzero(MEASURED, *(m["E"][j] for m in rt.modes))
+
+    def column(j: int) -> set:
+        return box("l", j) | box("u", j)
+
+    def omega(i: int) -> set:
+        d = set()
+        if any(float(a) != 0.0 for a in md["A1"][i]):
+            d |= {"vx"}.union(*(column(j) for j in range(n) if float(md["A1"][i][j]) != 0.0))
+        if float(md["B1"][i]) != 0.0:
+            d |= {"vx", "delta"}
+        if i in md["stiff"]["rows"]:
+            d |= {"vx", "delta"}.union(*(column(j) for j in md["stiff"]["cols"]))
+        return d
+
+    deps = {}
+    for side, names in (("l", lower), ("u", upper)):
+        for i, name in enumerate(names):
+            d = nonzero(names, *(m["N"][i] for m in rt.modes)) | nonzero(MEASURED, *(m["J"][i] for m in rt.modes))
+            if any(float(m["H"][i]) != 0.0 for m in rt.modes):
+                d.add("delta")
+            d = d.union(*(omega(k) for k in range(n) if any(float(m["P"][i][k]) != 0.0 for m in rt.modes)))
+            deps[f"der({name})"] = d
+    for out, parts in OUTPUT_BOUNDS.items():
+        deps[out] = set().union(*({p} if p == "vx" else box(p[0], int(p[1])) for p in parts))
+    return structure(deps)

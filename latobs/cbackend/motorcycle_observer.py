@@ -19,7 +19,7 @@ from __future__ import annotations
 from ..fmu_src.framework import DEFAULT_STEP
 from ..fmu_src.motorcycle_observer import MEASUREMENTS, MotorcycleFaultObserver, step_map
 from ..fmu_src.spec import Var
-from .emit import CModel, c_array, c_define
+from .emit import CModel, c_array, c_define, nonzero, structure
 
 SOURCE = "motorcycle_observer.c"
 
@@ -57,4 +57,23 @@ def emit(data: dict) -> CModel:
         c_array("OBS_F", rt._F),
         c_array("OBS_MAP_H0", maps),
     ])
-    return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS)
+    return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS,
+                  dependencies=_dependencies(rt))
+
+
+#: the outputs that are one state each (outputs_of in motorcycle_observer.c)
+STATE_OUTPUTS = {"roll_angle_hat": "fhat_roll_angle", "rider_torque_hat": "fhat_rider_torque",
+                 "vy_hat": "xhat_vy", "steer_rate_hat": "xhat_steer_rate"}
+
+
+def _dependencies(rt: MotorcycleFaultObserver) -> dict:
+    """ModelExchange (model_me_derivatives, outputs_of), in every mode: s' = M s + G y; the force
+    estimates F s; the residual norm |y - C x^| (every measurement, the states C reads)."""
+    names = [s.name for s in STATES]
+    deps = {f"der({name})": nonzero(names, *(M[i] for M in rt._M)) | nonzero(MEASUREMENTS, *(G[i] for G in rt._G))
+            for i, name in enumerate(names)}
+    deps.update({out: {state} for out, state in STATE_OUTPUTS.items()})
+    for k, out in enumerate(("Ff_hat", "Fr_hat")):
+        deps[out] = nonzero(names, *(F[k] for F in rt._F))
+    deps["residual_norm"] = set(MEASUREMENTS) | nonzero(names[:rt.N], *(row for C in rt._C for row in C))
+    return structure(deps)

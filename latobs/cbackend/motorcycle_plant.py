@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from ..fmu_src.motorcycle_plant import MotorcyclePlantModel
 from ..fmu_src.spec import Var
-from .emit import CModel, c_array, c_define
+from .emit import CModel, c_array, c_define, structure
 
 SOURCE = "motorcycle_plant.c"
 
@@ -64,4 +64,26 @@ def emit(data: dict) -> CModel:
         c_array("PL_TYRE_FZ", [t[5] for t in tyres]),
         c_define("PL_KT", float(rt._kt)),
     ])
-    return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS)
+    return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS,
+                  dependencies=DEPENDENCIES)
+
+
+_CHASSIS = ("x_roll_angle", "x_steer_angle", "x_yaw_rate", "x_roll_rate", "x_steer_rate", "x_Ff", "x_Fr")
+#: ModelExchange structure of motorcycle_plant.c (model_me_derivatives, model_me_outputs), the
+#: same for every data file: the kinematic rows; the mass-matrix-solved accelerations (rider
+#: torque, speed-scheduled terms, tire forces); each tire force relaxing (E4) towards the Magic
+#: Formula at its slip and camber; the slip and camber outputs. With sigma = 0 the force states
+#: are constant: their dependencies then are conservative.
+DEPENDENCIES = structure({
+    **{s[2:]: (s,) for s in ("x_steer_angle", "x_steer_rate", "x_yaw_rate", "x_roll_angle", "x_roll_rate",
+                             "x_vy", "x_Ff", "x_Fr")},
+    "Gamma_f": ("vx", "x_roll_angle", "x_steer_angle", "x_vy", "x_yaw_rate", "x_steer_rate"),
+    "Gamma_r": ("vx", "x_roll_angle", "x_vy", "x_yaw_rate"),
+    "alpha_f": ("vx", "x_steer_angle", "x_vy", "x_yaw_rate", "x_steer_rate"),
+    "alpha_r": ("vx", "x_vy", "x_yaw_rate"),
+    "der(x_roll_angle)": ("x_roll_rate",),
+    "der(x_steer_angle)": ("x_steer_rate",),
+    **{f"der({s})": ("rider_torque", "vx", *_CHASSIS) for s in ("x_vy", "x_yaw_rate", "x_roll_rate", "x_steer_rate")},
+    "der(x_Ff)": ("vx", "x_roll_angle", "x_steer_angle", "x_vy", "x_yaw_rate", "x_steer_rate", "x_Ff"),
+    "der(x_Fr)": ("vx", "x_roll_angle", "x_vy", "x_yaw_rate", "x_Fr"),
+})

@@ -34,7 +34,7 @@ from __future__ import annotations
 from ..fmu_src.framework import DEFAULT_STEP
 from ..fmu_src.pi_observer import SwitchedPIObserver
 from ..fmu_src.spec import Var
-from .emit import CModel, c_array, c_define
+from .emit import CModel, c_array, c_define, nonzero, structure
 
 SOURCE = "pi_observer.c"
 
@@ -144,4 +144,29 @@ def emit(data: dict) -> CModel:
         c_array("PI_TAB_RK4", rk4, "int"),
         c_array("PI_TAB_COEF", coef),
     ])
-    return CModel(header=header, states=STATES, n_event_indicators=_event_indicators(rt))
+    return CModel(header=header, states=STATES, n_event_indicators=_event_indicators(rt),
+                  dependencies=_dependencies(rt, mc, gc))
+
+
+#: w = [y; delta] (measurements() in pi_observer.c), y = the first three
+MEASURED = ("yaw_rate", "roll_angle", "roll_rate", "delta")
+#: x^ = z + N y, row by row (OUT_X in pi_observer.c); bank_angle_hat = w^ (the last state)
+ESTIMATES = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat")
+
+
+def _dependencies(rt: SwitchedPIObserver, mc, gc) -> dict:
+    """ModelExchange (model_me_derivatives, me_estimates): s' = M(v) s + G(v) w with M(v) =
+    sum_k Mc_k v^k, v = 1/vx for the modes whose model speed follows vx (fixed-speed modes: k = 0
+    only), in every map (the modes, and the frozen maps when validity freezes); x^ = z + N y."""
+    names = [s.name for s in STATES]
+    scheduled = [idx for idx in range(len(mc)) if rt._fixed_v[idx % rt._nm] is None]
+    deps = {}
+    for i, name in enumerate(names):
+        d = nonzero(names, *(P[i] for c in mc for P in c)) | nonzero(MEASURED, *(P[i] for c in gc for P in c))
+        if any(float(x) != 0.0 for idx in scheduled for c in (mc[idx][1:], gc[idx][1:]) for P in c for x in P[i]):
+            d.add("vx")
+        deps[f"der({name})"] = d
+    for i, out in enumerate(ESTIMATES):
+        deps[out] = {names[i]} | nonzero(MEASURED[:3], rt.N[i])
+    deps["bank_angle_hat"] = {names[-1]}
+    return structure(deps)

@@ -27,7 +27,7 @@ import math
 from ..fmu_src.framework import DEFAULT_STEP
 from ..fmu_src.spec import Var
 from ..fmu_src.tf_estimator import TfEstimator, zoh
-from .emit import CModel, c_array, c_define
+from .emit import CModel, nonzero, structure, c_array, c_define
 
 SOURCE = "tf_estimator.c"
 
@@ -98,4 +98,15 @@ def emit(data: dict) -> CModel:
         c_array("TF_NOMINAL", nominal) if n else "",       # ModelExchange only (n >= 1)
     ])
     return CModel(header=header, states=states(n),
-                  n_event_indicators=N_EVENT_INDICATORS_SCHEDULED if rt.edges is not None and n else 0)
+                  n_event_indicators=N_EVENT_INDICATORS_SCHEDULED if rt.edges is not None and n else 0,
+                  dependencies=_dependencies(rt.systems, n) if n else None)
+
+
+def _dependencies(systems, n: int) -> dict:
+    """ModelExchange: z' = A z + B r, beta^ = C z + D r in every band (model_me_derivatives,
+    outputs_of); the speed selects the band at events only."""
+    z = [s.name for s in states(n)]
+    deps = {f"der({z[i]})": nonzero(z, *(A[i] for A, *_ in systems))
+            | nonzero(["yaw_rate"], *([B[i]] for _, B, *_ in systems)) for i in range(n)}
+    deps["beta_hat"] = nonzero(z, *(C for _, _, C, *_ in systems)) | nonzero(["yaw_rate"], *([D] for *_, D, _ in systems))
+    return structure(deps)
