@@ -329,6 +329,11 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
         spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT)
     guard_variables = [(vr, typ, caus in ("input", "parameter"))
                        for vr, typ, caus, _ in _framework.variable_table(spec)]
+    from . import datasheet   # documentation/index.html and model.png
+
+    platforms = sorted({name.split("/")[1] for name in files if name.startswith("binaries/")})
+    files.update(datasheet.files(spec, data, class_name, data_kind=kind.data_kind, backend="python",
+                                 platforms=platforms, generation_tool=tool, copyright=COPYRIGHT))
 
     return install(out_dir, class_name, lambda tmp: seal_fmu(files, class_name, md, guard_variables, tmp), beside)
 
