@@ -191,9 +191,10 @@ def _ranges(spec: ModelSpec, data: dict, data_kind: str) -> str:
         lo, hi = declared["vx"]
         rows.append(("speed accepted", f"{_n(lo)} … {_n(hi)} m/s", "the input vx's declared range: a step "
                      "outside it is refused"))
-    if "vx_hold" in declared:
-        rows.append(("standstill", f"|vx| below the parameter vx_hold (default {_n(_framework.start_values(spec, data)['vx_hold'])} m/s)",
-                     "the observer is frozen, its outputs held"))
+    hold = next((v for v in spec.parameters if v.name == "vx_hold"), None)
+    if hold is not None:
+        rows.append(("standstill", f"vx_hold = {_n(_framework.start_values(spec, data)['vx_hold'])} m/s (parameter)",
+                     hold.description))
     box = _box(data)
     veh = {k: _value(x) for k, x in ((data.get("vehicle") or {}).get("parameters") or {}).items()}
     if box:
@@ -373,7 +374,7 @@ def _page(spec: ModelSpec, data: dict, model_identifier: str, *, data_kind: str,
     section("status", "Status outputs: valid, consistent, mode", _status(spec, data))
     section("certificate", "Certificate", _certificate(data, data_kind))
     section("data", "Design data" if data_kind == "design" else "Plant data", _data(data, data_kind))
-    plat = "".join(f"<li><code>binaries/{_e(p)}</code></li>" for p in platforms)
+    plat = "\n".join(f"<li><code>binaries/{_e(p)}</code></li>" for p in platforms)
     section("platforms", "Platforms", f'<ul id="platform-list">{plat}</ul><p>Backend: {_e(BACKEND_NOTE[backend])}.'
             "</p>")
     section("licence", "Licence", f"<p>{_e(copyright)}. Licence: <strong id=\"license\">{_e(license)}</strong>.</p>"
