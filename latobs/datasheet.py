@@ -159,10 +159,16 @@ def _speed_range(data: dict):
     edges = data.get("switching", {}).get("edges") if isinstance(data.get("switching"), dict) else None
     if edges:
         return float(edges[0]), float(edges[-1])
-    modes = data.get("modes") or []
-    bands = [m.get("vx_band") or m.get("box", {}).get("v") or m.get("scheduling", {}).get("range")
-             or m.get("model_speed", {}).get("range") for m in modes if isinstance(m, dict)]
-    bands = [b for b in bands if b]
+    def band(m: dict):
+        sched = m.get("scheduling") or {}
+        for b in (m.get("vx_band"), (m.get("box") or {}).get("v"),
+                  sched.get("range") if sched.get("variable") == "vx" else None,
+                  (m.get("model_speed") or {}).get("range")):
+            if isinstance(b, list) and len(b) == 2 and all(isinstance(x, (int, float)) for x in b):
+                return b
+        return None
+
+    bands = [b for b in (band(m) for m in data.get("modes") or [] if isinstance(m, dict)) if b]
     if bands:
         return min(float(b[0]) for b in bands), max(float(b[1]) for b in bands)
     return None
