@@ -15,6 +15,7 @@ from __future__ import annotations
 import html
 import json
 import math
+import re
 import struct
 import zlib
 from functools import lru_cache
@@ -188,6 +189,7 @@ def _box(data: dict):
 def _ranges(spec: ModelSpec, data: dict, data_kind: str) -> str:
     rows = []
     declared = {**var_bounds(spec, data, spec.inputs), **var_bounds(spec, data, spec.parameters)}
+    described = {v.name: v.description for v in (*spec.inputs, *spec.parameters)}
     speed = _speed_range(data)
     if speed:
         rows.append(("speed", f"{_n(speed[0])} … {_n(speed[1])} m/s ({_n(3.6 * speed[0])} … {_n(3.6 * speed[1])} "
@@ -195,8 +197,8 @@ def _ranges(spec: ModelSpec, data: dict, data_kind: str) -> str:
                      "mode runs (with a warning where the model says so)"))
     if "vx" in declared:
         lo, hi = declared["vx"]
-        rows.append(("speed accepted", f"{_n(lo)} … {_n(hi)} m/s", "the input vx's declared range: a step "
-                     "outside it is refused"))
+        rows.append(("speed accepted", f"{_n(lo)} … {_n(hi)} m/s", "the input vx's declared range (a step "
+                     f"outside it is refused); vx: {described['vx']}"))
     hold = next((v for v in spec.parameters if v.name == "vx_hold"), None)
     if hold is not None:
         rows.append(("standstill", f"vx_hold = {_n(_framework.start_values(spec, data)['vx_hold'])} m/s (parameter)",
@@ -207,19 +209,22 @@ def _ranges(spec: ModelSpec, data: dict, data_kind: str) -> str:
         rows.append(("cornering stiffness", f"front {_n(box['Cf'][0])} … {_n(box['Cf'][1])}, rear "
                      f"{_n(box['Cr'][0])} … {_n(box['Cr'][1])} N/rad per axle",
                      "the design's stiffness box: the certificate covers every stiffness inside it"))
-    elif isinstance(veh.get("Cf"), (int, float)) and isinstance(veh.get("Cr"), (int, float)):
-        where = ("the vehicle's nominal values, scaled by the parameters scale_f, scale_r and the inputs "
-                 "stiffness_scale_f, stiffness_scale_r" if data_kind == "plant"
-                 else "the design model's nominal values (the certificate's model-error bound covers departures "
-                      "from them)")
-        rows.append(("cornering stiffness", f"front {_n(veh['Cf'])}, rear {_n(veh['Cr'])} N/rad per axle", where))
+    else:
+        cf, cr = (("Cf", "Cr") if isinstance(veh.get("Cf"), (int, float)) else ("Cf1", "Cr1"))
+        if isinstance(veh.get(cf), (int, float)) and isinstance(veh.get(cr), (int, float)):
+            where = ("the vehicle's values" + (", scaled by the parameters scale_f, scale_r and the inputs "
+                                               "stiffness_scale_f, stiffness_scale_r" if "scale_f" in declared else "")
+                     if data_kind == "plant" else "the design model's nominal values")
+            rows.append(("cornering stiffness", f"front {_n(veh[cf])}, rear {_n(veh[cr])} N/rad "
+                         f"({cf}, {cr})", where))
     for name, r in ((data.get("vehicle") or {}).get("ranges") or {}).items():
         if isinstance(r, dict) and "min" in r and "max" in r:
             rows.append((f"vehicle range {name}", f"{_n(r['min'])} … {_n(r['max'])} {r.get('unit', '')}",
                          r.get("description", "")))
     for name in ("scale_f", "scale_r", "stiffness_scale_f", "stiffness_scale_r", "mu"):
         if name in declared:
-            rows.append((name, f"{_n(declared[name][0])} … {_n(declared[name][1])}", "declared range"))
+            rows.append((name, f"{_n(declared[name][0])} … {_n(declared[name][1])}",
+                         f"declared range; {described[name]}"))
     validity = data.get("validity") if isinstance(data.get("validity"), dict) else {}
     if "alpha_max" in validity:
         rows.append(("slip angle", f"|alpha_f|, |alpha_r| ≤ {_n(validity['alpha_max'])} rad "
@@ -274,6 +279,11 @@ def _status(spec: ModelSpec, data: dict) -> str:
     return _table(["Integer output", "values", "meaning"], rows, ' class="status"')
 
 
+def _slug(text: str) -> str:
+    """An HTML id made of ``text`` (no white space)."""
+    return re.sub(r"[^A-Za-z0-9_]+", "-", text).strip("-")
+
+
 def _margin(c: dict):
     v, lim = c.get("value"), c.get("limit")
     if not all(isinstance(x, (int, float)) for x in (v, lim)):
@@ -311,7 +321,7 @@ def _certificate(data: dict, data_kind: str) -> str:
         parts.append(f"<p>γ: {_e(data['gamma_meaning'])}</p>")
     head = _headline(data)
     if head:
-        parts.append(_table(["figure", "value"], [[f"<td>{_e(k)}</td>", f'<td class="num" id="fig-{_e(k)}" '
+        parts.append(_table(["figure", "value"], [[f"<td>{_e(k)}</td>", f'<td class="num" id="fig-{_slug(k)}" '
                                                    f'data-value="{float(x)!r}">{_n(x)}</td>'] for k, x in head],
                             ' class="headline"'))
     rows = []
@@ -330,8 +340,7 @@ def _data(data: dict, data_kind: str) -> str:
     veh = data.get("vehicle") if isinstance(data.get("vehicle"), dict) else {}
     parts = []
     if veh:
-        parts.append(f"<p>Vehicle <code>{_e(veh.get('name', '?'))}</code>: {_e(veh.get('description', ''))}"
-                     + (f" (source: {_e(veh['source'])})" if veh.get("source") else "") + "</p>")
+        parts.append(f"<p>Vehicle <code>{_e(veh.get('name', '?'))}</code>: {_e(veh.get('description', ''))}</p>")
         params = veh.get("parameters") or {}
         rows = []
         for k, p in params.items():

@@ -21,6 +21,9 @@ An FMU is assembled here file by file, not by pythonfmu's ``FmuBuilder``, so tha
 * **reproducible**: the zip has sorted entries, fixed timestamps and permissions, and the model
   description has no generation date: two builds from the same inputs are byte-identical.
 
+* **documented**: ``documentation/index.html``, the FMU's datasheet, and the icon ``model.png``,
+  generated from the model's declarations and its data (``latobs.datasheet``; both backends);
+
 * **identified by its inputs**: ``resources/latobs-identity.json`` holds the identity of what the
   FMU is made from (``latobs.identity``: design or plant inputs, backend, code, toolchain), which
   ``latobs build`` and every command that builds a missing FMU compare before reusing one; the

@@ -207,6 +207,8 @@ def test_links_resolve_and_icon_is_a_png(sheets, case):
     folder, page, md, data, spec = sheets[case]
     assert "../model.png" in page.links and "#certificate" in page.links
     assert broken_links(folder, page) == []
+    text = (folder / datasheet.PAGE).read_text(encoding="utf-8")
+    assert not [w for w in ("../shared", "shared/reference", "CONTRACT", "ERRATA.md") if w in text]
     raw = (folder / datasheet.ICON).read_bytes()
     assert raw[:8] == b"\x89PNG\r\n\x1a\n" and raw[12:16] == b"IHDR"
     assert struct.unpack(">II", raw[16:24]) == (datasheet.SIZE, datasheet.SIZE)
