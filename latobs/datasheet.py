@@ -262,11 +262,13 @@ def _initialisation(spec: ModelSpec, data: dict) -> str:
     rows += [[f"<td><code>{_e(n)}</code></td>", f'<td class="num">{_n(x)}</td>', "<td>parameter</td>"]
              for n, x in pars.items()]
     text = spec.initialization or "the model starts from its start values"
+    grid = (" (a vx start inside the design's speed grid, so that the FMU run unconnected steps without a "
+            "warning)" if spec.starts is not None else "")
     return (f"<p>At the start time {_e(text)}.</p><p>The parameters are fixed: set them between instantiation and "
             "the end of the initialisation mode. The inputs set during initialisation are the ones the model "
-            "starts from; unset inputs keep the start values below (a vx start inside the design's speed grid, "
-            "so that the FMU run unconnected steps without a warning). Outputs are calculated at the end of "
-            "initialisation; they change only in a step (no output depends directly on an input).</p>"
+            f"starts from; unset inputs keep the start values below{grid}. Outputs are calculated at the end of "
+            "initialisation; in co-simulation they change only in a step (no output depends directly on an "
+            "input).</p>"
             + _table(["variable", "start", "causality"], rows, ' class="starts"'))
 
 
