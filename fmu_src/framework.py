@@ -449,6 +449,14 @@ def _num(x: float) -> str:
     return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
+def model_text(spec: ModelSpec, data: dict) -> str:
+    """The model description's ``description``: what the model is, the variant ``data`` makes of it,
+    its longest communication step (the datasheet, ``latobs.datasheet``, shows the same text)."""
+    text = spec.description + (f" -- {spec.describe(data)}" if spec.describe else "")
+    return text + (f" -- communication steps up to {_num(max_step(spec, data))} s (longer ones are refused: the "
+                   "accuracy is measured up to there); inputs outside their declared min/max are refused")
+
+
 def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: str, *, version: str,
                       generation_tool: str, copyright: str, license: str = "MIT",
                       author: str = "latobs", native: "NativeInterfaces | None" = None) -> bytes:
@@ -472,10 +480,8 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     Integer outputs (mode, flags) change at events only: empty dependencies. InitialUnknowns list
     no dependencies: after initialisation they may depend on every input and parameter.
     """
-    description = spec.description + (f" -- {spec.describe(data)}" if spec.describe else "")
+    description = model_text(spec, data)
     longest = max_step(spec, data)
-    description += (f" -- communication steps up to {_num(longest)} s (longer ones are refused: the accuracy "
-                    "is measured up to there); inputs outside their declared min/max are refused")
     root = Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model_identifier, "guid": guid, "description": description,
         "author": author, "version": version, "copyright": copyright, "license": license,
@@ -530,7 +536,7 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     mv = SubElement(root, "ModelVariables")
     for vr, typ, caus, v in table:
         attrs = {"name": v.name, "valueReference": str(vr),
-                 "description": f"{v.description} [{v.unit}]" if v.unit != "1" else v.description,
+                 "description": f"{v.documentation} [{v.unit}]" if v.unit != "1" else v.documentation,
                  "causality": caus}
         if caus == "parameter":
             attrs.update(variability="fixed", initial="exact")

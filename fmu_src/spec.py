@@ -52,6 +52,31 @@ ACCEL = {"min": -ACCEL_MAX, "max": ACCEL_MAX}
 TORQUE = {"min": -TORQUE_MAX, "max": TORQUE_MAX}
 SCALE = {"min": 0.0, "max": SCALE_MAX}
 
+# Sign conventions and sources of the measured signals (keyword arguments of Var). Cars: ISO 8855
+# axes, x forward, y left, z up (CarPlant's); motorcycles: SAE axes, x forward, y right, z down
+# (Sharp's, MotorcyclePlant's). Observer inputs and plant outputs share names: wiring is by name.
+LEFT = "> 0 to the left"
+RIGHT = "> 0 to the right"
+CAR = {
+    "delta": {"sign": "> 0 steers left",
+              "sensor": "steering-wheel angle sensor divided by the steering ratio (CarPlant input delta)"},
+    "vx": {"sign": "> 0 forward", "sensor": "wheel-speed sensors or GNSS (CarPlant input vx)"},
+    "yaw_rate": {"sign": "> 0 turning left (counter-clockwise seen from above)",
+                 "sensor": "IMU yaw-rate gyroscope (CarPlant output yaw_rate)"},
+    "roll_angle": {"sign": "> 0 leaning right", "sensor": "IMU roll angle estimate (CarPlant output roll_angle)"},
+    "roll_rate": {"sign": "> 0 rolling to the right", "sensor": "IMU roll-rate gyroscope (CarPlant output roll_rate)"},
+    "ay": {"sign": LEFT, "sensor": "IMU lateral accelerometer at the centre of gravity (CarPlant output ay)"},
+}
+CAR_BETA = "> 0 when the velocity points left of the heading (vy > 0)"
+MOTORCYCLE = {
+    "vx": {"sign": "> 0 forward", "sensor": "wheel-speed sensor (MotorcyclePlant input vx)"},
+    "steer_angle": {"sign": "> 0 steers right",
+                    "sensor": "steering-head angle encoder (MotorcyclePlant output steer_angle)"},
+    "yaw_rate": {"sign": "> 0 turning right", "sensor": "IMU yaw-rate gyroscope (MotorcyclePlant output yaw_rate)"},
+    "roll_rate": {"sign": "> 0 leaning further right",
+                  "sensor": "IMU roll-rate gyroscope (MotorcyclePlant output roll_rate)"},
+}
+
 
 @dataclass(frozen=True)
 class Var:
@@ -67,6 +92,31 @@ class Var:
     start: float = 0.0
     min: Optional[float] = None
     max: Optional[float] = None
+    sign: str = ""       # sign convention (e.g. "> 0 steers left"), "" where a sign means nothing
+    sensor: str = ""     # an input's source: the sensor that measures it, or the plant output it comes from
+
+    @property
+    def documentation(self) -> str:
+        """The description with the sign convention and the sensor: the model description's
+        ``description`` and the datasheet's (``latobs.datasheet``) are this one text."""
+        return "; ".join([self.description] + ([self.sign] if self.sign else [])
+                         + ([f"from: {self.sensor}"] if self.sensor else []))
+
+
+@dataclass(frozen=True)
+class Paper:
+    """A publication a model implements (its datasheet cites it)."""
+
+    authors: tuple[str, ...]
+    title: str
+    venue: str
+    year: int
+    doi: str = ""
+
+    @property
+    def citation(self) -> str:
+        doi = f", doi:{self.doi}" if self.doi else ""
+        return f"{', '.join(self.authors)}: {self.title}. {self.venue}, {self.year}{doi}"
 
 
 @dataclass(frozen=True)
@@ -81,6 +131,8 @@ class ModelSpec:
                   depend on the data file (e.g. a speed inside the design's grid), so that the FMU
                   run unconnected from its start values steps with fmi2OK
     stop_time     s, the DefaultExperiment's stop time (a sensible first run)
+    paper         the publication the model implements (None: latobs's own model)
+    initialization what the outputs are at the start time and where the state starts (datasheet)
     max_step      s, the longest communication step the model keeps its accuracy at (measured:
                   outputs bounded and close to small-step results); a number, or
                   ``max_step(data) -> s``. Both FMI layers refuse a longer step (error, state kept),
@@ -98,6 +150,8 @@ class ModelSpec:
     starts: Optional[Callable[[dict], dict]] = None
     stop_time: float = 10.0
     max_step: "float | Callable[[dict], float]" = 1.0
+    paper: Optional[Paper] = None
+    initialization: str = ""
 
 
 #: relative slack on the longest step: a host computing its step as a difference of communication

@@ -110,7 +110,8 @@ def packaging_code() -> str:
 
     files = _sources(Path(fmu_src.__file__).resolve().parent, ("*.py", "*.c", "*.h"), "fmu_src")
     files += _sources(_ROOT / "cbackend", ("*.py",), "cbackend") + _sources(_ROOT / "native", ("*.c",), "native")
-    files += [(name, _ROOT / name) for name in ("packaging.py", "native_guard.py", "atomic.py", "identity.py")]
+    files += [(name, _ROOT / name)
+              for name in ("packaging.py", "native_guard.py", "atomic.py", "identity.py", "datasheet.py")]
     return _tree_hash(files)
 
 

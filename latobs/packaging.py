@@ -21,6 +21,9 @@ An FMU is assembled here file by file, not by pythonfmu's ``FmuBuilder``, so tha
 * **reproducible**: the zip has sorted entries, fixed timestamps and permissions, and the model
   description has no generation date: two builds from the same inputs are byte-identical.
 
+* **documented**: ``documentation/index.html``, the FMU's datasheet, and the icon ``model.png``,
+  generated from the model's declarations and its data (``latobs.datasheet``; both backends);
+
 * **identified by its inputs**: ``resources/latobs-identity.json`` holds the identity of what the
   FMU is made from (``latobs.identity``: design or plant inputs, backend, code, toolchain), which
   ``latobs build`` and every command that builds a missing FMU compare before reusing one; the
@@ -329,6 +332,11 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
         spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT)
     guard_variables = [(vr, typ, caus in ("input", "parameter"))
                        for vr, typ, caus, _ in _framework.variable_table(spec)]
+    from . import datasheet   # documentation/index.html and model.png
+
+    platforms = sorted({name.split("/")[1] for name in files if name.startswith("binaries/")})
+    files.update(datasheet.files(spec, data, class_name, data_kind=kind.data_kind, backend="python",
+                                 platforms=platforms, generation_tool=tool, copyright=COPYRIGHT))
 
     return install(out_dir, class_name, lambda tmp: seal_fmu(files, class_name, md, guard_variables, tmp), beside)
 

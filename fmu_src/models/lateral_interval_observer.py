@@ -4,7 +4,8 @@ Interface per CONTRACT.md; the maths is in ``interval_observer.py``; the gains, 
 box and the speed modes come from the design file baked into the FMU.
 """
 from ..interval_observer import IntervalObserver
-from ..spec import ACCEL, ANGLE, RATE, SPEED, ModelSpec, Var, design_speed
+from ..papers import IFQIR_2020
+from ..spec import ACCEL, ANGLE, CAR, CAR_BETA, LEFT, RATE, SPEED, ModelSpec, Var, design_speed
 
 
 def _variant(data: dict) -> str:
@@ -36,22 +37,22 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=IntervalObserver,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
-        Var("vx", "m/s", "longitudinal speed", **SPEED),
-        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
-        Var("ay", "m/s2", "measured lateral acceleration", **ACCEL),
+        Var("delta", "rad", "road-wheel steering angle", **ANGLE, **CAR["delta"]),
+        Var("vx", "m/s", "longitudinal speed", **SPEED, **CAR["vx"]),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE, **CAR["yaw_rate"]),
+        Var("ay", "m/s2", "measured lateral acceleration", **ACCEL, **CAR["ay"]),
     ),
     outputs=(
-        Var("vy_lower", "m/s", "lower bound of the lateral velocity at the CG"),
-        Var("vy_upper", "m/s", "upper bound of the lateral velocity at the CG"),
-        Var("beta_lower", "rad", "lower bound of the sideslip angle atan(vy/vx) at the CG"),
-        Var("beta_upper", "rad", "upper bound of the sideslip angle atan(vy/vx) at the CG"),
-        Var("yaw_rate_lower", "rad/s", "lower bound of the yaw rate"),
-        Var("yaw_rate_upper", "rad/s", "upper bound of the yaw rate"),
-        Var("Fyf_lower", "N", "lower bound of the front axle lateral force"),
-        Var("Fyf_upper", "N", "upper bound of the front axle lateral force"),
-        Var("Fyr_lower", "N", "lower bound of the rear axle lateral force"),
-        Var("Fyr_upper", "N", "upper bound of the rear axle lateral force"),
+        Var("vy_lower", "m/s", "lower bound of the lateral velocity at the CG", sign=LEFT),
+        Var("vy_upper", "m/s", "upper bound of the lateral velocity at the CG", sign=LEFT),
+        Var("beta_lower", "rad", "lower bound of the sideslip angle atan(vy/vx) at the CG", sign=CAR_BETA),
+        Var("beta_upper", "rad", "upper bound of the sideslip angle atan(vy/vx) at the CG", sign=CAR_BETA),
+        Var("yaw_rate_lower", "rad/s", "lower bound of the yaw rate", sign=CAR["yaw_rate"]["sign"]),
+        Var("yaw_rate_upper", "rad/s", "upper bound of the yaw rate", sign=CAR["yaw_rate"]["sign"]),
+        Var("Fyf_lower", "N", "lower bound of the front axle lateral force", sign=LEFT),
+        Var("Fyf_upper", "N", "upper bound of the front axle lateral force", sign=LEFT),
+        Var("Fyr_lower", "N", "lower bound of the rear axle lateral force", sign=LEFT),
+        Var("Fyr_upper", "N", "upper bound of the rear axle lateral force", sign=LEFT),
     ),
     integer_outputs=(
         Var("mode", "1", "active switched mode (speed band), 1-based", start=1, min=1),
@@ -69,4 +70,8 @@ SPEC = ModelSpec(
     # the design file; see IntervalObserver.max_communication_step)
     max_step=max_communication_step,
     stop_time=20.0,
+    paper=IFQIR_2020,
+    initialization="the bounds start around the first measurement (the measured yaw rate and ay, the design's "
+                   "initial box for the lateral velocity and the yaw acceleration) in the mode of the initial "
+                   "speed, consistent = 1",
 )

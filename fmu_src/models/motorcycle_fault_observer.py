@@ -5,7 +5,8 @@ design file baked into the FMU. Signs are those of the design model (``synthesis
 Sharp's SAE axes: y to the right, z down): roll, steer, yaw rate, vy, forces and torque > 0 to the right.
 """
 from ..motorcycle_observer import MotorcycleFaultObserver
-from ..spec import ANGLE, RATE, SPEED, ModelSpec, Var, design_speed
+from ..papers import ICHALAL_2017
+from ..spec import ANGLE, MOTORCYCLE, RATE, RIGHT, SPEED, ModelSpec, Var, design_speed
 
 
 def _variant(data: dict) -> str:
@@ -20,18 +21,21 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=MotorcycleFaultObserver,
     inputs=(
-        Var("vx", "m/s", "longitudinal speed (schedules the mode)", **SPEED),
-        Var("steer_angle", "rad", "measured steering (handlebar) angle, > 0 steers right", **ANGLE),
-        Var("yaw_rate", "rad/s", "measured yaw rate, > 0 turning right", **RATE),
-        Var("roll_rate", "rad/s", "measured roll rate, > 0 leaning further right", **RATE),
+        Var("vx", "m/s", "longitudinal speed (schedules the mode)", **SPEED, **MOTORCYCLE["vx"]),
+        Var("steer_angle", "rad", "measured steering (handlebar) angle", **ANGLE, **MOTORCYCLE["steer_angle"]),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE, **MOTORCYCLE["yaw_rate"]),
+        Var("roll_rate", "rad/s", "measured roll rate", **RATE, **MOTORCYCLE["roll_rate"]),
     ),
     outputs=(
-        Var("roll_angle_hat", "rad", "estimated roll angle (unknown input f1), > 0 leaning right"),
-        Var("rider_torque_hat", "N.m", "estimated rider steering torque (unknown input f2), > 0 turning the handlebar right"),
-        Var("vy_hat", "m/s", "estimated lateral velocity"),
-        Var("steer_rate_hat", "rad/s", "estimated steering rate"),
-        Var("Ff_hat", "N", "estimated front tyre lateral force, linear part H_x x^ + H_phi phi^ (no Gamma)"),
-        Var("Fr_hat", "N", "estimated rear tyre lateral force, linear part H_x x^ + H_phi phi^ (no Gamma)"),
+        Var("roll_angle_hat", "rad", "estimated roll angle (unknown input f1)", sign="> 0 leaning right"),
+        Var("rider_torque_hat", "N.m", "estimated rider steering torque (unknown input f2)",
+            sign="> 0 turning the handlebar right"),
+        Var("vy_hat", "m/s", "estimated lateral velocity", sign=RIGHT),
+        Var("steer_rate_hat", "rad/s", "estimated steering rate", sign="> 0 steering further right"),
+        Var("Ff_hat", "N", "estimated front tyre lateral force, linear part H_x x^ + H_phi phi^ (no Gamma)",
+            sign=RIGHT),
+        Var("Fr_hat", "N", "estimated rear tyre lateral force, linear part H_x x^ + H_phi phi^ (no Gamma)",
+            sign=RIGHT),
         Var("residual_norm", "1", "|y - C x^| (eq. 14), Euclidean norm of [rad, rad/s, rad/s] numbers in SI "
                                   "(mixed units)"),
     ),
@@ -46,4 +50,8 @@ SPEC = ModelSpec(
     # identical to 1 ms runs to 1e-11
     max_step=1.0,
     stop_time=16.0,
+    paper=ICHALAL_2017,
+    initialization="the measured states start at their first measurement (steering angle, yaw rate, roll rate), "
+                   "the others and both unknown inputs (roll angle, rider torque) at 0, in the mode of the "
+                   "initial speed",
 )

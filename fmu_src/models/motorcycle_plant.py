@@ -9,7 +9,8 @@ nonlinear parts of the tyre forces that paper 003's observer estimates) and alph
 Axes are Sharp's (SAE): x forward, y RIGHT, z down.
 """
 from ..motorcycle_plant import MotorcyclePlantModel
-from ..spec import SPEED, TORQUE, ModelSpec, Var
+from ..papers import SHARP_1971
+from ..spec import RIGHT, SPEED, TORQUE, ModelSpec, Var
 
 SPEC = ModelSpec(
     description="Nonlinear Sharp (1971) motorcycle: rear frame with rider, steered front frame, wheel "
@@ -17,20 +18,20 @@ SPEC = ModelSpec(
                 "of paper 003; SAE axes: y right, z down)",
     runtime=MotorcyclePlantModel,
     inputs=(
-        Var("rider_torque", "N.m", "rider steering torque about the steering axis, > 0 turns the handlebar "
-            "to the right; clamped to +-200 N m with a warning", **TORQUE),
+        Var("rider_torque", "N.m", "rider steering torque about the steering axis; clamped to +-200 N m with a "
+            "warning", **TORQUE, sign="> 0 turns the handlebar to the right"),
         Var("vx", "m/s", "prescribed forward speed (model meant for >= 5 m/s; < 1 m/s regularised, "
-            "clamped to [0, 60] with a warning)", start=15.0, **SPEED),
+            "clamped to [0, 60] with a warning)", start=15.0, **SPEED, sign="> 0 forward"),
     ),
     outputs=(
-        Var("steer_angle", "rad", "steering angle about the steering axis, > 0 steers right"),
-        Var("steer_rate", "rad/s", "steering rate"),
-        Var("yaw_rate", "rad/s", "yaw rate, > 0 turns right"),
-        Var("roll_angle", "rad", "roll (lean) angle, > 0 leans right"),
-        Var("roll_rate", "rad/s", "roll rate"),
-        Var("vy", "m/s", "lateral velocity (> 0 right) of the ground point below the rear-frame mass centre"),
-        Var("Ff", "N", "front tyre side force, > 0 to the right"),
-        Var("Fr", "N", "rear tyre side force, > 0 to the right"),
+        Var("steer_angle", "rad", "steering angle about the steering axis", sign="> 0 steers right"),
+        Var("steer_rate", "rad/s", "steering rate", sign="> 0 steering further right"),
+        Var("yaw_rate", "rad/s", "yaw rate", sign="> 0 turns right"),
+        Var("roll_angle", "rad", "roll (lean) angle", sign="> 0 leans right"),
+        Var("roll_rate", "rad/s", "roll rate", sign="> 0 leaning further right"),
+        Var("vy", "m/s", "lateral velocity of the ground point below the rear-frame mass centre", sign=RIGHT),
+        Var("Ff", "N", "front tyre side force", sign=RIGHT),
+        Var("Fr", "N", "rear tyre side force", sign=RIGHT),
         Var("Gamma_f", "N", "nonlinear part of the front static tyre force: Fs_f - (Cf1 alpha_f + Cf2 gamma_f)"),
         Var("Gamma_r", "N", "nonlinear part of the rear static tyre force: Fs_r - (Cr1 alpha_r + Cr2 gamma_r)"),
         Var("alpha_f", "rad", "front slip angle"),
@@ -50,4 +51,7 @@ SPEC = ModelSpec(
     # identical to 1 ms runs
     max_step=1.0,
     stop_time=16.0,
+    paper=SHARP_1971,
+    initialization="the motorcycle starts upright in straight running at the initial speed (every state 0); "
+                   "the outputs at the start time use the inputs set during initialisation",
 )

@@ -4,7 +4,8 @@ Interface per CONTRACT.md; the maths is in ``pi_observer.py``; the gains come fr
 file baked into the FMU.
 """
 from ..pi_observer import SwitchedPIObserver
-from ..spec import ANGLE, RATE, SPEED, ModelSpec, Var, design_speed
+from ..papers import MENHOUR_2014
+from ..spec import ANGLE, CAR, CAR_BETA, RATE, SPEED, ModelSpec, Var, design_speed
 
 
 def _grid_speed(mode: dict):
@@ -48,21 +49,24 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=SwitchedPIObserver,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
-        Var("vx", "m/s", "longitudinal speed", **SPEED),
-        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
-        Var("roll_angle", "rad", "measured roll angle", **ANGLE),
-        Var("roll_rate", "rad/s", "measured roll rate", **RATE),
+        Var("delta", "rad", "road-wheel steering angle", **ANGLE, **CAR["delta"]),
+        Var("vx", "m/s", "longitudinal speed", **SPEED, **CAR["vx"]),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE, **CAR["yaw_rate"]),
+        Var("roll_angle", "rad", "measured roll angle", **ANGLE, **CAR["roll_angle"]),
+        Var("roll_rate", "rad/s", "measured roll rate", **RATE, **CAR["roll_rate"]),
     ),
     outputs=(
         Var("beta_hat", "rad", "estimated sideslip angle at the roll axis below the CG (the design model's beta; "
-                               "the CG's differs by hr*roll_rate/vx), at the end of the step"),
+                               "the CG's differs by hr*roll_rate/vx), at the end of the step", sign=CAR_BETA),
         Var("yaw_rate_hat", "rad/s", "estimated yaw rate, at the end of the step (z + N y with the input hold's y "
-                                     "there: the measurement, or its first-order extrapolation)"),
-        Var("roll_angle_hat", "rad", "estimated roll angle, at the end of the step (as yaw_rate_hat)"),
-        Var("roll_rate_hat", "rad/s", "estimated roll rate, at the end of the step (as yaw_rate_hat)"),
+                                     "there: the measurement, or its first-order extrapolation)", sign=CAR["yaw_rate"]["sign"]),
+        Var("roll_angle_hat", "rad", "estimated roll angle, at the end of the step (as yaw_rate_hat)",
+            sign=CAR["roll_angle"]["sign"]),
+        Var("roll_rate_hat", "rad/s", "estimated roll rate, at the end of the step (as yaw_rate_hat)",
+            sign=CAR["roll_rate"]["sign"]),
         Var("bank_angle_hat", "rad", "estimated road bank angle (unknown input; the integral action, held while "
-                                     "valid = 0 if the design freezes it)"),
+                                     "valid = 0 if the design freezes it)", sign="> 0 when gravity pulls towards the right (as CarPlant's "
+                                     "bank_angle)"),
     ),
     integer_outputs=(
         Var("mode", "1", "active switched mode, 1-based", start=1, min=1),
@@ -85,4 +89,8 @@ SPEC = ModelSpec(
     max_step=lambda data: 0.005 if (data.get("options", {}).get("faithful")
                                     and data.get("switching", {}).get("kind") == "tire_slip") else 0.1,
     stop_time=30.0,
+    paper=MENHOUR_2014,
+    initialization="the state starts from the first measurement (estimated sideslip 0, the measured yaw rate, "
+                   "roll angle and roll rate; bank estimate 0) in the mode of the initial speed (tire modes: "
+                   "mode 1); the outputs at the start time are these values",
 )

@@ -3,7 +3,8 @@
 Interface per CONTRACT.md (input yaw_rate, output beta_hat); the maths is in ``tf_estimator.py``;
 the estimator's coefficients come from the design file baked into the FMU.
 """
-from ..spec import RATE, ModelSpec, Var
+from ..papers import DELIBASI_2014
+from ..spec import CAR, CAR_BETA, RATE, ModelSpec, Var
 from ..tf_estimator import TfEstimator
 
 
@@ -27,19 +28,26 @@ def describe_estimator(data: dict) -> str:
     return "; ".join(parts)
 
 
+#: the estimators' start (tf_estimator.TfEstimator.initialize)
+INITIALIZATION = ("the estimator starts in steady state for the initial yaw rate (as if that yaw rate had been "
+                  "held for ever), so beta_hat at the start time is its DC gain times the initial yaw rate")
+
+
 SPEC = ModelSpec(
     description="Fixed-order robust H-inf sideslip estimator beta^ = (y(s)/x(s)) r from the yaw rate alone "
                 "(Delibasi, fixed-order robust H-inf sideslip estimation, 2014)",
     describe=describe_estimator,
     runtime=TfEstimator,
     inputs=(
-        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE, **CAR["yaw_rate"]),
     ),
     outputs=(
-        Var("beta_hat", "rad", "estimated sideslip angle at the CG"),
+        Var("beta_hat", "rad", "estimated sideslip angle at the CG", sign=CAR_BETA),
     ),
     # longest communication step (s), measured against 1 ms runs: exact step maps: identical to 1 ms runs
     # to 1e-14
     max_step=1.0,
     stop_time=20.0,
+    paper=DELIBASI_2014,
+    initialization=INITIALIZATION,
 )

@@ -8,7 +8,8 @@ vehicle, the noise covariances and the speed clamp come from the design file bak
 the certified design.
 """
 from ..kalman_observer import KalmanObserver
-from ..spec import ACCEL, ANGLE, RATE, SPEED, ModelSpec, Var
+from ..papers import LEANZA_2021
+from ..spec import ACCEL, ANGLE, CAR, CAR_BETA, LEFT, RATE, SPEED, ModelSpec, Var
 
 
 def _diag(M) -> str:
@@ -38,19 +39,23 @@ SPEC = ModelSpec(
     describe=_variant,
     runtime=KalmanObserver,
     inputs=(
-        Var("delta", "rad", "road-wheel steering angle, > 0 steers left", **ANGLE),
+        Var("delta", "rad", "road-wheel steering angle", **ANGLE, **CAR["delta"]),
         Var("vx", "m/s", "longitudinal speed (the model is evaluated at vx clamped to [vx_min, vx_max])",
-            start=20.0, **SPEED),
-        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE),
-        Var("ay", "m/s2", "measured lateral acceleration at the centre of gravity", **ACCEL),
+            start=20.0, **SPEED, **CAR["vx"]),
+        Var("yaw_rate", "rad/s", "measured yaw rate", **RATE, **CAR["yaw_rate"]),
+        Var("ay", "m/s2", "measured lateral acceleration at the centre of gravity", **ACCEL, **CAR["ay"]),
     ),
     outputs=(
-        Var("beta_hat", "rad", "estimated sideslip angle atan(vy_hat/vx) at the centre of gravity"),
-        Var("vy_hat", "m/s", "estimated lateral velocity at the centre of gravity"),
-        Var("yaw_rate_hat", "rad/s", "estimated yaw rate"),
+        Var("beta_hat", "rad", "estimated sideslip angle atan(vy_hat/vx) at the centre of gravity", sign=CAR_BETA),
+        Var("vy_hat", "m/s", "estimated lateral velocity at the centre of gravity", sign=LEFT),
+        Var("yaw_rate_hat", "rad/s", "estimated yaw rate", sign=CAR["yaw_rate"]["sign"]),
     ),
     # longest communication step (s), measured against 1 ms runs: a discrete filter over the communication
     # step (its gain depends on the step, its error does not grow with it): bounded at every step to 1 s
     max_step=1.0,
     stop_time=20.0,
+    paper=LEANZA_2021,
+    initialization="the filter starts from lateral velocity 0 and the initial measured yaw rate, with the "
+                   "design's initial covariance P0; the outputs at the start time are these values at the initial "
+                   "speed (clamped to the filter's speed range)",
 )
