@@ -978,7 +978,7 @@ def _certify_003(d: dict) -> list[Check]:
                           gi * (1 + REL_TOL)))
         P, U = sym(np.asarray(mode["P"], float)), np.asarray(mode["U"], float)
         gb, ab = float(mode["gamma_bar"]), float(mode["alpha_bar"])
-        checks.append(_le(f"gamma_i = sqrt(gamma_bar) (ERRATA 003), relative error, {where}",
+        checks.append(_le(f"gamma_i = sqrt(gamma_bar) (corrected from the print), relative error, {where}",
                           abs(gi - math.sqrt(max(gb, 0.0))) / max(gi, 1e-300), 1e-12))
         checks.append(_le(f"P symmetric: max |P - P'|, {where}", float(np.max(np.abs(np.asarray(mode["P"]) - np.asarray(mode["P"]).T))), 0.0))
         try:
@@ -986,7 +986,7 @@ def _certify_003(d: dict) -> list[Check]:
             lerr = _rel_err(L, D @ Ln @ Yi)
         except np.linalg.LinAlgError:
             lerr = math.inf
-        checks.append(_le(f"gains = D (-P^-1 U) Y^-1 of the stored P, U (ERRATA 003: L = -P^-1 U), rel. error, {where}",
+        checks.append(_le(f"gains = D (-P^-1 U) Y^-1 of the stored P, U (corrected from the print: L = -P^-1 U), rel. error, {where}",
                           lerr, 1e-8))
         PA = P @ An + U @ Cn
         core = PA + PA.T
@@ -1001,7 +1001,7 @@ def _certify_003(d: dict) -> list[Check]:
         m22 = np.block([[ab * np.eye(na), P], [P, np.eye(na)]])
         checks.append(_le(f"LMI (20) on the stored P, U, gamma_bar: max eig, {where}", float(np.max(np.linalg.eigvalsh(sym(m20)))), 0.0))
         checks.append(_le(f"LMI (21) on the stored P, U, gamma_bar: max eig, {where}", float(np.max(np.linalg.eigvalsh(sym(m21)))), 0.0))
-        checks.append(_ge(f"LMI (22) [[alpha_bar I, P], [P, I]] (ERRATA 003): min eig, {where}",
+        checks.append(_ge(f"LMI (22) [[alpha_bar I, P], [P, I]] (sign corrected from the print): min eig, {where}",
                           float(np.min(np.linalg.eigvalsh(m22))), 0.0))
         ev = np.linalg.eigvalsh(P)
         checks.append(_ge(f"LMI (23) P >= I: min eig(P) - 1, {where}", float(ev[0] - 1.0), 0.0))

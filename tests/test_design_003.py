@@ -170,14 +170,14 @@ def test_certificate_rejects_corrupted_designs(d003):
     where = "mode 2 (vx = 15 m/s)"
     bad = copy.deepcopy(d003)
     bad["modes"][1]["gains"]["L_I"] = (10 * np.asarray(bad["modes"][1]["gains"]["L_I"])).tolist()
-    assert f"gains = D (-P^-1 U) Y^-1 of the stored P, U (ERRATA 003: L = -P^-1 U), rel. error, {where}" in _failed(bad)
+    assert f"gains = D (-P^-1 U) Y^-1 of the stored P, U (corrected from the print: L = -P^-1 U), rel. error, {where}" in _failed(bad)
 
     bad = copy.deepcopy(d003)
     hn = next(c["value"] for c in d003["checks"] if c["name"].startswith("H-inf d~ -> residual") and where in c["name"])
     bad["modes"][1]["gamma"] = 0.5 * hn
     failed = _failed(bad)
     assert f"H-inf d~ -> residual r (16), Hamiltonian, normalised <= gamma_i, {where}" in failed
-    assert f"gamma_i = sqrt(gamma_bar) (ERRATA 003), relative error, {where}" in failed
+    assert f"gamma_i = sqrt(gamma_bar) (corrected from the print), relative error, {where}" in failed
 
     bad = copy.deepcopy(d003)
     bad["modes"][1]["P"] = (0.5 * np.asarray(bad["modes"][1]["P"])).tolist()
@@ -185,7 +185,7 @@ def test_certificate_rejects_corrupted_designs(d003):
 
     bad = copy.deepcopy(d003)
     bad["modes"][1]["alpha_bar"] = 1.0
-    assert f"LMI (22) [[alpha_bar I, P], [P, I]] (ERRATA 003): min eig, {where}" in _failed(bad)
+    assert f"LMI (22) [[alpha_bar I, P], [P, I]] (sign corrected from the print): min eig, {where}" in _failed(bad)
 
     bad = copy.deepcopy(d003)
     bad["modes"][1]["gamma_bar"] *= 1e-3
