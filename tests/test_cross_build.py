@@ -240,6 +240,49 @@ def test_without_a_system_compiler_zig_builds_the_same_fmus_and_the_same_numbers
             f"observer {k}: max |diff| {np.max(np.abs(got.observers['obs'][k] - v))}"
 
 
+def _zig_twin(fmu: Path, out: Path) -> Path:
+    """A copy of ``fmu`` whose linux64 library zig compiled from the FMU's own sources (as
+    buildDescription.xml lists them) instead of the system compiler: the same guid, the same code."""
+    from xml.etree import ElementTree
+
+    with zipfile.ZipFile(fmu) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    sources = {n.removeprefix("sources/"): raw for n, raw in members.items() if n.startswith("sources/")}
+    c_files = [f.get("name") for f in ElementTree.fromstring(sources["buildDescription.xml"]).iter("SourceFile")]
+    so = f"binaries/linux64/{fmu.stem}.so"
+    members[so] = toolchain.compile_for("linux64", sources, c_files, f"{fmu.stem}.so", zig=True)
+    out.mkdir(parents=True, exist_ok=True)
+    packaging.write_zip(out / fmu.name, members)
+    return out / fmu.name
+
+
+#: the scenario each plant's observers are compared on (short: the first seconds)
+COMPARED_ON = {"CarPlant": "bank-braking", "MotorcyclePlant": "motorcycle-lane-change"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in C_NAMES if n in packaging.OBSERVERS])
+def test_zig_and_the_system_compiler_give_the_same_doubles(built_fmus, name, tmp_path_factory):
+    """Every observer beside its plant, closed loop in fmpy: the linux64 libraries compiled by zig
+    (clang, glibc 2.17 stubs) and by the system compiler (gcc) give the same outputs to the bit:
+    -ffp-contract=off, no fast-math, and the same libm functions bound (glibc_compat.h)."""
+    from latobs.synthesis import designs
+    from latobs.validation import harness
+    from latobs.validation.scenarios import get_scenario
+
+    if toolchain.host_platform() != "linux64" or toolchain.system_compiler() is None or toolchain.zig_cc() is None:
+        pytest.skip("compares zig with this Linux x86-64 machine's system compiler")
+    plant = designs.DESIGNS[name].plant
+    twins = tmp_path_factory.mktemp("zig_twins")
+    sc = get_scenario(COMPARED_ON[plant], duration=3.0)
+    ref = harness.run(sc, built_fmus.c_path(plant), {"obs": built_fmus.c_path(name)}, dt=0.005)
+    got = harness.run(sc, _zig_twin(built_fmus.c_path(plant), twins),
+                      {"obs": _zig_twin(built_fmus.c_path(name), twins)}, dt=0.005)
+    for what, a, b in [*((f"plant {k}", v, got.bus[k]) for k, v in ref.bus.items()),
+                       *((f"{name} {k}", v, got.observers["obs"][k]) for k, v in ref.observers["obs"].items())]:
+        assert np.array_equal(a, b, equal_nan=True), f"{what}: max |diff| {np.max(np.abs(np.subtract(a, b)))}"
+
+
 @pytest.mark.slow
 def test_prepare_readies_every_target():
     proc = subprocess.run([sys.executable, "-m", "latobs.cbackend.toolchain", "--prepare"], capture_output=True,

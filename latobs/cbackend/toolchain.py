@@ -2,9 +2,11 @@
 
 Every target is compiled by ``zig cc`` from the ``ziglang`` package (a dependency: ``pip install``
 brings a C compiler and its cross targets; zig builds each target's C runtime once, minutes, and
-keeps it in the user cache folder). The host platform is compiled with the system C compiler when
-there is one (``$CC``, ``cc``, ``gcc``: no first-build cost) and the results are the same
-(``tests/test_cross_build.py``).
+keeps it in the user cache folder; ``python -m latobs.cbackend.toolchain --prepare`` builds them
+all at once). On Linux the host platform is compiled with the system C compiler when there is one
+(``$CC``, ``cc``, ``gcc``: no first-build cost); the outputs are the same bit for bit
+(``tests/test_cross_build.py``). The targets of one build are compiled in parallel, a thread per
+target running its compiler.
 
 Platform folders as FMI 2.0.4 names them: ``linux64`` (x86-64, glibc 2.17 and newer), ``win64``
 (x86-64 Windows, the system's universal C runtime only), ``darwin64`` (one universal Mach-O holding
@@ -70,7 +72,8 @@ def host_platform() -> str | None:
     """The platform folder this machine loads, or None."""
     machine = _platform.machine().lower()
     if sys.platform.startswith("linux"):
-        return {"x86_64": "linux64", "amd64": "linux64", "aarch64": "aarch64-linux", "arm64": "aarch64-linux"}.get(machine)
+        return {"x86_64": "linux64", "amd64": "linux64", "aarch64": "aarch64-linux",
+                "arm64": "aarch64-linux"}.get(machine)
     if sys.platform == "win32":
         return "win64" if machine in ("amd64", "x86_64") else None
     if sys.platform == "darwin":
@@ -120,7 +123,9 @@ def _target_flags(target: str, out_name: str, shared: bool, sources=()) -> list[
     flags = list(COMMON_FLAGS)
     if "linux" in target:
         # glibc_compat.h (the native backend's sources): the old-glibc baseline, included first
-        flags += ["-fPIC", "-s", "-Wl,--build-id=none"] + (["-include", GLIBC_COMPAT] if GLIBC_COMPAT in sources else [])
+        flags += ["-fPIC", "-s", "-Wl,--build-id=none"]
+        if GLIBC_COMPAT in sources:
+            flags += ["-include", GLIBC_COMPAT]
     elif "macos" in target:
         # the install name is the file's own name, not the scratch folder it was linked in
         flags += ["-s"] + (["-Wl,-install_name,@rpath/" + out_name] if shared else [])
