@@ -9,7 +9,7 @@ with the pure-Python readers of ``binfmt.py`` (no objdump, readelf or otool need
   no msvcr*, no MinGW runtime (libgcc, libwinpthread);
 * darwin64: one universal Mach-O of exactly an x86-64 and an arm64 dylib, each exporting every
   fmi2 function, named ``@rpath/<id>.dylib`` (no scratch-folder path), needing only libSystem,
-  for macOS 10.13 and 11.0 and later;
+  for macOS 10.13 and 11.0 and later, the arm64 one ad-hoc signed (its page hashes checked);
 * linux64 and aarch64-linux: ELF shared objects needing libc and libm only, no symbol version
   newer than GLIBC_2.17, exporting the fmi2 functions only;
 * two builds give byte-identical FMUs, every platform;
@@ -131,6 +131,9 @@ def test_darwin_library_is_universal_x86_64_and_arm64_exporting_fmi2(built_fmus,
         assert set(m.exports) <= fmi2 | MACHO_LINKER_SYMBOLS, sorted(set(m.exports) - fmi2)
         if m.symtab_exports:             # the symbol table, where kept, says the same
             assert set(m.symtab_exports) == set(m.exports)
+        if cputype == binfmt.CPU_ARM64:  # Apple silicon loads signed code only: zig's ad-hoc signature, intact
+            pages, bad = binfmt.code_signature_pages(thin)
+            assert pages > 0 and bad == [], f"arm64 slice: pages {bad} do not match their signed hashes"
 
 
 @pytest.mark.slow

@@ -3,9 +3,9 @@
 Every target is compiled by ``zig cc`` from the ``ziglang`` package (a dependency: ``pip install``
 brings a C compiler and its cross targets; zig builds each target's C runtime once, minutes, and
 keeps it in the user cache folder; ``python -m latobs.cbackend.toolchain --prepare`` builds them
-all at once). On Linux the host platform is compiled with the system C compiler when there is one
-(``$CC``, ``cc``, ``gcc``: no first-build cost); the outputs are the same bit for bit
-(``tests/test_cross_build.py``). The targets of one build are compiled in parallel, a thread per
+all at once). On x86-64 Linux, linux64 is compiled with the system C compiler when there is one
+(``$CC``, ``cc``, ``gcc``: no first-build cost; once zig's runtime is built, zig is as fast); the
+outputs are the same bit for bit (``tests/test_cross_build.py``). The targets of one build are compiled in parallel, a thread per
 target running its compiler.
 
 Platform folders as FMI 2.0.4 names them: ``linux64`` (x86-64, glibc 2.17 and newer), ``win64``
@@ -145,10 +145,10 @@ def _run(cmd: list[str], cwd: Path) -> None:
 
 def _uses_zig(platform: str, zig: bool) -> bool:
     """Whether ``platform`` is compiled by zig: a cross target always; the host platform when
-    asked (``zig``), when there is no system compiler, or when it is not Linux (the flags above are
-    for a Linux gcc/clang; darwin64 needs both architectures)."""
-    return (zig or platform != host_platform() or system_compiler() is None
-            or not sys.platform.startswith("linux"))
+    asked (``zig``), when there is no system compiler, or when it is not linux64 (the system
+    compiler is used where glibc_compat.h keeps its symbols at glibc 2.17: x86-64 Linux; on
+    aarch64 it would bind the host glibc's newest versions; darwin64 needs both architectures)."""
+    return zig or platform != host_platform() or platform != "linux64" or system_compiler() is None
 
 
 def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_files: list[str], out_name: str,
@@ -199,7 +199,7 @@ def compile_for(platform: str, sources: dict[str, bytes], c_files: list[str], ou
     """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
     names) for ``platform`` (a folder of :data:`PLATFORMS`) into a shared library (``shared``) or a
     program named ``out_name``; returns its bytes (darwin64: one universal file of both
-    architectures). The host platform uses the system compiler when there is one, unless ``zig``.
+    architectures). On x86-64 Linux, linux64 uses the system compiler when there is one, unless ``zig``.
     ToolchainError with the compiler's output."""
     return compile_platforms({platform: out_name}, sources, c_files, shared=shared, libs=libs, zig=zig)[platform]
 
@@ -309,7 +309,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         p.error(str(exc))
     cc = system_compiler()
-    print(f"system C compiler: {_version_line(cc) if cc else 'none'} (builds {host_platform()} when present)")
+    host = host_platform()
+    role = "builds linux64" if host and not _uses_zig(host, False) else "zig builds every platform"
+    print(f"system C compiler: {_version_line(cc) if cc else 'none'} ({role})")
     print(f"zig: {_version_line(shlex.join(zig_cc())) if zig_cc() else 'none (pip install ziglang)'}")
     if args.prepare:
         t0 = time.perf_counter()
