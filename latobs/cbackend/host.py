@@ -34,7 +34,7 @@ def compile_host(out_dir: Path | None = None) -> Path:
         return _BUILT[key]
     cc = find_compiler()
     if cc is None:
-        raise HostError("no C compiler found (set CC, or install cc/gcc)")
+        raise HostError("no C compiler found (pip install ziglang, set CC, or install cc/gcc)")
     folder = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="latobs-host-"))
     folder.mkdir(parents=True, exist_ok=True)
     exe = folder / "fmi2_host"
