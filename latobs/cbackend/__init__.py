@@ -203,7 +203,7 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     tool = f"latobs {__version__} (native C backend)"
     from ..datasheet import files as datasheet_files   # documentation/index.html and model.png
 
-    files.update(datasheet_files(spec, data, class_name, data_kind=kind.data_kind, backend="c", platforms=["linux64"],
+    files.update(datasheet_files(spec, data, class_name, data_kind=kind.data_kind, backend="c", platforms=platforms,
                                  generation_tool=tool, copyright=COPYRIGHT, states=cm.states))
     md = lambda guid: _framework.model_description(  # noqa: E731
         spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT,
