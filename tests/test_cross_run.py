@@ -83,7 +83,7 @@ def libm_differs():
     def hashes(platform: str) -> dict[str, str]:
         with tempfile.TemporaryDirectory(prefix="latobs-probe-") as tmp:
             exe = Path(tmp) / ("probe.exe" if platform == "win64" else "probe")
-            exe.write_bytes(toolchain.compile_for(platform, {"probe.c": PROBE.read_bytes(), "glibc_compat.h": b""},
+            exe.write_bytes(toolchain.compile_for(platform, {"probe.c": PROBE.read_bytes()},
                                                   ["probe.c"], exe.name, shared=False))
             exe.chmod(0o755)
             code, text, _ = runner.execute(platform, exe, [], timeout=120)
@@ -131,7 +131,7 @@ def _plant_for(built_fmus, name: str) -> tuple[Path, str]:
         if vehicle != default:
             try:
                 found = (packaging.package_plant(plant, vehicle, built_fmus.out / "c" / vehicle, backend="c"), vehicle)
-            except (ValueError, KeyError, TypeError):
+            except packaging.PackagingError:     # e.g. a vehicle without the plant's roll data
                 pass
         _PLANTS[(plant, vehicle)] = found
     return _PLANTS[(plant, vehicle)]

@@ -147,10 +147,7 @@ def _sources() -> dict[str, bytes]:
     from ..native_guard import fmi2_headers
 
     headers = fmi2_headers()
-    # the toolchain force-includes the FMUs' old-glibc baseline on Linux; the host is no FMU (it
-    # runs where it is built, or under qemu with the sysroot's glibc) and must set its own feature
-    # macros before any system header: an empty one
-    out = {"fmu_runner.c": SOURCE.read_bytes(), "glibc_compat.h": b"/* the FMU host needs no glibc baseline */\n"}
+    out = {"fmu_runner.c": SOURCE.read_bytes()}
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
         out[h] = (headers / h).read_bytes()
     return out
