@@ -30,6 +30,7 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -219,3 +220,31 @@ def test_a_missing_binary_or_emulator_is_named(built_fmus, tmp_path):
     assert "cannot run" in runner.available("darwin64")
     with pytest.raises(runner.RunnerError, match=r"CarPlant\.fmu on darwin64"):
         runner.run(fmu, "darwin64", t, {})
+
+
+def test_the_comparison_sees_a_binary_built_without_the_floating_point_contract(built_fmus, monkeypatch, tmp_path):
+    """Bit for bit means something: the same FMU's aarch64-linux binary compiled from its own
+    sources with fused multiply-adds allowed (fp_contract.h emptied, -ffp-contract=fast) gives
+    other last bits under qemu, which the comparison above would reject."""
+    _need("aarch64-linux")
+    case = _case(built_fmus, "SideslipBankObserver")
+    with zipfile.ZipFile(case.fmu) as z:
+        src = {n[len("sources/"):]: z.read(n) for n in z.namelist() if n.startswith("sources/") and n[-1] != "/"}
+        members = {i.filename: z.read(i) for i in z.infolist()}
+    build = ElementTree.fromstring(src["buildDescription.xml"])
+    ident = build.find("BuildConfiguration").get("modelIdentifier")
+    src["fp_contract.h"] = b"/* no floating-point contract */\n"
+    monkeypatch.setattr(toolchain, "COMMON_FLAGS", tuple(
+        "-ffp-contract=fast" if f == "-ffp-contract=off" else f for f in toolchain.COMMON_FLAGS))
+    members[f"binaries/aarch64-linux/{ident}.so"] = toolchain.compile_for(
+        "aarch64-linux", src, [f.get("name") for f in build.iter("SourceFile")], f"{ident}.so")
+    fused = tmp_path / case.fmu.name
+    with zipfile.ZipFile(fused, "w") as z:
+        for name, raw in members.items():
+            z.writestr(name, raw)
+    got = runner.run(fused, "aarch64-linux", case.time, case.inputs, step=case.step)
+    assert got.ok, got.failure()
+    differ = [k for k, ref in case.linux.outputs.items() if not np.array_equal(got[k], ref, equal_nan=True)]
+    assert differ, "fused multiply-adds gave the same bits: the comparison would not see them"
+    for k in differ:    # the last bits only
+        assert np.nanmax(np.abs(got[k] - case.linux[k])) <= RELATIVE * np.nanmax(np.abs(case.linux[k])), k
