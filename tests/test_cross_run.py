@@ -248,3 +248,19 @@ def test_the_comparison_sees_a_binary_built_without_the_floating_point_contract(
     assert differ, "fused multiply-adds gave the same bits: the comparison would not see them"
     for k in differ:    # the last bits only
         assert np.nanmax(np.abs(got[k] - case.linux[k])) <= RELATIVE * np.nanmax(np.abs(case.linux[k])), k
+
+
+@pytest.mark.parametrize("platform", ["linux64", *CROSS])
+def test_a_refused_step_is_recorded_not_hidden(built_fmus, platform):
+    """A NaN input at t_2: the FMU refuses that step (fmi2Error, its message logged); the host
+    records the status at the point the step would reach and stops there, on every platform."""
+    if platform != toolchain.host_platform():
+        _need(platform)
+    fmu = built_fmus.c_path("SideslipBankObserver")
+    inputs = {"delta": [0.01, 0.01, np.nan, 0.01, 0.01], "vx": 20.0, "yaw_rate": 0.1, "roll_angle": 0.0,
+              "roll_rate": 0.0}
+    got = runner.run(fmu, platform, np.arange(5) * 0.005, inputs, step=0.005)
+    assert not got.ok
+    assert list(got.status) == [0, 0, 0, 3]
+    assert np.all(np.isfinite(got["beta_hat"][:3])) and np.isnan(got["beta_hat"][3])
+    assert "delta = nan" in got.log and "fmi2Error at t = 0.015" in got.failure()

@@ -87,7 +87,7 @@ class RunResult:
         if self.ok:
             return None
         s = int(self.status[-1])
-        return (f"a call returned fmi2{STATUS[s] if 0 <= s < len(STATUS) else s} at t = {self.time[-1]:.17g} s "
+        return (f"a call returned fmi2{STATUS[s] if 0 <= s < len(STATUS) else s} at t = {float(self.time[-1])!r} s "
                 f"({len(self.time)} of {self.points} communication points); log: {self.log.strip()[-2000:]}")
 
     def __getitem__(self, name: str) -> np.ndarray:
@@ -240,7 +240,7 @@ def _host_paths(platform: str):
 def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mapping[str, Sequence[float]],
             outputs: Sequence[str] | None, parameters: Mapping[str, object] | None, step: float | None,
             workdir: Path | None, timeout: float):
-    """Run the host: (stdout file text, output names, the host's stderr, seconds, exit code)."""
+    """Run the host: (its output file's text, the output names, its log, seconds)."""
     from fmpy import read_model_description
 
     fmu = Path(fmu)
