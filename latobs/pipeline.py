@@ -84,6 +84,7 @@ class _Artefact:
     backend: str                # "c" or "python"
     why: str | None             # why "auto" fell back to pythonfmu
     fmu: Path
+    reference: str = ""         # identity of its reference results (:func:`reference_identity`)
 
     @property
     def design_path(self) -> Path | None:
@@ -105,6 +106,11 @@ class _Artefact:
         found = identity.read_fmu(self.fmu)
         if found is None or found.sha256 != expected.sha256:
             return False, f"rebuilding {self.fmu.name}: {expected.changes(found)}"
+        from . import reference
+
+        if reference.identity_of(self.fmu) != self.reference:
+            return False, (f"rebuilding {self.fmu.name}: its reference results are missing or were made from another "
+                           "plant, scenario or code")
         if self.design_path is not None and (design_file_needed or self.design_path.exists()):
             try:
                 with zipfile.ZipFile(self.fmu) as z:
@@ -144,7 +150,8 @@ def _plan(names: list[str], vehicle, out: Path, backend: str) -> list[_Artefact]
             chosen, why = existing, None
         else:
             chosen, why = packaging.resolve_backend(backend, kind)
-        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu))
+        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu,
+                               reference_identity(name, vehicle, chosen)))
     if conflicts:
         raise PipelineError(f"{'; '.join(conflicts)}: refusing to replace {'it' if len(conflicts) == 1 else 'them'} "
                             f"with {BACKEND_LABEL[backend]} FMUs of the same name; build into another --out "
@@ -188,27 +195,187 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
         for p in plans:
             print(f"reusing {p.fmu.name} (identical inputs)")
         return [p.fmu for p in plans]
-    built = []
-    with locked_folder(out, "build"):
+    built = {}
+    with locked_folder(out, "build"), _ReferencePlants(out) as plants:
         plans = _plan(names, vehicle, out, backend)     # again: another build may have written meanwhile
-        for p in plans:
+        # plants first: an observer's reference experiment runs beside the plant built here
+        for p in sorted(plans, key=lambda p: p.design_path is not None):
             ok, what = p.current(design_files)
             if ok:
                 print(f"reusing {p.fmu.name} (identical inputs)")
-                built.append(p.fmu)
+                built[p.name] = p.fmu
                 continue
             if p.why:
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
+            finish = reference_finish(p.model, p.vehicle, p.backend, p.reference, plants)
             if p.design_path is None:
-                path = packaging.package_plant(p.model, p.vehicle, out, p.backend)
+                path = packaging.package_plant(p.model, p.vehicle, out, p.backend, finish=finish)
             else:
                 data = _current_design(p) or solve(p.model, p.vehicle)
                 path = packaging.package_design_data(data, out, p.backend, write_design=True,
-                                                     origin=str(p.design_path))
+                                                     origin=str(p.design_path), finish=finish)
             print(f"built {path} ({BACKEND_LABEL[p.backend]})")
-            built.append(path)
-    return built
+            built[p.name] = path
+    return [built[p.name] for p in plans]
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    """The reference experiment an FMU carries: the first ``seconds`` of its own validation
+    ``scenario`` (with the scenario fields ``overrides``, to bring the manoeuvre into them)."""
+    scenario: str
+    seconds: float
+    overrides: tuple[tuple[str, float], ...] = ()
+
+
+_MOTORCYCLE = ReferenceSpec("motorcycle-lane-change", 2.5, (("t_rise", 0.0), ("t_first", 0.3), ("t_second", 1.4)))
+#: Each FMU's reference experiment (``latobs check``): its own validation scenario, a few seconds
+#: at the FMU's default step. An observer's inputs are its plant's signals in that scenario (the
+#: plant of the same backend, for the observer's vehicle; for the plant's default vehicle when the
+#: plant cannot be built for it, e.g. a vehicle without roll data); a plant's are the scenario's.
+REFERENCE_EXPERIMENTS = {
+    **dict.fromkeys(("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
+                     "SideslipBankObserverTirePaper", "CarPlant"), ReferenceSpec("bank-braking", 2.5)),
+    "LateralIntervalObserver": ReferenceSpec("double-lane-change-15", 2.5),
+    "SideslipFixedOrderEstimator": ReferenceSpec("w1-steer", 2.5),
+    **dict.fromkeys(("SideslipFixedOrderEstimatorScheduled", "SideslipKalmanFilter"),
+                    ReferenceSpec("double-lane-change", 2.5)),
+    "MotorcycleFaultObserver": _MOTORCYCLE, "MotorcyclePlant": _MOTORCYCLE,
+}
+
+
+def _reference_spec(model: str) -> ReferenceSpec:
+    spec = REFERENCE_EXPERIMENTS.get(model)
+    if spec is None:
+        raise PipelineError(f"{model}: no reference experiment (latobs.pipeline.REFERENCE_EXPERIMENTS)")
+    return spec
+
+
+def reference_plant(model: str, vehicle) -> tuple[str, object] | None:
+    """(plant, its vehicle as given to :func:`build`) beside which the observer ``model`` for
+    ``vehicle`` (None: its default) runs its reference experiment; None for a plant."""
+    from importlib import import_module
+
+    from . import fmu_src, packaging
+    from .synthesis.params import load_vehicle
+
+    if model not in designs.DESIGNS:
+        return None
+    plant = designs.DESIGNS[model].plant
+    kind = packaging.PLANTS[plant]
+    given = vehicle or designs.DESIGNS[model].default_vehicle
+    veh = load_vehicle(given)
+    if veh.name == kind.default_vehicle:
+        return plant, None
+    spec = import_module(f"{fmu_src.__name__}.models.{kind.model_module}").SPEC
+    try:
+        spec.runtime(packaging.plant_data(veh), {})
+    except (ValueError, KeyError, TypeError):
+        return plant, None            # e.g. a vehicle without the plant's roll data
+    return plant, given
+
+
+def reference_identity(model: str, vehicle, backend: str) -> str:
+    """What the reference results of ``model``'s FMU for ``vehicle`` are made from besides the FMU
+    itself: the experiment, the plant FMU's identity (observers) and the code that runs them."""
+    from . import check, identity, packaging, reference
+    from .validation import harness, scenarios
+
+    beside = reference_plant(model, vehicle)
+    plant = None
+    if beside is not None:
+        _, _, _, base = packaging.plant_artefact(*beside)
+        plant = identity.of_fmu(base, backend).sha256
+    code = reference.code_hash(*(Path(m.__file__) for m in (check, reference, harness, scenarios)))
+    return identity.sha256_json({"experiment": _reference_spec(model), "plant": plant, "code": code})
+
+
+class _ReferencePlants:
+    """The plant FMUs of one build's reference runs: the one in ``out`` when it is current, else
+    built once into a scratch folder (removed at the end)."""
+
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self._tmp = None
+        self._made: dict[tuple, Path] = {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def get(self, plant: str, vehicle, backend: str) -> Path:
+        import tempfile
+
+        key = (plant, str(vehicle), backend)
+        if key not in self._made:
+            try:
+                p, = _plan([plant], vehicle, self.out, backend)
+                here = p.current(design_file_needed=False)[0]
+            except PipelineError:         # e.g. an FMU of the other backend there
+                here = False
+            if here:
+                self._made[key] = p.fmu
+            else:
+                if self._tmp is None:
+                    self._tmp = tempfile.TemporaryDirectory(prefix="latobs-reference-")
+                print(f"{plant}: building it for the observers' reference experiments")
+                self._made[key], = build([plant], vehicle, Path(self._tmp.name) / backend, backend,
+                                         design_files=False)
+        return self._made[key]
+
+
+def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _ReferencePlants):
+    """``finish`` of ``packaging.install`` for ``model``'s FMU: runs the sealed FMU on its
+    reference experiment (:data:`REFERENCE_EXPERIMENTS`) and returns its FMI-LS-REF members."""
+
+    def finish(fmu: Path) -> dict[str, bytes]:
+        from fmpy import read_model_description
+
+        from . import packaging, reference
+        from .cbackend.toolchain import host_platform
+        from .check import run_host
+        from .synthesis.params import load_vehicle
+        from .validation import get_scenario
+        from .validation.harness import run as cosimulate
+
+        spec = _reference_spec(model)
+        h = float(read_model_description(str(fmu)).defaultExperiment.stepSize)
+        sc = get_scenario(spec.scenario, duration=spec.seconds, **dict(spec.overrides))
+        beside = reference_plant(model, vehicle)
+        if beside is None:                # a plant: the scenario's driver inputs
+            veh = load_vehicle(vehicle or packaging.PLANTS[model].default_vehicle)
+            t = sc.time_grid(h)
+            signals = sc.sampled(t, veh)
+            names = [v.name for v in read_model_description(str(fmu)).modelVariables if v.causality == "input"]
+            inputs = {n: signals[n] for n in names if n in signals}
+            source = f"the scenario's inputs (vehicle {veh.name})"
+        else:                             # an observer: its plant's signals in the scenario
+            plant, pveh = beside
+            veh = load_vehicle(pveh or packaging.PLANTS[plant].default_vehicle)
+            run = cosimulate(sc, plants.get(plant, pveh, backend), {"observer": fmu}, dt=h, vehicle=veh)
+            t = run.time
+            inputs = {n: run.measured[n] for n in run.inputs["observer"]}
+            source = f"the signals of {plant} (vehicle {veh.name}) at the communication points"
+        what = (f"scenario {spec.scenario}"
+                + "".join(f", {k} = {v:g}" for k, v in spec.overrides) + f", first {spec.seconds:g} s: inputs "
+                f"{source}; outputs this FMU's own, on them.")
+        probe = reference.Experiment(spec.scenario, what, t, h, inputs, {}, host_platform() or "")
+        outputs = run_host(fmu, probe)
+        e = reference.Experiment(spec.scenario, what, t, h, inputs, outputs, host_platform() or "")
+        return reference.files([e], fmu_name(fmu), ident)
+
+    return finish
+
+
+def fmu_name(path: Path) -> str:
+    """The modelIdentifier of a (temporary) FMU file."""
+    from fmpy import read_model_description
+
+    return read_model_description(str(path)).coSimulation.modelIdentifier
 
 
 def _current_design(p: _Artefact) -> dict | None:

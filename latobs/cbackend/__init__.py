@@ -164,14 +164,14 @@ def _compile(cc: str, sources: dict[str, bytes], c_files: list[str], out_name: s
         return (work / out_name).read_bytes()
 
 
-def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None) -> Path:
+def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None, finish=None) -> Path:
     """Build ``out_dir/<class_name>.fmu`` with the native C backend; returns its path.
 
     ``kind``: a ``latobs.packaging.FmuKind``. The Python runtime must accept ``data`` (the same
     checks as the pythonfmu backend), then the model's emitter writes its C data. Raises
     NativeBuildError when there is no C compiler or no C model for this runtime (see
     :func:`unavailable_reason`) or the compiler fails, PackagingError when ``fmpy validate`` does.
-    ``base`` and ``beside``: as in ``latobs.packaging.build_fmu`` (identity, files written with it)."""
+    ``base``, ``beside``, ``finish``: as in ``latobs.packaging.build_fmu``."""
     from ..packaging import COPYRIGHT, PackagingError, check_name, identity_file, install, seal_fmu
     from ..synthesis import design_file
 
@@ -220,4 +220,4 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     stamp = hashlib.sha256(compiler_version(cc))
     return install(Path(out_dir), class_name, lambda tmp: seal_fmu(
         files, class_name, md, [], tmp, native=compiled, native_sources=stamp.digest() + " ".join(CFLAGS).encode()),
-        beside)
+        beside, finish)
