@@ -208,13 +208,12 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
             if p.why:
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
-            finish = reference_finish(p.model, p.vehicle, p.backend, p.reference, plants)
             if p.design_path is None:
-                path = packaging.package_plant(p.model, p.vehicle, out, p.backend, finish=finish)
+                path = package_plant(p.model, p.vehicle, out, p.backend, plants)
             else:
                 data = _current_design(p) or solve(p.model, p.vehicle)
-                path = packaging.package_design_data(data, out, p.backend, write_design=True,
-                                                     origin=str(p.design_path), finish=finish)
+                path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
+                                           origin=str(p.design_path), plants=plants)
             print(f"built {path} ({BACKEND_LABEL[p.backend]})")
             built[p.name] = path
     return [built[p.name] for p in plans]
@@ -223,24 +222,34 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
 @dataclass(frozen=True)
 class ReferenceSpec:
     """The reference experiment an FMU carries: the first ``seconds`` of its own validation
-    ``scenario`` (with the scenario fields ``overrides``, to bring the manoeuvre into them)."""
+    ``scenario``, with the scenario fields ``overrides`` (``note`` says why) that bring the
+    manoeuvre into those seconds."""
     scenario: str
     seconds: float
-    overrides: tuple[tuple[str, float], ...] = ()
+    overrides: tuple[tuple[str, object], ...] = ()
+    note: str = ""
 
 
-_MOTORCYCLE = ReferenceSpec("motorcycle-lane-change", 2.5, (("t_rise", 0.0), ("t_first", 0.3), ("t_second", 1.4)))
-#: Each FMU's reference experiment (``latobs check``): its own validation scenario, a few seconds
+_BANK = ((0.0, 0.0), (0.5, 0.0), (0.5, 2.0), (8.0, 2.0), (12.0, 5.0), (18.0, 5.0), (18.0, -2.0), (22.0, -2.0),
+         (26.0, 0.0))
+_SECONDS = 2.0          # 401 rows at the default step of 5 ms: a few tens of kB in an FMU
+_MOTORCYCLE = ReferenceSpec("motorcycle-lane-change", _SECONDS,
+                            (("t_rise", 0.0), ("t_first", 0.2), ("pulse", 0.8), ("t_second", 1.1)),
+                            "the speed rise and both torque pulses (0.8 s each) within the first 2 s")
+#: Each FMU's reference experiment (``latobs check``): its own validation scenario, two seconds
 #: at the FMU's default step. An observer's inputs are its plant's signals in that scenario (the
 #: plant of the same backend, for the observer's vehicle; for the plant's default vehicle when the
 #: plant cannot be built for it, e.g. a vehicle without roll data); a plant's are the scenario's.
 REFERENCE_EXPERIMENTS = {
     **dict.fromkeys(("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
-                     "SideslipBankObserverTirePaper", "CarPlant"), ReferenceSpec("bank-braking", 2.5)),
-    "LateralIntervalObserver": ReferenceSpec("double-lane-change-15", 2.5),
-    "SideslipFixedOrderEstimator": ReferenceSpec("w1-steer", 2.5),
+                     "SideslipBankObserverTirePaper", "CarPlant"),
+                    ReferenceSpec("bank-braking", _SECONDS, (("bank_knots_deg", _BANK), ("t_brake", 1.0)),
+                                  "the 2 deg bank step at 0.5 s and the braking from 1 s")),
+    "LateralIntervalObserver": ReferenceSpec("double-lane-change-15", _SECONDS, (("t_start", 0.2),),
+                                             "the lane change from 0.2 s"),
+    "SideslipFixedOrderEstimator": ReferenceSpec("w1-steer", _SECONDS),
     **dict.fromkeys(("SideslipFixedOrderEstimatorScheduled", "SideslipKalmanFilter"),
-                    ReferenceSpec("double-lane-change", 2.5)),
+                    ReferenceSpec("double-lane-change", _SECONDS, (("t_start", 0.2),), "the lane change from 0.2 s")),
     "MotorcycleFaultObserver": _MOTORCYCLE, "MotorcyclePlant": _MOTORCYCLE,
 }
 
@@ -360,15 +369,44 @@ def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _Ref
             t = run.time
             inputs = {n: run.measured[n] for n in run.inputs["observer"]}
             source = f"the signals of {plant} (vehicle {veh.name}) at the communication points"
-        what = (f"scenario {spec.scenario}"
-                + "".join(f", {k} = {v:g}" for k, v in spec.overrides) + f", first {spec.seconds:g} s: inputs "
-                f"{source}; outputs this FMU's own, on them.")
+        what = (f"scenario {spec.scenario}, first {spec.seconds:g} s" + (f" ({spec.note})" if spec.note else "")
+                + f": inputs {source}; outputs this FMU's own, on them.")
         probe = reference.Experiment(spec.scenario, what, t, h, inputs, {}, host_platform() or "")
         outputs = run_host(fmu, probe)
         e = reference.Experiment(spec.scenario, what, t, h, inputs, outputs, host_platform() or "")
         return reference.files([e], fmu_name(fmu), ident)
 
     return finish
+
+
+def package_design_data(data: dict, out: Path, backend: str, vehicle=None, write_design: bool = False,
+                        origin: str | None = None, plants: _ReferencePlants | None = None) -> Path:
+    """``packaging.package_design_data`` with the FMU's reference experiment inside it (the
+    observer designed for ``vehicle``, None: its default); the plant it runs beside comes from
+    ``plants`` (default: ``out`` if current there, else built into a scratch folder)."""
+    from contextlib import nullcontext
+
+    from . import packaging
+
+    model = data.get("design", "")
+    if model not in designs.DESIGNS:
+        raise PipelineError(f"{origin or data.get('name')}: no catalogue design {model!r} (known: "
+                            f"{', '.join(designs.DESIGNS)})")
+    with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
+        finish = reference_finish(model, vehicle, backend, reference_identity(model, vehicle, backend), pl)
+        return packaging.package_design_data(data, out, backend, write_design=write_design, origin=origin,
+                                             finish=finish)
+
+
+def package_plant(name: str, vehicle, out: Path, backend: str, plants: _ReferencePlants | None = None) -> Path:
+    """``packaging.package_plant`` with the FMU's reference experiment inside it."""
+    from contextlib import nullcontext
+
+    from . import packaging
+
+    with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
+        finish = reference_finish(name, vehicle, backend, reference_identity(name, vehicle, backend), pl)
+        return packaging.package_plant(name, vehicle, out, backend, finish=finish)
 
 
 def fmu_name(path: Path) -> str:

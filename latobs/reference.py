@@ -13,7 +13,9 @@ An FMU carries, in ``extra/org.fmi-standard.fmi-ls-ref/``:
   tolerances (below);
 * ``NAME_in.csv`` and ``NAME_ref.csv``, as the Reference FMUs ship them: a header ``time,<variable
   names>``, one row per communication point, each value as the shortest text that reads back as
-  the same double (integers as integers).
+  the same double (integers as integers);
+
+and ``documentation/fmi-ls-ref.txt`` says, in words, what they are and how to re-run them.
 
 How an experiment runs (the experiments file's ``description`` says it too): fixed-step
 co-simulation with h = ``stepSize``: setupExperiment(startTime, stopTime), the inputs of row 0
@@ -55,6 +57,7 @@ LS_NAME = "org.fmi-standard.fmi-ls-ref"
 LS_DIR = f"extra/{LS_NAME}"
 MANIFEST = f"{LS_DIR}/fmi-ls-manifest.xml"
 EXPERIMENTS = "experiments.exp"
+DOCUMENTATION = "documentation/fmi-ls-ref.txt"
 LS_NS = "http://fmi-standard.org/fmi-ls-manifest"
 LS_VERSION = "1.0.0-alpha.1"
 LS_DESCRIPTION = "Layered Standard providing information on related files included in an FMU."
@@ -171,7 +174,24 @@ def files(experiments: list[Experiment], title: str, identity: str) -> dict[str,
     ET.SubElement(ann, "Identity", sha256=identity)
     out[MANIFEST] = _xml(man)
     out[f"{LS_DIR}/{EXPERIMENTS}"] = _xml(exps)
+    out[DOCUMENTATION] = _documentation(experiments, title).encode()
     return out
+
+
+def _documentation(experiments: list[Experiment], title: str) -> str:
+    """``documentation/fmi-ls-ref.txt``: what the experiments are and how to re-run them (the
+    documentation FMI-LS-REF recommends beside the related files)."""
+    lines = [f"Reference experiments of {title} ({LS_DIR}/)", "",
+             "Each experiment runs this FMU alone on recorded inputs (NAME_in.csv) and lists its outputs "
+             "(NAME_ref.csv) as certified.", f"How it runs: {RUN_RULE}.", ""]
+    for e in experiments:
+        lines += [f"{e.name}: {e.description}",
+                  f"  {len(e.time)} rows, t = {e.start:g} .. {e.stop:g} s, step {e.step:g} s; inputs "
+                  f"{', '.join(e.inputs)}; outputs {', '.join(e.outputs)}",
+                  f"  certified on {e.platform}: bit for bit there; elsewhere |y - y_ref| <= {e.relative:g} |y_ref| "
+                  f"+ {e.relative:g} max|y_ref| per output (Integer outputs exactly).", ""]
+    lines += ["Re-run them: latobs check FMU [--platform host|all|PLATFORM] (exit 0: all pass)."]
+    return "\n".join(lines) + "\n"
 
 
 # --------------------------------------------------------------------------------------------
