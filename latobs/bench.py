@@ -22,7 +22,7 @@ vary by tens of percent between runs) are what gets compared. Sections (each can
   the FMUs of ``--fmu-dir``/<backend> (built there if missing), driven by the signal bus of its
   pairing (:func:`pairings`, the demo's runs): through fmpy's ``FMU2Slave`` (set inputs, doStep,
   get outputs, as the validation harness's plain loop); in a plain C host
-  (``latobs/native/fmi2_host.c``, no Python in the loop; a pythonfmu FMU gets libpython
+  (``latobs/native/fmu_runner.c``, no Python in the loop; a pythonfmu FMU gets libpython
   preloaded); and the reference: for a pythonfmu FMU its runtime class of ``fmu_src/`` stepped
   directly in Python (the same arithmetic outside FMI), for a native FMU the C host's doStep.
 * **coupled** (``--skip-coupled``): each pairing's co-simulation by the validation harness

@@ -8,7 +8,7 @@ validate, fmutool, libcosim) and the hypothesis fuzz run on the C FMUs too (``te
 * the shared object needs only libc and libm, and no symbol version newer than GLIBC_2.17;
 * the FMU carries its sources and a build description from which a foreign tool compiles it (the
   test does, from those files alone, and the result runs identically);
-* a plain C host (``latobs/native/fmi2_host.c``) loads it with dlopen and runs a scenario: the
+* a plain C host (``latobs/native/fmu_runner.c``) loads it with dlopen and runs a scenario: the
   same outputs as fmpy, bit for bit;
 * misuse gets real fmi2Error statuses with the culprit named, the state kept: a wrong guid, calls
   out of order, unknown value references, setting an output, NaN inputs, a bad step, a parameter
