@@ -31,15 +31,22 @@ class Result:
     comparison: reference.Comparison
     rows: int
     outputs: int
+    failure: str = ""           # the run itself failed (a call's error status, the host's crash)
+
+    @property
+    def passed(self) -> bool:
+        return not self.failure and self.comparison.passed
 
     def line(self) -> str:
         c = self.comparison
-        head = f"{'PASS' if c.passed else 'FAIL'}  {self.fmu}  {self.experiment}  {self.platform}: "
+        head = f"{'PASS' if self.passed else 'FAIL'}  {self.fmu}  {self.experiment}  {self.platform}: "
+        if self.failure:
+            return head + self.failure
         if c.exact:
             return head + f"bit for bit ({self.rows} rows x {self.outputs} outputs)"
         name, t, y, ref, dev, allowed = c.worst
-        return head + (f"worst {name} at t = {t:.6g} s: {y!r} vs reference {ref!r} (deviation {dev:.3g}, allowed "
-                       f"{allowed:.3g}; {c.rule})")
+        return head + (f"{'within tolerance, ' if c.passed else ''}worst {name} at t = {t:.6g} s: {y!r} vs reference "
+                       f"{ref!r} (deviation {dev:.3g}, allowed {allowed:.3g}; {c.rule})")
 
 
 def run_host(fmu: str | Path, e: reference.Experiment) -> dict[str, np.ndarray]:
@@ -60,9 +67,13 @@ def run_host(fmu: str | Path, e: reference.Experiment) -> dict[str, np.ndarray]:
         for name, val in first.items():
             out[name][0] = val
         for k in range(n - 1):
-            f.set_inputs(row(k))
-            f.slave.doStep(float(e.time[k]), e.step)
-            for name, val in f.get_outputs().items():
+            try:
+                f.set_inputs(row(k))
+                f.slave.doStep(float(e.time[k]), e.step)
+                values = f.get_outputs()
+            except Exception as exc:                # fmpy's error status: this run failed
+                raise RuntimeError(f"at t = {e.time[k]:.6g} s: {exc}; log: {f.log_tail()}") from exc
+            for name, val in values.items():
                 out[name][k + 1] = val
         return out
     finally:
@@ -78,9 +89,13 @@ def _runner():
 
 
 def _folders(fmu: Path) -> list[str]:
+    """The platform folders under ``binaries/``, the FMI platforms first in their order."""
+    from .cbackend.toolchain import PLATFORMS
+
     with zipfile.ZipFile(fmu) as z:
-        return sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") >= 2
-                       and n.split("/")[1]})
+        held = {n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") >= 2}
+    order = list(PLATFORMS)
+    return sorted(held - {""}, key=lambda p: (order.index(p) if p in order else len(order), p))
 
 
 def _why_not(fmu: Path, platform: str, host: str | None) -> str | None:
@@ -127,9 +142,19 @@ def platforms(fmu: Path, requested: str) -> tuple[list[str], list[tuple[str, str
 
 
 def run_on(fmu: Path, e: reference.Experiment, platform: str, host: str | None) -> dict[str, np.ndarray]:
+    """The outputs of ``e`` run on ``platform``'s binary: in this process with fmpy on the host,
+    else in the cross-platform runner with the experiment's fixed step. RuntimeError saying why
+    when the run fails."""
     if platform == host:
         return run_host(fmu, e)
-    return _runner().run(fmu, platform, e.time, e.inputs, list(e.outputs), {})
+    runner = _runner()
+    try:
+        r = runner.run(fmu, platform, e.time, e.inputs, list(e.outputs), {}, step=e.step)
+    except runner.RunnerError as exc:
+        raise RuntimeError(str(exc)) from None
+    if not r.ok:
+        raise RuntimeError(r.failure())
+    return r.outputs
 
 
 def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[tuple[str, str]]]:
@@ -155,6 +180,10 @@ def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[t
     results = []
     for p in run:
         for e in experiments:
-            got = run_on(fmu, e, p, host)
-            results.append(Result(fmu.stem, e.name, p, reference.compare(e, got, p), len(e.time), len(e.outputs)))
+            try:
+                got, failure = run_on(fmu, e, p, host), ""
+            except RuntimeError as exc:         # the FMU or the host failed: this run fails
+                got, failure = {}, f"the run failed: {' '.join(str(exc).split())}"
+            results.append(Result(fmu.stem, e.name, p, reference.compare(e, got, p), len(e.time), len(e.outputs),
+                                  failure))
     return results, skipped

@@ -122,7 +122,7 @@ def _cmd_check(args) -> int:
         print(r.line())
     for platform, why in skipped:
         print(f"SKIP  {Path(args.fmu).stem}  {platform}: {why}")
-    return 0 if all(r.comparison.passed for r in results) else 1
+    return 0 if all(r.passed for r in results) else 1
 
 
 def _cmd_validate(args) -> int:

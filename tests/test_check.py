@@ -212,3 +212,42 @@ def test_an_fmu_without_current_references_is_rebuilt(built_fmus, tmp_path, caps
     assert "its reference results are missing" in capsys.readouterr().out
     assert path.read_bytes() == fmu.read_bytes()              # the same FMU as the session's, references included
     assert bare == path and pipeline.current("CarPlant", None, out, "c")
+
+
+def _with_platform(fmu: Path, platform: str, dest: Path) -> Path:
+    """``fmu`` itself when it holds ``platform``'s binary, else a copy with that binary compiled
+    from the FMU's own sources (an FMU built without that platform)."""
+    import re
+
+    from latobs.cbackend import toolchain
+
+    members = _members(fmu)
+    ident = pipeline.fmu_name(fmu)
+    lib = f"binaries/{platform}/{ident}{toolchain.SUFFIX[platform]}"
+    if lib in members:
+        return fmu
+    why = toolchain.missing([platform])
+    if why:
+        pytest.skip(f"{fmu.name} holds no {platform} binary and none can be compiled here: {why}")
+    sources = {n[len("sources/"):]: raw for n, raw in members.items() if n.startswith("sources/")}
+    c_files = re.findall(r'SourceFile name="([^"]+)"', sources["buildDescription.xml"].decode())
+    members[lib] = toolchain.compile_for(platform, sources, c_files, Path(lib).name)
+    packaging.write_zip(dest, members)
+    return dest
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("platform", ["win64", "aarch64-linux"])
+@pytest.mark.parametrize("name", [n for n in pipeline.REFERENCE_EXPERIMENTS if n in __import__("conftest").C_NAMES])
+def test_latobs_check_passes_on_the_other_platforms(name, platform, built_fmus, tmp_path):
+    """Every native FMU reproduces its references on win64 (Wine) and aarch64-linux (qemu):
+    bit for bit, or within the stated tolerance where a libm function differs in the last bit."""
+    from latobs.cbackend import runner
+
+    why = runner.available(platform)
+    if why:
+        pytest.skip(f"{platform} cannot run here: {why}")
+    fmu = _with_platform(built_fmus.c_path(name), platform, tmp_path / f"{name}.fmu")
+    code, out, err = _cli(fmu, "--platform", platform)
+    assert code == 0, out + err
+    assert out.startswith(f"PASS  {name}  ") and f"  {platform}: " in out, out
