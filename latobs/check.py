@@ -173,7 +173,7 @@ def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[t
             raise CheckError(f"{fmu}: not an FMU (no modelDescription.xml)")
     try:
         experiments = reference.read(fmu)
-    except reference.ReferenceError as exc:
+    except reference.ReferenceResultsError as exc:
         raise CheckError(str(exc)) from None
     run, skipped = platforms(fmu, platform)
     host = host_platform()

@@ -374,7 +374,7 @@ def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _Ref
         probe = reference.Experiment(spec.scenario, what, t, h, inputs, {}, host_platform() or "")
         outputs = run_host(fmu, probe)
         e = reference.Experiment(spec.scenario, what, t, h, inputs, outputs, host_platform() or "")
-        return reference.files([e], fmu_name(fmu), ident)
+        return reference.files([e], model_identifier(fmu), ident)
 
     return finish
 
@@ -409,7 +409,7 @@ def package_plant(name: str, vehicle, out: Path, backend: str, plants: _Referenc
         return packaging.package_plant(name, vehicle, out, backend, finish=finish)
 
 
-def fmu_name(path: Path) -> str:
+def model_identifier(path: Path) -> str:
     """The modelIdentifier of a (temporary) FMU file."""
     from fmpy import read_model_description
 

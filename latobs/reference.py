@@ -50,7 +50,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-__all__ = ["LS_DIR", "MANIFEST", "Experiment", "ReferenceError", "Comparison", "files", "read", "compare",
+__all__ = ["LS_DIR", "MANIFEST", "Experiment", "ReferenceResultsError", "Comparison", "files", "read", "compare",
            "identity_of"]
 
 LS_NAME = "org.fmi-standard.fmi-ls-ref"
@@ -68,7 +68,7 @@ RUN_RULE = ("fixed step h = stepSize; inputs of row 0 set in initialisation mode
             "inputs of row k are set, then doStep(t_k, h); output row 0 after initialisation, row k+1 after step k")
 
 
-class ReferenceError(ValueError):
+class ReferenceResultsError(ValueError):
     """An FMU holds no (readable) reference results: the message says which file and why."""
 
 
@@ -202,55 +202,55 @@ def _members(fmu: Path) -> dict[str, bytes]:
         with zipfile.ZipFile(fmu) as z:
             return {n: z.read(n) for n in z.namelist() if n.startswith(LS_DIR + "/")}
     except zipfile.BadZipFile as exc:
-        raise ReferenceError(f"{fmu}: not an FMU (not a zip archive: {exc})") from None
+        raise ReferenceResultsError(f"{fmu}: not an FMU (not a zip archive: {exc})") from None
 
 
 def _experiments_member(fmu: Path, members: dict[str, bytes]) -> str:
     if MANIFEST not in members:
-        raise ReferenceError(f"{fmu}: no reference results ({MANIFEST} is missing)")
+        raise ReferenceResultsError(f"{fmu}: no reference results ({MANIFEST} is missing)")
     try:
         man = ET.fromstring(members[MANIFEST])
     except ET.ParseError as exc:
-        raise ReferenceError(f"{fmu}: {MANIFEST} is not well-formed XML: {exc}") from None
+        raise ReferenceResultsError(f"{fmu}: {MANIFEST} is not well-formed XML: {exc}") from None
     if man.tag != "fmiReferences" or man.get(f"{{{LS_NS}}}fmi-ls-name") != LS_NAME:
-        raise ReferenceError(f"{fmu}: {MANIFEST} is not an {LS_NAME} manifest")
+        raise ReferenceResultsError(f"{fmu}: {MANIFEST} is not an {LS_NAME} manifest")
     for rel in man.iter("Related"):
         if (rel.get("role") or "").split("/")[0] == "experiment" and (
                 rel.get("type") == EXPERIMENTS_TYPE or (rel.get("source") or "").endswith(".exp")):
             return posixpath.normpath(posixpath.join(LS_DIR, rel.get("source") or ""))
-    raise ReferenceError(f"{fmu}: {MANIFEST} lists no experiments file (role experiment)")
+    raise ReferenceResultsError(f"{fmu}: {MANIFEST} lists no experiments file (role experiment)")
 
 
 def _read_csv(fmu: Path, member: str, raw: bytes | None) -> tuple[list[str], np.ndarray]:
     if raw is None:
-        raise ReferenceError(f"{fmu}: {member} is missing")
+        raise ReferenceResultsError(f"{fmu}: {member} is missing")
     lines = [ln for ln in raw.decode("utf-8").splitlines() if ln.strip()]
     if not lines:
-        raise ReferenceError(f"{fmu}: {member} is empty")
+        raise ReferenceResultsError(f"{fmu}: {member} is empty")
     header = [h.strip() for h in lines[0].split(",")]
     if header[0] != "time" or len(set(header)) != len(header):
-        raise ReferenceError(f"{fmu}: {member}: the header must be time,<distinct variable names>, got {lines[0]!r}")
+        raise ReferenceResultsError(f"{fmu}: {member}: the header must be time,<distinct variable names>, got {lines[0]!r}")
     try:
         rows = [[float(x) for x in ln.split(",")] for ln in lines[1:]]
     except ValueError as exc:
-        raise ReferenceError(f"{fmu}: {member}: {exc}") from None
+        raise ReferenceResultsError(f"{fmu}: {member}: {exc}") from None
     if any(len(r) != len(header) for r in rows) or not rows:
-        raise ReferenceError(f"{fmu}: {member}: every row needs {len(header)} values")
+        raise ReferenceResultsError(f"{fmu}: {member}: every row needs {len(header)} values")
     return header[1:], np.array(rows)
 
 
 def read(fmu: str | Path) -> list[Experiment]:
-    """The reference experiments an FMU carries; ReferenceError (naming the file) when it has none
+    """The reference experiments an FMU carries; ReferenceResultsError (naming the file) when it has none
     or they cannot be read."""
     fmu = Path(fmu)
     members = _members(fmu)
     exp_name = _experiments_member(fmu, members)
     if exp_name not in members:
-        raise ReferenceError(f"{fmu}: {exp_name} (listed in the manifest) is missing")
+        raise ReferenceResultsError(f"{fmu}: {exp_name} (listed in the manifest) is missing")
     try:
         root = ET.fromstring(members[exp_name])
     except ET.ParseError as exc:
-        raise ReferenceError(f"{fmu}: {exp_name} is not well-formed XML: {exc}") from None
+        raise ReferenceResultsError(f"{fmu}: {exp_name} is not well-formed XML: {exc}") from None
     base = posixpath.dirname(exp_name)
     out = []
     for x in root.findall("Experiment"):
@@ -259,22 +259,22 @@ def read(fmu: str | Path) -> list[Experiment]:
         try:
             start, stop, step = (float(attrs[a]) for a in ("startTime", "stopTime", "stepSize"))
         except (KeyError, ValueError):
-            raise ReferenceError(f"{fmu}: experiment {x.get('name')!r} needs startTime, stopTime and stepSize") \
+            raise ReferenceResultsError(f"{fmu}: experiment {x.get('name')!r} needs startTime, stopTime and stepSize") \
                 from None
         src = {}
         for tag in ("Stimuli", "References"):
             el = x.find(tag)
             src[tag] = None if el is None else posixpath.normpath(posixpath.join(base, el.get("source", "")))
         if src["References"] is None:
-            raise ReferenceError(f"{fmu}: experiment {x.get('name')!r} has no References")
+            raise ReferenceResultsError(f"{fmu}: experiment {x.get('name')!r} has no References")
         out_names, ref = _read_csv(fmu, src["References"], members.get(src["References"]))
         in_names, inp = (_read_csv(fmu, src["Stimuli"], members.get(src["Stimuli"])) if src["Stimuli"]
                          else ([], ref[:, :1]))
         if inp.shape[0] != ref.shape[0] or not np.array_equal(inp[:, 0], ref[:, 0]):
-            raise ReferenceError(f"{fmu}: experiment {x.get('name')!r}: the stimuli and references have other times")
+            raise ReferenceResultsError(f"{fmu}: experiment {x.get('name')!r}: the stimuli and references have other times")
         time = ref[:, 0]
         if not (np.all(np.diff(time) > 0) and math.isclose(time[0], start) and math.isclose(time[-1], stop)):
-            raise ReferenceError(f"{fmu}: experiment {x.get('name')!r}: times must increase from startTime to stopTime")
+            raise ReferenceResultsError(f"{fmu}: experiment {x.get('name')!r}: times must increase from startTime to stopTime")
         platform, rel, absolute = "", 0.0, {}
         for ann in x.iter("Annotation"):
             if ann.get("type") != "latobs":
@@ -292,7 +292,7 @@ def read(fmu: str | Path) -> list[Experiment]:
             outputs={n: ref[:, j + 1] for j, n in enumerate(out_names)},
             platform=platform, relative=rel, absolute=absolute))
     if not out:
-        raise ReferenceError(f"{fmu}: {exp_name} holds no experiment")
+        raise ReferenceResultsError(f"{fmu}: {exp_name} holds no experiment")
     return out
 
 
@@ -301,7 +301,7 @@ def identity_of(fmu: str | Path) -> str | None:
     try:
         members = _members(Path(fmu))
         root = ET.fromstring(members[_experiments_member(Path(fmu), members)])
-    except (OSError, KeyError, ReferenceError, ET.ParseError):
+    except (OSError, KeyError, ReferenceResultsError, ET.ParseError):
         return None
     for ann in root.findall("Annotations/Annotation"):
         ident = ann.find("Identity")

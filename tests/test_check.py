@@ -145,7 +145,7 @@ def test_check_fails_when_the_fmu_computes_with_another_gain(built_fmus, tmp_pat
     for est in (data["estimator"], data["modes"][0]["estimator"]):
         est["num"][0] *= 1 + 1e-9
     other = pipeline.package_design_data(data, tmp_path / "other", "c")
-    assert pipeline.fmu_name(other) == name
+    assert pipeline.model_identifier(other) == name
     certified = {n: raw for n, raw in _members(original).items() if n.startswith(reference.LS_DIR)}
     swapped = _rewrite(other, tmp_path / f"{name}.fmu", lambda files: {
         **{n: raw for n, raw in files.items() if not n.startswith(reference.LS_DIR)}, **certified})
@@ -222,7 +222,7 @@ def _with_platform(fmu: Path, platform: str, dest: Path) -> Path:
     from latobs.cbackend import toolchain
 
     members = _members(fmu)
-    ident = pipeline.fmu_name(fmu)
+    ident = pipeline.model_identifier(fmu)
     lib = f"binaries/{platform}/{ident}{toolchain.SUFFIX[platform]}"
     if lib in members:
         return fmu
