@@ -93,9 +93,12 @@ def _cmd_build(args) -> int:
         # `--json NAME` would otherwise take an FMU name for the file (argparse's optional value)
         raise CliError(f"--json takes a FILE ending in .json (or '-' for stdout), got {args.json!r}; "
                        "put the FMU names before --json")
+    if args.platforms is not None and args.backend == "python":
+        raise CliError("--platforms chooses the native FMUs' platforms; the pythonfmu backend (--backend python) "
+                       "ships pythonfmu's binaries")
     # with the summary on stdout, the progress lines go to stderr so that stdout is the JSON alone
     with contextlib.redirect_stdout(sys.stderr) if to_stdout else contextlib.nullcontext():
-        built = build(args.names, args.vehicle, Path(args.out), args.backend)
+        built = build(args.names, args.vehicle, Path(args.out), args.backend, platforms=args.platforms)
     if args.json is not None:
         from .atomic import locked_folder
 
@@ -182,7 +185,7 @@ def _cmd_campaign(args) -> int:
 def _cmd_demo(args) -> int:
     from .demo import demo
 
-    demo(Path(args.out), verbose=args.verbose)
+    demo(Path(args.out), verbose=args.verbose, platforms=args.platforms)
     return 0
 
 
@@ -316,6 +319,19 @@ def _vehicle(text: str) -> str:
     return text
 
 
+PLATFORMS_HELP = ("comma-separated FMI platform folders, `host`, or `all`{default}: linux64, win64, darwin64 "
+                  "(x86-64 + arm64), aarch64-linux")
+
+
+def _platforms(text: str) -> list[str]:
+    from .cbackend.toolchain import parse_platforms
+
+    try:
+        return parse_platforms(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _positive_int(text: str) -> int:
     return _int_at_least(1, text)
 
@@ -399,8 +415,11 @@ def parser() -> argparse.ArgumentParser:
                         "is locked while a build writes it (another build waits)")
     b.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
                    help="a machine-readable summary of the FMUs built (name, kind, paper, vehicle, path, "
-                        "sha256, size; gamma and certificate of observers): written atomically to FILE "
-                        "(*.json), or to stdout without FILE (or with '-'; progress goes to stderr then)")
+                        "sha256, size, backend, platforms; gamma and certificate of observers): written atomically "
+                        "to FILE (*.json), or to stdout without FILE (or with '-'; progress goes to stderr then)")
+    b.add_argument("--platforms", type=_platforms, default=None, metavar="LIST",
+                   help="the native FMUs' binaries: " + PLATFORMS_HELP.format(default=" (default)")
+                        + ". Not with --backend python (pythonfmu ships its own binaries)")
     b.set_defaults(func=_cmd_build)
     v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
     v.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")
@@ -469,6 +488,10 @@ def parser() -> argparse.ArgumentParser:
                    help="folder written: the FMUs, DIR/report/index.md and its figures (default: build)")
     m.add_argument("--verbose", action="store_true", help="print every run's tables (default: a summary, one line "
                                                           "per observer and scenario; the rest is in the report)")
+    m.add_argument("--platforms", type=_platforms, default=None, metavar="LIST",
+                   help="the native FMUs' binaries: " + PLATFORMS_HELP.format(default="")
+                        + " (default: this machine's, a quick first run; an FMU already in DIR that holds it is "
+                          "reused)")
     m.set_defaults(func=_cmd_demo)
     x = sub.add_parser("export-ssp", help="write a scenario's co-simulation as an SSP 1.0 package (.ssp)")
     x.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")

@@ -279,11 +279,13 @@ def run_title(scen: str, tag: str, params: dict, noise: bool, observers, plant_v
     return f"{scen}, {who} ({what or 'nominal plant'})"
 
 
-def demo(out: Path, verbose: bool = False) -> Path:
+def demo(out: Path, verbose: bool = False, platforms: list[str] | None = None) -> Path:
     """Build, run and report (module docstring). The console gets a summary: one line per observer
     and run with the best baseline beside it (:func:`latobs.validation.report.overview_rows`);
     everything the steps print goes to ``REPORT/demo.log`` (linked from the report), and to the
-    console too with ``verbose``."""
+    console too with ``verbose``. Native FMUs are built for ``platforms`` (FMI platform folders),
+    by default for this machine's only (a quick first run: zig builds a cross target's C runtime
+    the first time, minutes), reusing an FMU already in ``out`` that holds it."""
     import contextlib
     import io
     import sys
@@ -291,8 +293,14 @@ def demo(out: Path, verbose: bool = False) -> Path:
     from .atomic import atomic_write_text
     from .validation.report import ReportSection, overview_rows, section_from_dir, write_index
 
+    from .cbackend import toolchain
+
     t0 = time.perf_counter()
     out = Path(out)
+    host = toolchain.host_platform()
+    # default: this machine's platform; an FMU already there holding it is reused, whatever else it holds
+    build_for = platforms or ([host] if host else None)
+    host_suffices = platforms is None
     report = out / "report"
     log = io.StringIO()
     sink = _Tee(sys.stdout, log) if verbose else log
@@ -303,11 +311,12 @@ def demo(out: Path, verbose: bool = False) -> Path:
         with contextlib.redirect_stdout(sink):
             return fn(*args, **kw)
 
-    step("building every FMU (design, certificate, packaging)", build, None, None, out)
+    step(f"building every FMU (design, certificate, packaging; native FMUs for {', '.join(build_for or ['all'])})",
+         build, None, None, out, platforms=build_for, host_suffices=host_suffices)
     for scen, tag, params, noise, observers, plant_vehicle in RUNS:
         step(f"running {scen}{' [' + tag + ']' if tag else ''}", run_validation, scen, observers, report, out,
-             plant_parameters=params, noise=noise, tag=tag, plant_vehicle=plant_vehicle)
-    replays = step("replaying the MBDS record", _replays, out, report)
+             plant_parameters=params, noise=noise, tag=tag, plant_vehicle=plant_vehicle, platforms=build_for)
+    replays = step("replaying the MBDS record", _replays, out, report, build_for)
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
                 ReportSection(title="Paper 000: default and paper-faithful designs, every scenario", markdown=_headline(report)),
@@ -337,6 +346,9 @@ def demo(out: Path, verbose: bool = False) -> Path:
                                                    for r in rows]))
     print(f"report: {path} ({time.perf_counter() - t0:.0f} s); every table, figure and step's output there "
           f"({log_path.name}){'' if verbose else '; --verbose prints it all'}")
+    if platforms is None:
+        print(f"native FMUs built for this machine ({host or 'all platforms'}); for Windows, macOS and Linux "
+              f"(x86-64 and ARM) in one FMU: latobs build --platforms all --out {out}")
     return path
 
 
@@ -363,14 +375,14 @@ class _Tee:
             st.flush()
 
 
-def _replays(out: Path, report: Path) -> dict:
+def _replays(out: Path, report: Path, platforms: list[str] | None = None) -> dict:
     """Paper 001 on the real MBDS record (vehicle mbds_250lm): the default design and a wider box."""
     from . import packaging
     from .pipeline import replay
     from .validation import replay as rp
 
     runs = {}
-    m = replay("mbds", "LateralIntervalObserver", "mbds_250lm", out=report, fmu_dir=out)
+    m = replay("mbds", "LateralIntervalObserver", "mbds_250lm", out=report, fmu_dir=out, platforms=platforms)
     runs["LateralIntervalObserver_mbds_250lm, +-20 % box"] = (m, report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm")
     wide = designs.run("LateralIntervalObserver", "mbds_250lm", box=WIDE_BOX)
     wide_dir = out / "wide-box"
@@ -380,7 +392,7 @@ def _replays(out: Path, report: Path) -> dict:
                   observer="LateralIntervalObserver", vehicle="mbds_250lm", mass=wide["model"]["m"])
     runs[f"LateralIntervalObserver_mbds_250lm, +-{WIDE_BOX[0]:.0%} box"] = (m, mdir)
     for label, name, vehicle in REPLAYS_002:
-        m = replay("mbds", name, vehicle, out=report, fmu_dir=out)
+        m = replay("mbds", name, vehicle, out=report, fmu_dir=out, platforms=platforms)
         runs[f"002: {label}"] = (m, report / f"replay_mbds_250lm_100hz_{designs.artefact_name(name, vehicle)}")
     return runs
 

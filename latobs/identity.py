@@ -13,8 +13,9 @@ built now; otherwise it is rebuilt, saying what changed. An identity is a small 
   (a motorcycle's equations are derived there) and the latobs version;
 * an **FMU** (``resources/latobs-identity.json`` inside it): the parts of its design or plant
   data, the backend, the packaging code (runtime sources in Python and C, packaging, native
-  guard, this module) and the toolchain (the C compiler's version and flags, the FMI headers,
-  pythonfmu's binaries for the pythonfmu backend).
+  guard, this module), the toolchain (the C compilers' versions and flags, the FMI headers,
+  pythonfmu's binaries for the pythonfmu backend) and, for the native backend, the platforms it
+  holds binaries for.
 
 Every part is run-independent (no time, path or temporary name), so an identity can be stored
 inside a reproducible FMU, and a cache of designs and FMUs can be keyed on ``Identity.sha256``.
@@ -40,9 +41,10 @@ LABELS = {"kind": "the kind of artefact", "model": "the catalogue model", "artef
           "vehicle": "the vehicle parameters", "options": "the design options", "design_code": "the design code",
           "latobs": "the latobs version", "data": "the design (made outside the catalogue)",
           "backend": "the backend", "packaging_code": "the runtime or packaging code",
-          "toolchain": "the toolchain (C compiler, FMI headers, pythonfmu binaries)"}
+          "toolchain": "the toolchain (C compiler, FMI headers, pythonfmu binaries)",
+          "platforms": "the platforms"}
 #: parts shown with their values when they differ (short plain values, not hashes)
-_PLAIN = ("kind", "model", "artefact", "latobs", "backend")
+_PLAIN = ("kind", "model", "artefact", "latobs", "backend", "platforms")
 
 
 @dataclass(frozen=True)
@@ -126,30 +128,41 @@ def compiler_version(cc: str) -> bytes:
         return f"{cc}: {exc}".encode()
 
 
-@lru_cache(maxsize=None)
 def toolchain(backend: str) -> str:
-    """Hash of the tools whose output an FMU of ``backend`` holds: the C compiler (its
-    ``--version`` and the flags; the pythonfmu backend compiles its native guard with it), the FMI
-    headers, and for the pythonfmu backend pythonfmu's binaries."""
-    from .native_guard import CFLAGS as GUARD_FLAGS
+    """Hash of the tools whose output an FMU of ``backend`` holds: the C compilers (native
+    backend: ``latobs.cbackend.toolchain.describe``, the system compiler's and zig's versions and
+    the flags; pythonfmu backend: the compiler of its native guard and the guard's flags), the FMI
+    headers, and for the pythonfmu backend pythonfmu's binaries. Which compilers are found is
+    looked up at every call (cheap); what they are, once per process and compiler."""
+    if backend == "c":
+        from .cbackend import toolchain as c_toolchain
+
+        return _toolchain_c(c_toolchain.describe())
     from .native_guard import find_compiler
 
-    h = hashlib.sha256()
-    cc = find_compiler()
-    h.update(b"no C compiler" if cc is None else compiler_version(cc))
-    if backend == "c":
-        from .cbackend import CFLAGS, FMI_HEADERS
-        from .native_guard import fmi2_headers
+    return _toolchain_python(find_compiler())
 
-        h.update(" ".join(CFLAGS).encode())
-        for name in FMI_HEADERS:
-            h.update((fmi2_headers() / name).read_bytes())
-    else:
-        from .packaging import pythonfmu_binaries
 
-        h.update(" ".join(GUARD_FLAGS).encode())
-        for key, raw in sorted(pythonfmu_binaries().items()):
-            h.update(key.encode() + b"\0" + hashlib.sha256(raw).digest())
+@lru_cache(maxsize=None)
+def _toolchain_c(compilers: bytes) -> str:
+    from .cbackend import FMI_HEADERS
+    from .native_guard import fmi2_headers
+
+    h = hashlib.sha256(compilers)
+    for name in FMI_HEADERS:
+        h.update((fmi2_headers() / name).read_bytes())
+    return h.hexdigest()
+
+
+@lru_cache(maxsize=None)
+def _toolchain_python(cc: str | None) -> str:
+    from .native_guard import CFLAGS as GUARD_FLAGS
+    from .packaging import pythonfmu_binaries
+
+    h = hashlib.sha256(b"no C compiler" if cc is None else compiler_version(cc))
+    h.update(" ".join(GUARD_FLAGS).encode())
+    for key, raw in sorted(pythonfmu_binaries().items()):
+        h.update(key.encode() + b"\0" + hashlib.sha256(raw).digest())
     return h.hexdigest()
 
 
@@ -190,10 +203,16 @@ def of_data(data: dict) -> Identity:
     return Identity({"kind": "data", "data": hashlib.sha256(content).hexdigest(), "latobs": __version__})
 
 
-def of_fmu(base: Identity, backend: str) -> Identity:
-    """The identity of the FMU of ``backend`` ("c" or "python") built from the data of ``base``."""
-    return Identity({**base.parts, "backend": backend, "packaging_code": packaging_code(),
-                     "toolchain": toolchain(backend)})
+def of_fmu(base: Identity, backend: str, platforms: list[str] | None = None) -> Identity:
+    """The identity of the FMU of ``backend`` ("c" or "python") built from the data of ``base``;
+    a native FMU's for ``platforms`` (FMI platform folders; None: all), a pythonfmu FMU's holds
+    pythonfmu's binaries (the toolchain)."""
+    parts = {**base.parts, "backend": backend, "packaging_code": packaging_code(), "toolchain": toolchain(backend)}
+    if backend == "c":
+        from .cbackend import platforms_of
+
+        parts["platforms"] = ",".join(platforms_of(platforms))
+    return Identity(parts)
 
 
 def fmu_bytes(ident: Identity) -> bytes:

@@ -47,12 +47,12 @@ class GuardBuildError(RuntimeError):
 
 
 def find_compiler() -> str | None:
-    """The C compiler command: ``$CC`` if set and found, else ``cc``, else ``gcc``; None if none."""
-    candidates = [os.environ.get("CC", "").strip(), "cc", "gcc"]
-    for cc in candidates:
-        if cc and shutil.which(shlex.split(cc)[0]):
-            return cc
-    return None
+    """The C compiler command for this machine (``latobs.cbackend.toolchain.host_compiler``:
+    ``$CC`` if set and found, else ``cc``, else ``gcc``, else the ``zig cc`` of the ``ziglang``
+    package); None if none."""
+    from .cbackend.toolchain import host_compiler
+
+    return host_compiler()
 
 
 def fmi2_headers() -> Path:
@@ -129,7 +129,7 @@ def build_guard(model_identifier: str, guid: str, real_library: str,
     header = guard_header(model_identifier, guid, real_library, variables)
     cc = find_compiler()
     if cc is None:
-        raise GuardBuildError("no C compiler found (set CC, or install cc/gcc)")
+        raise GuardBuildError("no C compiler found (pip install ziglang, set CC, or install cc/gcc)")
     include = fmi2_headers()
     out_path = Path(out_path)
     with tempfile.TemporaryDirectory(prefix="latobs-guard-") as tmp:

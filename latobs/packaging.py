@@ -247,10 +247,12 @@ def check_name(class_name: str) -> str:
     return class_name
 
 
-def identity_file(data: dict, backend: str, base: identity.Identity | None = None) -> dict[str, bytes]:
+def identity_file(data: dict, backend: str, base: identity.Identity | None = None,
+                  platforms: list[str] | None = None) -> dict[str, bytes]:
     """The FMU member holding the identity of the FMU of ``backend`` made from ``data``, whose
-    own identity is ``base`` (default: the one ``data`` carries, else its content)."""
-    ident = identity.of_fmu(base or identity.of_data(data), backend)
+    own identity is ``base`` (default: the one ``data`` carries, else its content); a native
+    FMU's for ``platforms`` (None: all)."""
+    ident = identity.of_fmu(base or identity.of_data(data), backend, platforms)
     return {identity.FMU_MEMBER: identity.fmu_bytes(ident)}
 
 
@@ -359,43 +361,51 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
 BACKENDS = ("c", "python")
 
 
-def resolve_backend(requested: str, kind: FmuKind) -> tuple[str, str | None]:
+def resolve_backend(requested: str, kind: FmuKind, platforms: list[str] | None = None) -> tuple[str, str | None]:
     """(backend, why) for building ``kind``: ``requested`` "python" or "c" is taken as is (the C
-    build then fails with the reason if it cannot be done); "auto" is "c" where a C compiler is
-    present and the runtime has a C model, else "python" with ``why`` it fell back."""
+    build then fails with the reason if it cannot be done); "auto" is "c" where the C compilers
+    for ``platforms`` (None: all) are present and the runtime has a C model, else "python" with
+    ``why`` it fell back."""
     if requested not in (*BACKENDS, "auto"):
         raise PackagingError(f"unknown backend {requested!r}; known: auto, {', '.join(BACKENDS)}")
     if requested != "auto":
         return requested, None
     from . import cbackend
 
-    why = cbackend.unavailable_reason(kind.model_module)
+    why = cbackend.unavailable_reason(kind.model_module, platforms)
     return ("python", why) if why else ("c", None)
 
 
 def _build(kind: FmuKind, class_name: str, data: dict, out_dir: Path, backend: str,
            base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None,
-           finish: Finish | None = None) -> Path:
+           platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
     if backend == "c":
         from . import cbackend
 
         try:
-            return cbackend.build_c_fmu(kind, class_name, data, out_dir, base=base, beside=beside, finish=finish)
+            return cbackend.build_c_fmu(kind, class_name, data, out_dir, base=base, beside=beside,
+                                        platforms=platforms, finish=finish)
         except cbackend.NativeBuildError as exc:
             raise PackagingError(str(exc)) from exc
+    if platforms is not None:   # pythonfmu's binaries are pythonfmu's platforms
+        raise PackagingError(f"{class_name}: the pythonfmu backend ships pythonfmu's binaries; platforms "
+                             f"({', '.join(platforms)}) are chosen for native FMUs only")
     return build_fmu(kind, class_name, data, out_dir, base=base, beside=beside, finish=finish)
 
 
-def package_design(design_path: Path, out_dir: Path, backend: str = "python", finish: Finish | None = None) -> Path:
+def package_design(design_path: Path, out_dir: Path, backend: str = "python",
+                   platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
     """Re-certify a design file and package its observer FMU (never an uncertified one) with
-    ``backend`` "python" (pythonfmu) or "c" (native, ``latobs.cbackend``); ``finish``: see
+    ``backend`` "python" (pythonfmu) or "c" (native, ``latobs.cbackend``, for ``platforms``:
+    FMI platform folders, None: all of ``latobs.cbackend.toolchain.PLATFORMS``); ``finish``: see
     :func:`install`."""
     return package_design_data(design_file.read(design_path), out_dir, backend, origin=str(design_path),
-                               finish=finish)
+                               platforms=platforms, finish=finish)
 
 
 def package_design_data(data: dict, out_dir: Path, backend: str = "python", write_design: bool = False,
-                        origin: str | None = None, finish: Finish | None = None) -> Path:
+                        origin: str | None = None, platforms: list[str] | None = None,
+                        finish: Finish | None = None) -> Path:
     """:func:`package_design` of a design dict; with ``write_design`` its design file
     ``out_dir/NAME.design.json`` is written with the FMU, as one unit (:func:`install`)."""
     from .synthesis import certificate  # scipy: only when packaging a design
@@ -412,7 +422,7 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
                              f"(known: {', '.join(OBSERVERS)})")
     beside = {design_file.path_of(data, out_dir).name: design_file.dumps(data).encode("utf-8")} if write_design \
         else None
-    return _build(kind, data["name"], data, out_dir, backend, beside=beside, finish=finish)
+    return _build(kind, data["name"], data, out_dir, backend, beside=beside, platforms=platforms, finish=finish)
 
 
 def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, Vehicle, str, identity.Identity]:
@@ -429,6 +439,9 @@ def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, V
 
 
 def package_plant(name: str, vehicle: str | Vehicle | None, out_dir: Path, backend: str = "python",
-                  finish: Finish | None = None) -> Path:
+                  platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
+    """Package the plant ``name``'s FMU for ``vehicle`` (:func:`plant_artefact`) with ``backend``
+    (native: for ``platforms``, as :func:`package_design`; ``finish``: see :func:`install`)."""
     kind, veh, class_name, base = plant_artefact(name, vehicle)
-    return _build(kind, class_name, plant_data(veh), out_dir, backend, base=base, finish=finish)
+    return _build(kind, class_name, plant_data(veh), out_dir, backend, base=base, platforms=platforms,
+                  finish=finish)

@@ -84,6 +84,7 @@ class _Artefact:
     backend: str                # "c" or "python"
     why: str | None             # why "auto" fell back to pythonfmu
     fmu: Path
+    platforms: list[str] | None = None   # native FMUs: the platform folders it holds binaries for
     reference: str = ""         # identity of its reference results (:func:`reference_identity`)
 
     @property
@@ -102,7 +103,7 @@ class _Artefact:
 
         if not self.fmu.is_file():
             return False, f"building {self.fmu.name}"
-        expected = identity.of_fmu(self.base, self.backend)
+        expected = identity.of_fmu(self.base, self.backend, self.platforms)
         found = identity.read_fmu(self.fmu)
         if found is None or found.sha256 != expected.sha256:
             return False, f"rebuilding {self.fmu.name}: {expected.changes(found)}"
@@ -124,12 +125,16 @@ class _Artefact:
         return True, ""
 
 
-def _plan(names: list[str], vehicle, out: Path, backend: str) -> list[_Artefact]:
-    """The artefacts of a build: names checked, identities known, backends chosen. "auto" keeps
-    the backend of an FMU already in ``out`` (when it can be built here); an explicit backend
-    that differs from an existing FMU's is refused (a folder never mixes two backends' FMUs of one
-    name unnoticed): PipelineError before anything is written."""
+def _plan(names: list[str], vehicle, out: Path, backend: str, platforms: list[str] | None = None,
+          host_suffices: bool = False) -> list[_Artefact]:
+    """The artefacts of a build: names checked, identities known, backends and platforms chosen.
+    "auto" keeps the backend of an FMU already in ``out`` (when it can be built here); an explicit
+    backend that differs from an existing FMU's is refused (a folder never mixes two backends' FMUs
+    of one name unnoticed): PipelineError before anything is written. Native FMUs are planned for
+    ``platforms`` (None: all), or with ``host_suffices`` for the platforms of the native FMU already
+    in ``out`` when they include this machine's."""
     from . import cbackend, identity, packaging
+    from .cbackend import toolchain
     from .synthesis.params import load_vehicle
 
     plans, conflicts = [], []
@@ -146,11 +151,17 @@ def _plan(names: list[str], vehicle, out: Path, backend: str) -> list[_Artefact]
         if existing is not None and backend != "auto" and existing != backend:
             conflicts.append(f"{fmu} is a {BACKEND_LABEL[existing]} FMU")
         if backend == "auto" and existing is not None and (
-                existing == "python" or cbackend.unavailable_reason(kind.model_module) is None):
+                existing == "python" or cbackend.unavailable_reason(kind.model_module, platforms) is None):
             chosen, why = existing, None
         else:
-            chosen, why = packaging.resolve_backend(backend, kind)
-        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu,
+            chosen, why = packaging.resolve_backend(backend, kind, platforms)
+        planned = None
+        if chosen == "c":
+            planned = cbackend.platforms_of(platforms)
+            held = _platforms_held(fmu) if host_suffices and existing == "c" else None
+            if held and toolchain.host_platform() in held:
+                planned = held
+        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu, planned,
                                reference_identity(name, vehicle, chosen)))
     if conflicts:
         raise PipelineError(f"{'; '.join(conflicts)}: refusing to replace {'it' if len(conflicts) == 1 else 'them'} "
@@ -159,18 +170,33 @@ def _plan(names: list[str], vehicle, out: Path, backend: str) -> list[_Artefact]
     return plans
 
 
-def current(name: str, vehicle: str | None, out: Path, backend: str = "auto") -> bool:
+def _platforms_held(fmu: Path) -> list[str] | None:
+    """The platforms of a native FMU's identity (None: it carries none)."""
+    from . import identity
+
+    found = identity.read_fmu(fmu)
+    held = found.parts.get("platforms") if found is not None else None
+    return held.split(",") if isinstance(held, str) and held else None
+
+
+def current(name: str, vehicle: str | None, out: Path, backend: str = "auto",
+            platforms: list[str] | None = None, host_suffices: bool = False) -> bool:
     """Whether ``out`` holds the FMU ``name`` (catalogue design or plant) for ``vehicle`` as
     :func:`build` would make it now (and would reuse it)."""
-    return _plan([name], vehicle, Path(out), backend)[0].current(design_file_needed=False)[0]
+    plan = _plan([name], vehicle, Path(out), backend, platforms, host_suffices)[0]
+    return plan.current(design_file_needed=False)[0]
 
 
 def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "auto",
-          design_files: bool = True) -> list[Path]:
+          design_files: bool = True, platforms: list[str] | None = None, host_suffices: bool = False) -> list[Path]:
     """Design + package the named FMUs (default: every observer and plant) with ``backend``:
     "c" (native, ``latobs.cbackend``), "python" (pythonfmu) or "auto" (the backend of the FMU
     already there, else C where a C compiler is present and the runtime has a C model, else
-    pythonfmu, saying why).
+    pythonfmu, saying why). Native FMUs hold binaries for ``platforms`` (FMI platform folders of
+    ``latobs.cbackend.toolchain.PLATFORMS``; None: all); with ``host_suffices`` (the commands that
+    only run the FMUs here) a native FMU already in ``out`` holding this machine's platform is
+    reused (if otherwise current) whatever its other platforms. Platforms are refused with the
+    pythonfmu backend (its binaries are pythonfmu's).
 
     An FMU already in ``out`` is reused only when it carries the identity of what would be built
     now (``latobs.identity``: design or plant inputs, backend, code, toolchain) and, for an
@@ -189,15 +215,25 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
     if unknown:
         raise PipelineError(f"unknown FMU(s) {', '.join(unknown)}; known: "
                             f"{', '.join([*designs.DESIGNS, *packaging.PLANTS])}")
+    if platforms is not None:
+        from . import cbackend
+
+        if backend == "python":
+            raise PipelineError("platforms are chosen for native FMUs only: the pythonfmu backend ships "
+                                "pythonfmu's binaries")
+        try:
+            platforms = cbackend.platforms_of(platforms)
+        except cbackend.NativeBuildError as exc:
+            raise PipelineError(str(exc)) from exc
     out = Path(out)
-    plans = _plan(names, vehicle, out, backend)
+    plans = _plan(names, vehicle, out, backend, platforms, host_suffices)
     if all(p.current(design_files)[0] for p in plans):       # nothing to write: no lock to wait for
         for p in plans:
             print(f"reusing {p.fmu.name} (identical inputs)")
         return [p.fmu for p in plans]
     built = {}
     with locked_folder(out, "build"), _ReferencePlants(out) as plants:
-        plans = _plan(names, vehicle, out, backend)     # again: another build may have written meanwhile
+        plans = _plan(names, vehicle, out, backend, platforms, host_suffices)   # again: another build may have written
         # plants first: an observer's reference experiment runs beside the plant built here
         for p in sorted(plans, key=lambda p: p.design_path is not None):
             ok, what = p.current(design_files)
@@ -209,12 +245,13 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
             if p.design_path is None:
-                path = package_plant(p.model, p.vehicle, out, p.backend, plants)
+                path = package_plant(p.model, p.vehicle, out, p.backend, plants, platforms=p.platforms)
             else:
                 data = _current_design(p) or solve(p.model, p.vehicle)
                 path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
-                                           origin=str(p.design_path), plants=plants)
-            print(f"built {path} ({BACKEND_LABEL[p.backend]})")
+                                           origin=str(p.design_path), plants=plants, platforms=p.platforms)
+            print(f"built {path} ({BACKEND_LABEL[p.backend]}"
+                  f"{': ' + ', '.join(p.platforms) if p.platforms else ''})")
             built[p.name] = path
     return [built[p.name] for p in plans]
 
@@ -291,11 +328,13 @@ def reference_identity(model: str, vehicle, backend: str) -> str:
     from . import check, identity, packaging, reference
     from .validation import harness, scenarios
 
+    from .cbackend.toolchain import host_platform
+
     beside = reference_plant(model, vehicle)
     plant = None
-    if beside is not None:
+    if beside is not None:            # the plant's binary that runs here
         _, _, _, base = packaging.plant_artefact(*beside)
-        plant = identity.of_fmu(base, backend).sha256
+        plant = identity.of_fmu(base, backend, [host_platform()] if backend == "c" else None).sha256
     code = reference.code_hash(*(Path(m.__file__) for m in (check, reference, harness, scenarios)))
     return identity.sha256_json({"experiment": _reference_spec(model), "plant": plant, "code": code})
 
@@ -319,10 +358,12 @@ class _ReferencePlants:
     def get(self, plant: str, vehicle, backend: str) -> Path:
         import tempfile
 
+        from .cbackend.toolchain import host_platform
+
         key = (plant, str(vehicle), backend)
         if key not in self._made:
-            try:
-                p, = _plan([plant], vehicle, self.out, backend)
+            try:                          # any platforms, so long as this machine's is among them
+                p, = _plan([plant], vehicle, self.out, backend, host_suffices=True)
                 here = p.current(design_file_needed=False)[0]
             except PipelineError:         # e.g. an FMU of the other backend there
                 here = False
@@ -332,8 +373,9 @@ class _ReferencePlants:
                 if self._tmp is None:
                     self._tmp = tempfile.TemporaryDirectory(prefix="latobs-reference-")
                 print(f"{plant}: building it for the observers' reference experiments")
+                host = [host_platform()] if backend == "c" else None    # the reference runs here
                 self._made[key], = build([plant], vehicle, Path(self._tmp.name) / backend, backend,
-                                         design_files=False)
+                                         design_files=False, platforms=host)
         return self._made[key]
 
 
@@ -380,7 +422,8 @@ def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _Ref
 
 
 def package_design_data(data: dict, out: Path, backend: str, vehicle=None, write_design: bool = False,
-                        origin: str | None = None, plants: _ReferencePlants | None = None) -> Path:
+                        origin: str | None = None, plants: _ReferencePlants | None = None,
+                        platforms: list[str] | None = None) -> Path:
     """``packaging.package_design_data`` with the FMU's reference experiment inside it (the
     observer designed for ``vehicle``, None: its default); the plant it runs beside comes from
     ``plants`` (default: ``out`` if current there, else built into a scratch folder)."""
@@ -395,10 +438,11 @@ def package_design_data(data: dict, out: Path, backend: str, vehicle=None, write
     with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
         finish = reference_finish(model, vehicle, backend, reference_identity(model, vehicle, backend), pl)
         return packaging.package_design_data(data, out, backend, write_design=write_design, origin=origin,
-                                             finish=finish)
+                                             platforms=platforms, finish=finish)
 
 
-def package_plant(name: str, vehicle, out: Path, backend: str, plants: _ReferencePlants | None = None) -> Path:
+def package_plant(name: str, vehicle, out: Path, backend: str, plants: _ReferencePlants | None = None,
+                  platforms: list[str] | None = None) -> Path:
     """``packaging.package_plant`` with the FMU's reference experiment inside it."""
     from contextlib import nullcontext
 
@@ -406,7 +450,7 @@ def package_plant(name: str, vehicle, out: Path, backend: str, plants: _Referenc
 
     with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
         finish = reference_finish(name, vehicle, backend, reference_identity(name, vehicle, backend), pl)
-        return packaging.package_plant(name, vehicle, out, backend, finish=finish)
+        return packaging.package_plant(name, vehicle, out, backend, platforms=platforms, finish=finish)
 
 
 def model_identifier(path: Path) -> str:
@@ -442,6 +486,9 @@ def build_summary(fmus: list[Path]) -> dict:
             "model": catalogue design or plant name, "paper": "000".."003" | null (plants),
             "vehicle": vehicle set name, "path": str, "sha256": hex of the .fmu, "size": bytes,
             "backend": "c" (native) | "python" (pythonfmu),
+            "platforms": [FMI platform folders the FMU has binaries for: "linux64", "win64",
+                          "darwin64", "aarch64-linux" (native FMUs: those built; pythonfmu FMUs:
+                          pythonfmu's)],
             # observers (null for plants), read from NAME.design.json beside the FMU:
             "design_file": str, "design_sha256": hex of that file, "gamma": the design's "gamma",
             "model_error_gamma": its "model_error"."gamma" (paper 000's default designs) | null,
@@ -455,6 +502,7 @@ def build_summary(fmus: list[Path]) -> dict:
     import zipfile
 
     from . import __version__
+    from .cbackend.toolchain import PLATFORMS
     from .packaging import PLANTS
     from .synthesis.design_file import reproducible
 
@@ -469,8 +517,10 @@ def build_summary(fmus: list[Path]) -> dict:
             members = {n: z.read(n) for n in names
                        if n.startswith("resources/") and n.endswith((".design.json", ".plant.json"))
                        and n.count("/") == 1}
+        held = {n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") == 2}
         entry = {"name": fmu.stem, "path": str(fmu), "sha256": sha(raw), "size": len(raw),
-                 "backend": "python" if "resources/slavemodule.txt" in names else "c"}
+                 "backend": "python" if "resources/slavemodule.txt" in names else "c",
+                 "platforms": [p for p in PLATFORMS if p in held] + sorted(held - set(PLATFORMS))}
         inner = members.get(f"resources/{fmu.stem}.design.json")
         if inner is not None:
             design_path = fmu.with_name(f"{fmu.stem}.design.json")
@@ -499,16 +549,17 @@ def build_summary(fmus: list[Path]) -> dict:
                           if fmu.stem == k or fmu.stem.startswith(k + "_")), None)
             entry.update(kind="plant", model=model, paper=None, vehicle=veh.get("name"), design_file=None,
                          design_sha256=None, gamma=None, model_error_gamma=None, certificate=None)
-        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "design_file",
-                 "design_sha256", "gamma", "model_error_gamma", "certificate")
+        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "platforms",
+                 "design_file", "design_sha256", "gamma", "model_error_gamma", "certificate")
         entries.append({k: entry[k] for k in order})
     return {"schema": BUILD_SUMMARY_SCHEMA, "latobs_version": __version__, "fmus": entries}
 
 
-def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
+def ensure_fmus(names: list[str], fmu_dir: Path, platforms: list[str] | None = None) -> dict[str, Path]:
     """Paths of the named observer FMUs in ``fmu_dir``: ``NAME`` or ``NAME_V`` (V a shipped
-    vehicle set), each reused if current, else built (:func:`build` says which). An FMU of
-    another name found there (made by hand) is used as it is."""
+    vehicle set), each reused if current (a native one if it holds this machine's platform), else
+    built (:func:`build` says which; native ones for ``platforms``, None: all). An FMU of another
+    name found there (made by hand) is used as it is."""
     fmu_dir = Path(fmu_dir)
     out = {}
     for n in names:
@@ -520,25 +571,26 @@ def ensure_fmus(names: list[str], fmu_dir: Path) -> dict[str, Path]:
             print(f"using {n}.fmu as found (not a catalogue design: its inputs cannot be checked)")
             out[n] = fmu_dir / f"{n}.fmu"
             continue
-        out[n], = build([design], vehicle, fmu_dir, design_files=False)
+        out[n], = build([design], vehicle, fmu_dir, design_files=False, platforms=platforms, host_suffices=True)
     return out
 
 
-def ensure_plant(plant: str, vehicle: str | None, fmu_dir: Path) -> Path:
+def ensure_plant(plant: str, vehicle: str | None, fmu_dir: Path, platforms: list[str] | None = None) -> Path:
     """Path of the plant FMU ``plant`` for ``vehicle`` (a name or a TOML file; None: the plant's
     default vehicle) in ``fmu_dir``: ``PLANT.fmu`` for the default vehicle, ``PLANT_VEHICLE.fmu``
-    otherwise (VEHICLE the set's ``name``), reused if current, else built (:func:`build`)."""
-    path, = build([plant], vehicle, fmu_dir, design_files=False)
+    otherwise (VEHICLE the set's ``name``), reused if current, else built (as :func:`ensure_fmus`)."""
+    path, = build([plant], vehicle, fmu_dir, design_files=False, platforms=platforms, host_suffices=True)
     return path
 
 
 def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_dir: Path,
                    plant_parameters: dict | None = None, noise: bool = False, seed: int = 0,
                    tag: str = "", quiet: bool = False, plots: bool = True,
-                   plant_vehicle: str | None = None) -> dict:
+                   plant_vehicle: str | None = None, platforms: list[str] | None = None) -> dict:
     """Co-simulate plant + observers on a scenario; writes out/SCENARIO[_TAG]/metrics.json and PNGs
     (no PNGs with ``plots=False``). ``plant_vehicle``: the plant FMU's vehicle (its FMU is
-    ``PLANT_V``, built if missing); default the plant's default vehicle."""
+    ``PLANT_V``, built if missing); default the plant's default vehicle. ``platforms``: of the
+    native FMUs built when missing (:func:`ensure_fmus`)."""
     from . import packaging
     from .validation import get_scenario, validate
     from .validation.harness import NoiseSpec
@@ -548,9 +600,9 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     # default: paper 000's observers beside CarPlant, every observer of the plant otherwise
     observers = observers or [n for n, e in designs.DESIGNS.items()
                               if (e.paper == "000" if sc.plant == "CarPlant" else e.plant == sc.plant)]
-    fmus = ensure_fmus(observers, fmu_dir)
+    fmus = ensure_fmus(observers, fmu_dir, platforms)
     plant_vehicle = plant_vehicle or packaging.PLANTS[sc.plant].default_vehicle
-    plant = ensure_plant(sc.plant, plant_vehicle, fmu_dir)
+    plant = ensure_plant(sc.plant, plant_vehicle, fmu_dir, platforms)
     out_dir = out / (f"{scenario}_{tag}" if tag else scenario)
     _, metrics, paths = validate(sc, plant, {n: fmus[n] for n in observers}, out_dir, vehicle=plant_vehicle,
                                  plant_parameters=plant_parameters or {},
@@ -578,13 +630,14 @@ def observer_inputs(observer: str):
 
 def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("build"),
            fmu_dir: Path = Path("build"), split: float | None | str = "auto", plots: bool = True,
-           quiet: bool = False) -> dict:
+           quiet: bool = False, platforms: list[str] | None = None) -> dict:
     """Drive the built observer FMU ``fmu_dir/NAME[_V].fmu`` (built if missing) with the columns of
     ``csv`` (a .csv/.csv.gz path, or ``"mbds"`` for the bundled MBDS record) and score it against
     the reference columns present; writes ``out/replay_<csv stem>_<NAME[_V]>/metrics.json`` and
     PNGs (none with ``plots=False``). ``split``: a time in s scored separately before and after,
     None for none, ``"auto"`` for the file's default (425 s for the MBDS record, else none).
-    Returns the metrics (structure in :func:`latobs.validation.replay.score`)."""
+    ``platforms``: of the native FMU when built (:func:`ensure_fmus`). Returns the metrics
+    (structure in :func:`latobs.validation.replay.score`)."""
     from .synthesis.params import load_vehicle
     from .validation import replay as rp
     from .validation.report import text_table
@@ -601,7 +654,8 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
         print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
               f"{veh.name!r} (use --vehicle {rp.MBDS_VEHICLE} for the dataset's own parameters)")
     name = designs.artefact_name(observer, veh.name)   # a TOML path: named after the set's `name`
-    fmu, = build([observer], vehicle, Path(fmu_dir), design_files=False)   # reused if current, else built
+    fmu, = build([observer], vehicle, Path(fmu_dir), design_files=False, platforms=platforms,
+                 host_suffices=True)    # reused if current (and holds this machine's platform), else built
     mass = veh.parameters["m"].value if "m" in veh.parameters else None
     out_dir = Path(out) / f"replay_{rp.csv_stem(path)}_{name}"
     metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,

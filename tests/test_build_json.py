@@ -11,8 +11,8 @@ import pytest
 from latobs.cli import main
 from latobs.native_guard import find_compiler
 
-KEYS = ["name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "design_file", "design_sha256",
-        "gamma", "model_error_gamma", "certificate"]
+KEYS = ["name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "platforms", "design_file",
+        "design_sha256", "gamma", "model_error_gamma", "certificate"]
 
 
 @pytest.mark.slow
@@ -30,7 +30,11 @@ def test_build_json_file(tmp_path, capsys):
         assert e["sha256"] == hashlib.sha256(raw).hexdigest() and e["size"] == len(raw)
         with zipfile.ZipFile(e["path"]) as z:            # the default backend where a compiler is: native C
             native = "binaries/linux64/" + e["name"] + ".so" in z.namelist() and "sources/model.h" in z.namelist()
+            folders = {n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") == 2}
         assert e["backend"] == ("c" if native else "python")
+        assert sorted(e["platforms"]) == sorted(folders)
+        if native:                                        # every platform by default
+            assert e["platforms"] == ["linux64", "win64", "darwin64", "aarch64-linux"]
         assert e["backend"] == ("c" if find_compiler() else "python")
     assert (obs["name"], obs["kind"], obs["model"], obs["paper"], obs["vehicle"]) == \
         ("SideslipBankObserver", "observer", "SideslipBankObserver", "000", "sedan")

@@ -50,8 +50,9 @@ def test_errors_exit_nonzero_with_the_culprit(tmp_path, capsys, monkeypatch):
     assert not list(tmp_path.glob("*.fmu"))
     assert main(["design", "NoSuchObserver"]) == 2
     assert "unknown design" in capsys.readouterr().err
-    from latobs import cbackend
-    monkeypatch.setattr(cbackend, "find_compiler", lambda: None)     # a machine without a C compiler
+    from latobs.cbackend import toolchain
+    monkeypatch.setattr(toolchain, "system_compiler", lambda: None)     # a machine without a C compiler
+    monkeypatch.setattr(toolchain, "zig_cc", lambda: None)              # (nor zig)
     assert main(["build", "CarPlant", "--backend", "c", "--out", str(tmp_path)]) == 2
     assert "CarPlant: no C compiler found" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.fmu"))

@@ -1,7 +1,8 @@
 """The native C backend: FMI 2.0 FMUs with no Python inside (``latobs build --backend c``).
 
 For one FMU (an observer's design file or a plant's data file) the generator writes C sources and
-compiles them with the system C compiler at build time:
+compiles them at build time for every platform asked (``latobs.cbackend.toolchain``: zig cc, the
+system C compiler for this machine's platform when there is one):
 
 * ``model_data.h``: the data as ``static const`` C data, written by the model's emitter
   (``latobs/cbackend/<runtime>.py``, one per runtime, beside the Python runtime
@@ -15,9 +16,11 @@ compiles them with the system C compiler at build time:
   ``fp_contract.h`` (no FMA contraction, stated in the sources for every compiler that rebuilds
   them; included by ``model.h``) and ``glibc_compat.h`` (the old-glibc baseline, below).
 
-The FMU holds ``binaries/linux64/<id>.so`` (libc and libm only; no symbol newer than GLIBC_2.17
-on x86-64: ``glibc_compat.h`` binds the few libm functions that glibc 2.29 re-versioned to their
-old versions), ``sources/`` (every file above, the standard FMI 2.0 headers taken from fmpy, and a
+The FMU holds ``binaries/<platform>/<id><suffix>`` for each platform (default all of
+``toolchain.PLATFORMS``: ``linux64`` and ``aarch64-linux`` with libc and libm only and no symbol
+newer than GLIBC_2.17 (on x86-64 ``glibc_compat.h`` binds the few libm functions that glibc 2.29
+re-versioned to their old versions), ``win64`` with the system's universal C runtime only,
+``darwin64`` one universal x86-64 + arm64 library), ``sources/`` (every file above, the standard FMI 2.0 headers taken from fmpy, and a
 ``buildDescription.xml``; the model description lists the sources too, so a tool can compile the
 FMU for another platform), ``resources/<name>.<kind>.json`` (the design or plant file it was built
 from, for the record: the library does not read it), and the model description (both interfaces
@@ -26,18 +29,14 @@ no build id, relative source names) and its guid is derived from its content.
 """
 from __future__ import annotations
 
-import hashlib
-import os
-import shlex
-import subprocess
-import tempfile
 from importlib import import_module
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .. import __version__
 from ..fmu_src import framework as _framework
-from ..native_guard import fmi2_headers, find_compiler
+from ..native_guard import fmi2_headers
+from . import toolchain
 from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
 from .emit import CModel, c_array, c_define, c_string
 
@@ -58,12 +57,6 @@ EMITTERS = {
     "motorcycle_plant": "motorcycle_plant",
 }
 
-# Fixed flags: the library depends only on the compiler and the sources. -ffp-contract=off: no
-# fused multiply-add where the Python runtime rounds twice (platforms that have FMA); the sources
-# state it too (fp_contract.h), for the importers that rebuild them without our flags.
-CFLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-ffp-contract=off",
-          "-Wall", "-Wextra", "-s", "-Wl,--build-id=none", "-include", "glibc_compat.h")
-LIBS = ("-lm",)
 
 
 class NativeBuildError(RuntimeError):
@@ -83,10 +76,23 @@ def emitter(model_module: str):
         raise
 
 
-def unavailable_reason(model_module: str) -> str | None:
-    """Why the C backend cannot build this model here (None: it can)."""
-    if find_compiler() is None:
-        return "no C compiler found (set CC, or install cc/gcc)"
+def platforms_of(platforms: list[str] | None) -> list[str]:
+    """The platform folders to build: ``platforms`` (each a folder of ``toolchain.PLATFORMS``, in
+    that order, once) or, for None, all of them. NativeBuildError naming an unknown one."""
+    if platforms is None:
+        return list(toolchain.PLATFORMS)
+    unknown = [p for p in platforms if p not in toolchain.PLATFORMS]
+    if unknown or not platforms:
+        raise NativeBuildError(f"unknown platform {unknown[0]!r}" if unknown else "no platform given"
+                               f" (known: {', '.join(toolchain.PLATFORMS)})")
+    return [p for p in toolchain.PLATFORMS if p in platforms]
+
+
+def unavailable_reason(model_module: str, platforms: list[str] | None = None) -> str | None:
+    """Why the C backend cannot build this model here for ``platforms`` (None: all) (None: it can)."""
+    why = toolchain.missing(platforms_of(platforms))
+    if why:
+        return why
     if emitter(model_module) is None:
         return f"the {model_module} model has no C implementation"
     return None
@@ -147,25 +153,10 @@ def _build_description(model_identifier: str, sources: list[str]) -> bytes:
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="unicode") + "\n").encode()
 
 
-def _compile(cc: str, sources: dict[str, bytes], c_files: list[str], out_name: str) -> bytes:
-    """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
-    names) into a shared library; returns its bytes. NativeBuildError with the compiler's output."""
-    with tempfile.TemporaryDirectory(prefix="latobs-c-") as tmp:
-        work = Path(tmp)
-        for name, raw in sources.items():
-            (work / name).write_bytes(raw)
-        cmd = [*shlex.split(cc), *CFLAGS, "-I.", "-o", out_name, *c_files, *LIBS]
-        try:
-            proc = subprocess.run(cmd, cwd=work, env=dict(os.environ, LC_ALL="C"), capture_output=True, text=True)
-        except OSError as exc:
-            raise NativeBuildError(f"cannot run {cmd[0]}: {exc}") from exc
-        if proc.returncode != 0:
-            raise NativeBuildError(f"C build failed ({shlex.join(cmd)}, exit {proc.returncode}):\n{proc.stderr}")
-        return (work / out_name).read_bytes()
-
-
-def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None, finish=None) -> Path:
-    """Build ``out_dir/<class_name>.fmu`` with the native C backend; returns its path.
+def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None,
+                platforms: list[str] | None = None, finish=None) -> Path:
+    """Build ``out_dir/<class_name>.fmu`` with the native C backend for ``platforms`` (FMI platform
+    folders of ``toolchain.PLATFORMS``; None: all), compiled in parallel; returns its path.
 
     ``kind``: a ``latobs.packaging.FmuKind``. The Python runtime must accept ``data`` (the same
     checks as the pythonfmu backend), then the model's emitter writes its C data. Raises
@@ -177,7 +168,8 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
 
     check_name(class_name)
     data = design_file.reproducible(data)       # no wall-clock figure enters an FMU
-    why = unavailable_reason(kind.model_module)
+    platforms = platforms_of(platforms)
+    why = unavailable_reason(kind.model_module, platforms)
     if why:
         raise NativeBuildError(f"{class_name}: {why}")
     spec = import_module(f"{_framework.__package__}.models.{kind.model_module}").SPEC
@@ -187,7 +179,6 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
         cm = em.emit(data)
     except (ValueError, KeyError, TypeError) as exc:
         raise PackagingError(f"{class_name}: the {kind.name} runtime rejects its data: {exc}") from exc
-    cc = find_compiler()
     headers = fmi2_headers()
     model_c = Path(em.SOURCE).name
     sources = {name: (C_SRC / name).read_bytes() for name in (*LAYER, *SHARED_HEADERS)}
@@ -201,7 +192,7 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     data_name = f"{class_name}.{kind.data_kind}.json"
     files = {f"sources/{name}": raw for name, raw in sources.items()}
     files[f"resources/{data_name}"] = design_file.dumps(data).encode("utf-8")
-    files.update(identity_file(data, "c", base))
+    files.update(identity_file(data, "c", base, platforms))
 
     native = _framework.NativeInterfaces(cm.states, cm.n_event_indicators, c_files)
     tool = f"latobs {__version__} (native C backend)"
@@ -211,13 +202,15 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
 
     def compiled(guid: str) -> dict[str, bytes]:
         config = _config_header(spec, data, class_name, guid, cm).encode()
-        library = _compile(cc, {**sources, "fmu_config.h": config}, c_files, f"{class_name}.so")
-        return {"sources/fmu_config.h": config, f"binaries/linux64/{class_name}.so": library}
+        try:
+            libraries = toolchain.compile_platforms({p: class_name + toolchain.SUFFIX[p] for p in platforms},
+                                                    {**sources, "fmu_config.h": config}, c_files)
+        except toolchain.ToolchainError as exc:
+            raise NativeBuildError(f"{class_name}: {exc}") from exc
+        return {"sources/fmu_config.h": config,
+                **{f"binaries/{p}/{class_name}{toolchain.SUFFIX[p]}": raw for p, raw in libraries.items()}}
 
-    # the compiler's identity is part of what the binary is made from
-    from ..identity import compiler_version
-
-    stamp = hashlib.sha256(compiler_version(cc))
+    # the compilers' identity and the platforms are part of what the binaries are made from
+    stamp = toolchain.describe() + b"\0" + ",".join(platforms).encode()
     return install(Path(out_dir), class_name, lambda tmp: seal_fmu(
-        files, class_name, md, [], tmp, native=compiled, native_sources=stamp.digest() + " ".join(CFLAGS).encode()),
-        beside, finish)
+        files, class_name, md, [], tmp, native=compiled, native_sources=stamp), beside, finish)

@@ -35,6 +35,7 @@ SUFFIX = {"linux64": ".so", "aarch64-linux": ".so", "win64": ".dll", "darwin64":
 
 # Flags every target gets: C99, optimised, symbols hidden but the FMI functions' (FMI2_Export),
 # no FMA contraction (the sources say it too: fp_contract.h), no debug information.
+GLIBC_COMPAT = "glibc_compat.h"
 COMMON_FLAGS = ("-std=c99", "-O2", "-fvisibility=hidden", "-ffp-contract=off", "-Wall", "-Wextra", "-g0")
 
 
@@ -104,21 +105,22 @@ def host_compiler() -> str | None:
     return shlex.join(zig) if zig else None
 
 
-def missing(platforms: list[str]) -> str | None:
-    """Why these platforms cannot be built here (None: they can)."""
-    host = host_platform()
-    cross = [p for p in platforms if not (p == host and system_compiler())]
-    if cross and zig_cc() is None:
-        return ("building for " + ", ".join(cross) + " needs zig (pip install ziglang)")
-    if not cross and system_compiler() is None and zig_cc() is None:
-        return "no C compiler found (set CC, install cc/gcc, or pip install ziglang)"
-    return None
+def missing(platforms: list[str], zig: bool = False) -> str | None:
+    """Why these platforms cannot be built here (None: they can); ``zig``: every one by zig."""
+    need = [p for p in platforms if _uses_zig(p, zig)]
+    if not need or zig_cc() is not None:
+        return None
+    if system_compiler() is None:
+        return ("no C compiler found (pip install ziglang; or set CC, or install cc/gcc, for this machine's "
+                "platform only)")
+    return "building for " + ", ".join(need) + " needs zig (pip install ziglang)"
 
 
-def _target_flags(target: str, out_name: str, shared: bool) -> list[str]:
+def _target_flags(target: str, out_name: str, shared: bool, sources=()) -> list[str]:
     flags = list(COMMON_FLAGS)
     if "linux" in target:
-        flags += ["-fPIC", "-s", "-Wl,--build-id=none", "-include", "glibc_compat.h"]
+        # glibc_compat.h (the native backend's sources): the old-glibc baseline, included first
+        flags += ["-fPIC", "-s", "-Wl,--build-id=none"] + (["-include", GLIBC_COMPAT] if GLIBC_COMPAT in sources else [])
     elif "macos" in target:
         # the install name is the file's own name, not the scratch folder it was linked in
         flags += ["-s"] + (["-Wl,-install_name,@rpath/" + out_name] if shared else [])
@@ -136,31 +138,65 @@ def _run(cmd: list[str], cwd: Path) -> None:
         raise ToolchainError(f"C build failed ({shlex.join(cmd)}, exit {proc.returncode}):\n{proc.stderr}")
 
 
-def compile_for(platform: str, sources: dict[str, bytes], c_files: list[str], out_name: str, *,
-                shared: bool = True, libs: tuple[str, ...] = ("-lm",)) -> bytes:
-    """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
-    names) for ``platform`` (a folder of :data:`PLATFORMS`) into a shared library (``shared``) or a
-    program; returns its bytes. The host platform uses the system compiler when there is one.
-    ToolchainError with the compiler's output."""
-    if platform not in PLATFORMS:
-        raise ToolchainError(f"unknown platform {platform!r} (one of: {', '.join(PLATFORMS)})")
-    why = missing([platform])
-    if why:
-        raise ToolchainError(why)
-    slices = []
+def _uses_zig(platform: str, zig: bool) -> bool:
+    """Whether ``platform`` is compiled by zig: a cross target always; the host platform when
+    asked (``zig``), when there is no system compiler, or when it is not Linux (the flags above are
+    for a Linux gcc/clang; darwin64 needs both architectures)."""
+    return (zig or platform != host_platform() or system_compiler() is None
+            or not sys.platform.startswith("linux"))
+
+
+def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_files: list[str], out_name: str,
+                    shared: bool, libs: tuple[str, ...], zig: bool) -> bytes:
+    """One target's file, compiled in a scratch folder of its own: every source under its relative
+    name, the output under its final name (a Windows DLL records its own name)."""
+    if _uses_zig(platform, zig):
+        cmd = [*zig_cc(), "-target", target]
+    else:
+        cmd = shlex.split(system_compiler())
     with tempfile.TemporaryDirectory(prefix="latobs-c-") as tmp:
         work = Path(tmp)
         for name, raw in sources.items():
             (work / name).write_bytes(raw)
-        for k, target in enumerate(PLATFORMS[platform]):
-            name = out_name if len(PLATFORMS[platform]) == 1 else f"{k}.{out_name}"
-            if platform == host_platform() and system_compiler():
-                cmd = [*shlex.split(system_compiler()), *_target_flags(target, out_name, shared)]
-            else:
-                cmd = [*zig_cc(), "-target", target, *_target_flags(target, out_name, shared)]
-            _run([*cmd, "-I.", "-o", name, *c_files, *(libs if "windows" not in target else ())], work)
-            slices.append((target, (work / name).read_bytes()))
-    return slices[0][1] if len(slices) == 1 else fat_macho([raw for _, raw in slices])
+        _run([*cmd, *_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *c_files,
+              *(libs if "windows" not in target else ())], work)
+        return (work / out_name).read_bytes()
+
+
+def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_files: list[str], *,
+                      shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False,
+                      jobs: int | None = None) -> dict[str, bytes]:
+    """:func:`compile_for` of several platforms at once: ``out_names`` {platform: output file
+    name} -> {platform: file bytes}. Every target is compiled in a thread of its own running the
+    compiler (``jobs`` at a time, default one per core); ToolchainError naming the first failure."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    unknown = [p for p in out_names if p not in PLATFORMS]
+    if unknown:
+        raise ToolchainError(f"unknown platform {unknown[0]!r} (one of: {', '.join(PLATFORMS)})")
+    why = missing(list(out_names), zig)
+    if why:
+        raise ToolchainError(why)
+    tasks = [(p, t) for p in out_names for t in PLATFORMS[p]]
+    with ThreadPoolExecutor(max_workers=max(1, min(len(tasks), jobs or os.cpu_count() or 1))) as pool:
+        futures = {(p, t): pool.submit(_compile_target, p, t, sources, c_files, out_names[p], shared, libs, zig)
+                   for p, t in tasks}
+        thin = {task: f.result() for task, f in futures.items()}
+    out = {}
+    for p in out_names:
+        files = [thin[(p, t)] for t in PLATFORMS[p]]
+        out[p] = files[0] if len(files) == 1 else fat_macho(files)
+    return out
+
+
+def compile_for(platform: str, sources: dict[str, bytes], c_files: list[str], out_name: str, *,
+                shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False) -> bytes:
+    """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
+    names) for ``platform`` (a folder of :data:`PLATFORMS`) into a shared library (``shared``) or a
+    program named ``out_name``; returns its bytes (darwin64: one universal file of both
+    architectures). The host platform uses the system compiler when there is one, unless ``zig``.
+    ToolchainError with the compiler's output."""
+    return compile_platforms({platform: out_name}, sources, c_files, shared=shared, libs=libs, zig=zig)[platform]
 
 
 # Mach-O universal ("fat") file: a big-endian header, one record per architecture, then each
@@ -213,9 +249,75 @@ def describe() -> bytes:
     return b"\n".join(parts) + b"\n" + " ".join(COMMON_FLAGS).encode()
 
 
+def _version_line(cc: str) -> str:
+    """The first line of ``cc --version``."""
+    return (_version((*shlex.split(cc), "--version")).decode(errors="replace").strip().splitlines() or ["?"])[0]
+
+
 @lru_cache(maxsize=None)
 def _version(cmd: tuple[str, ...]) -> bytes:
     try:
         return subprocess.run(list(cmd), capture_output=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError) as exc:
         return f"{cmd[0]}: {exc}".encode()
+
+
+def prepare(platforms: list[str] | None = None) -> dict[str, float]:
+    """Have zig build and cache the C runtime of every target of ``platforms`` (default: all), for
+    shared libraries and programs, all at once: a one-line C file compiled for each. Minutes on a
+    fresh machine (once: zig keeps them in its cache folder), about a second per target after.
+    Returns the seconds each platform took. ToolchainError without zig."""
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    platforms = list(platforms or PLATFORMS)
+    if zig_cc() is None:
+        raise ToolchainError("zig not found (pip install ziglang)")
+    # (one exported symbol: zig 0.17's Mach-O linker crashes on a library that exports none)
+    src = {"one.c": b"#include <math.h>\nint main(void) { return (int)sqrt(1.0) - 1; }\n"
+                    b"__attribute__((visibility(\"default\"))) double one(double x) { return sin(x) + 1.0; }\n"}
+
+    def one(platform: str) -> float:
+        t0 = time.perf_counter()
+        for shared in (True, False):
+            compile_for(platform, src, ["one.c"], "one" + (SUFFIX[platform] if shared else ""), shared=shared,
+                        zig=True)
+        return time.perf_counter() - t0
+
+    # one thread per platform: zig itself builds a runtime's many files on every core
+    with ThreadPoolExecutor(max_workers=len(platforms)) as pool:
+        return dict(zip(platforms, pool.map(one, platforms)))
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import time
+
+    p = argparse.ArgumentParser(prog="python -m latobs.cbackend.toolchain",
+                                description="The native FMUs' C compilers (zig cc): which, and their runtimes.")
+    p.add_argument("--prepare", action="store_true",
+                   help="build and cache zig's C runtime of every target now (minutes, once per machine)")
+    p.add_argument("--platforms", default="all", help="comma-separated platform folders, host or all (default)")
+    args = p.parse_args(argv)
+    try:
+        platforms = parse_platforms(args.platforms)
+    except ValueError as exc:
+        p.error(str(exc))
+    cc = system_compiler()
+    print(f"system C compiler: {_version_line(cc) if cc else 'none'} (builds {host_platform()} when present)")
+    print(f"zig: {_version_line(shlex.join(zig_cc())) if zig_cc() else 'none (pip install ziglang)'}")
+    if args.prepare:
+        t0 = time.perf_counter()
+        try:
+            times = prepare(platforms)
+        except ToolchainError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        for platform, seconds in times.items():
+            print(f"{platform}: ready ({seconds:.1f} s)")
+        print(f"all ready in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
