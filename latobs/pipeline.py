@@ -326,9 +326,8 @@ def reference_identity(model: str, vehicle, backend: str) -> str:
     """What the reference results of ``model``'s FMU for ``vehicle`` are made from besides the FMU
     itself: the experiment, the plant FMU's identity (observers) and the code that runs them."""
     from . import check, identity, packaging, reference
-    from .validation import harness, scenarios
-
     from .cbackend.toolchain import host_platform
+    from .validation import harness, scenarios
 
     beside = reference_plant(model, vehicle)
     plant = None
