@@ -30,7 +30,7 @@ import sysconfig
 import tempfile
 import time as _time
 import zipfile
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path, PureWindowsPath
 from typing import Mapping, Sequence
@@ -87,7 +87,7 @@ class RunResult:
         if self.ok:
             return None
         s = int(self.status[-1])
-        return (f"a call returned fmi2{STATUS[s] if 0 <= s < len(STATUS) else s} at t = {self.time[-1]:.17g} s "
+        return (f"a call returned fmi2{STATUS[s] if 0 <= s < len(STATUS) else s} at t = {float(self.time[-1])!r} s "
                 f"({len(self.time)} of {self.points} communication points); log: {self.log.strip()[-2000:]}")
 
     def __getitem__(self, name: str) -> np.ndarray:
@@ -147,10 +147,7 @@ def _sources() -> dict[str, bytes]:
     from ..native_guard import fmi2_headers
 
     headers = fmi2_headers()
-    # the toolchain force-includes the FMUs' old-glibc baseline on Linux; the host is no FMU (it
-    # runs where it is built, or under qemu with the sysroot's glibc) and must set its own feature
-    # macros before any system header: an empty one
-    out = {"fmu_runner.c": SOURCE.read_bytes(), "glibc_compat.h": b"/* the FMU host needs no glibc baseline */\n"}
+    out = {"fmu_runner.c": SOURCE.read_bytes()}
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
         out[h] = (headers / h).read_bytes()
     return out
@@ -200,14 +197,24 @@ def _text(x: float) -> str:
     return repr(float(x))     # shortest round-trip digits; nan, inf, -inf as the host reads them
 
 
+#: s a Wine server stays up after the last program: consecutive runs start in ~0.2 s, not ~1.2 s
+WINE_LINGER = 10
+
+
 @contextmanager
-def _wine_prefix(env: dict[str, str]):
-    """Wine's prefix in the user cache folder; its first start (which creates it) holds a lock,
-    so that two processes never create it at once."""
+def _wine_prefix(env: dict[str, str], loader: str):
+    """Wine's environment: its own prefix in the user cache folder (its first start, which creates
+    it, holds a lock so that two processes never create it at once), no debug output, no
+    Mono/Gecko install prompts; a server that lingers :data:`WINE_LINGER` s (Debian's stops at once)."""
     prefix = cache_dir() / "wine"
     env.update(WINEPREFIX=str(prefix), WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
+    server = Path(loader).parent / "wineserver"
+    server = str(server) if server.is_file() else shutil.which("wineserver")
     ready = prefix / ".latobs-ready"
     if ready.is_file():
+        if server:     # exits at once (status 2) when this prefix's server is already up
+            subprocess.run([server, f"-p{WINE_LINGER}"], env=env, stdin=subprocess.DEVNULL,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
         yield
         return
     import fcntl
@@ -233,12 +240,12 @@ def _host_paths(platform: str):
 def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mapping[str, Sequence[float]],
             outputs: Sequence[str] | None, parameters: Mapping[str, object] | None, step: float | None,
             workdir: Path | None, timeout: float):
-    """Run the host: (stdout file text, output names, the host's stderr, seconds, exit code)."""
+    """Run the host: (its output file's text, the output names, its log, seconds)."""
     from fmpy import read_model_description
 
     fmu = Path(fmu)
-    cmd_prefix, why = _emulator(platform)
-    if cmd_prefix is None:
+    why = available(platform)
+    if why is not None:
         raise RunnerError(f"{fmu.name} on {platform}: {why}")
     if not zipfile.is_zipfile(fmu):
         raise RunnerError(f"{fmu}: not an FMU (zip archive)")
@@ -284,7 +291,6 @@ def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mappi
     out_vars = [var(n, "output") for n in out_names]
     sets = [f"{var(n, 'parameter')}={_text(float(x))}" for n, x in (parameters or {}).items()]
     exe = compile_runner(platform)
-    env = dict(os.environ)
     with tempfile.TemporaryDirectory(prefix="latobs-run-", dir=workdir) as tmp:
         tmp = Path(tmp)
         folder = tmp / "fmu"
@@ -294,31 +300,45 @@ def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mappi
         (tmp / "in.csv").write_text("time," + ",".join(var(n, "input") for n in in_names) + "\n"
                                     + "".join(",".join(map(_text, row)) + "\n" for row in table.tolist()))
         path, uri = _host_paths(platform)
-        cmd = [*cmd_prefix, str(exe), mode, path(folder / lib_name), uri(folder / "resources"), ident, md.guid,
-               path(tmp / "in.csv"), path(tmp / "out.csv"), ",".join(out_vars) or "-",
-               _text(step) if step else "-", str(preload) if preload else "-", *sets]
-        wine = _wine_prefix(env) if platform == "win64" and cmd_prefix else _nothing()
-        with wine, open(tmp / "stderr", "w+b") as err:
-            t0 = _time.perf_counter()
-            try:    # files, not pipes: wineserver outlives wine and would hold a pipe open
-                code = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=err, stderr=err, env=env,
-                                      timeout=timeout).returncode
-            except subprocess.TimeoutExpired:
-                raise RunnerError(f"{fmu.name} on {platform}: the host took longer than {timeout:g} s") from None
-            except OSError as exc:
-                raise RunnerError(f"{fmu.name} on {platform}: cannot start {cmd[0]}: {exc}") from exc
-            seconds = _time.perf_counter() - t0
-            err.seek(0)
-            log = err.read().decode("utf-8", "replace")
+        args = [mode, path(folder / lib_name), uri(folder / "resources"), ident, md.guid, path(tmp / "in.csv"),
+                path(tmp / "out.csv"), ",".join(out_vars) or "-", _text(step) if step else "-",
+                str(preload) if preload else "-", *sets]
+        code, log, seconds = execute(platform, exe, args, timeout, f"{fmu.name} on {platform}")
         if code != 0:
             raise RunnerError(f"{fmu.name} on {platform}: the FMU host failed (exit {code}): {log.strip()[-3000:]}")
         text = (tmp / "out.csv").read_text()
     return text, out_names, log, seconds
 
 
-@contextmanager
-def _nothing():
-    yield
+def execute(platform: str, program: Path, args: Sequence[str], timeout: float = 600.0,
+            what: str | None = None) -> tuple[int, str, float]:
+    """Run a ``program`` compiled for ``platform`` here (natively, Wine, qemu) with ``args`` (paths
+    as the program sees them: :func:`host_path`): (exit code, stdout and stderr, seconds).
+    RunnerError when it cannot be started or takes longer than ``timeout`` seconds."""
+    what = what or f"{Path(program).name} on {platform}"
+    prefix, why = _emulator(platform)
+    if prefix is None:
+        raise RunnerError(f"{what}: {why}")
+    env = dict(os.environ)
+    wine = _wine_prefix(env, prefix[0]) if platform == "win64" and prefix else nullcontext()
+    cmd = [*prefix, str(program), *args]
+    with wine, tempfile.TemporaryFile() as out:
+        t0 = _time.perf_counter()
+        try:    # a file, not a pipe: wineserver outlives wine and would hold a pipe open
+            code = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=out, env=env,
+                                  timeout=timeout).returncode
+        except subprocess.TimeoutExpired:
+            raise RunnerError(f"{what}: took longer than {timeout:g} s") from None
+        except OSError as exc:
+            raise RunnerError(f"{what}: cannot start {cmd[0]}: {exc}") from exc
+        seconds = _time.perf_counter() - t0
+        out.seek(0)
+        return code, out.read().decode("utf-8", "replace"), seconds
+
+
+def host_path(platform: str, path: str | os.PathLike) -> str:
+    """``path`` as a program of ``platform`` run here sees it (under Wine: ``Z:\\...``)."""
+    return _host_paths(platform)[0](Path(path))
 
 
 def run(fmu: str | os.PathLike, platform: str, time: Sequence[float], inputs: Mapping[str, Sequence[float]],

@@ -54,21 +54,11 @@ typedef struct { /* variables by type (0 Real, 1 Integer, 2 Boolean): value refs
     fmi2ValueReference vr[3][MAX_VARS];
 } Vars;
 
-typedef struct {
-    fmi2InstantiateTYPE *instantiate;
-    fmi2FreeInstanceTYPE *free_instance;
-    fmi2SetupExperimentTYPE *setup;
-    fmi2EnterInitializationModeTYPE *enter_init;
-    fmi2ExitInitializationModeTYPE *exit_init;
-    fmi2TerminateTYPE *terminate;
-    fmi2DoStepTYPE *do_step;
-    fmi2SetRealTYPE *set_real;
-    fmi2SetIntegerTYPE *set_int;
-    fmi2SetBooleanTYPE *set_bool;
-    fmi2GetRealTYPE *get_real;
-    fmi2GetIntegerTYPE *get_int;
-    fmi2GetBooleanTYPE *get_bool;
-} Api;
+#define FMI_FUNCTIONS(X)                                                                                  \
+    X(Instantiate) X(FreeInstance) X(SetupExperiment) X(EnterInitializationMode) X(ExitInitializationMode) \
+    X(Terminate) X(DoStep) X(SetReal) X(SetInteger) X(SetBoolean) X(GetReal) X(GetInteger) X(GetBoolean)
+#define DECLARE(name) fmi2##name##TYPE *name;
+typedef struct { FMI_FUNCTIONS(DECLARE) } Api;
 
 typedef struct {
     Api api;
@@ -173,9 +163,9 @@ static fmi2Status set_vars(const Api *a, fmi2Component c, const Vars *v, const d
     for (size_t k = 0; k < v->n[0]; k++) r[k] = x[v->col[0][k]];
     for (size_t k = 0; k < v->n[1]; k++) i[k] = isfinite(x[v->col[1][k]]) ? (fmi2Integer)x[v->col[1][k]] : 0;
     for (size_t k = 0; k < v->n[2]; k++) b[k] = x[v->col[2][k]] != 0.0;
-    if (v->n[0]) WORSE(s, a->set_real(c, v->vr[0], v->n[0], r));
-    if (v->n[1]) WORSE(s, a->set_int(c, v->vr[1], v->n[1], i));
-    if (v->n[2]) WORSE(s, a->set_bool(c, v->vr[2], v->n[2], b));
+    if (v->n[0]) WORSE(s, a->SetReal(c, v->vr[0], v->n[0], r));
+    if (v->n[1]) WORSE(s, a->SetInteger(c, v->vr[1], v->n[1], i));
+    if (v->n[2]) WORSE(s, a->SetBoolean(c, v->vr[2], v->n[2], b));
     return s;
 }
 
@@ -185,9 +175,9 @@ static fmi2Status get_vars(const Api *a, fmi2Component c, const Vars *v, double 
     fmi2Integer i[MAX_VARS];
     fmi2Boolean b[MAX_VARS];
     fmi2Status s = fmi2OK;
-    if (v->n[0]) WORSE(s, a->get_real(c, v->vr[0], v->n[0], r));
-    if (v->n[1]) WORSE(s, a->get_int(c, v->vr[1], v->n[1], i));
-    if (v->n[2]) WORSE(s, a->get_bool(c, v->vr[2], v->n[2], b));
+    if (v->n[0]) WORSE(s, a->GetReal(c, v->vr[0], v->n[0], r));
+    if (v->n[1]) WORSE(s, a->GetInteger(c, v->vr[1], v->n[1], i));
+    if (v->n[2]) WORSE(s, a->GetBoolean(c, v->vr[2], v->n[2], b));
     for (size_t k = 0; k < v->n[0]; k++) y[v->col[0][k]] = r[k];
     for (size_t k = 0; k < v->n[1]; k++) y[v->col[1][k]] = (double)i[k];
     for (size_t k = 0; k < v->n[2]; k++) y[v->col[2][k]] = b[k] ? 1.0 : 0.0;
@@ -197,20 +187,20 @@ static fmi2Status get_vars(const Api *a, fmi2Component c, const Vars *v, double 
 static fmi2Component start(const Run *r, fmi2Status *s)
 {
     const Api *a = &r->api;
-    fmi2Component c = a->instantiate(r->id, fmi2CoSimulation, r->guid, r->uri, &callbacks, fmi2False, fmi2True);
+    fmi2Component c = a->Instantiate(r->id, fmi2CoSimulation, r->guid, r->uri, &callbacks, fmi2False, fmi2True);
     if (c == NULL) die(1, "fmi2Instantiate returned NULL");
-    *s = a->setup(c, fmi2False, 0.0, r->rows[0], fmi2True, r->rows[(r->n - 1) * r->width]);
+    *s = a->SetupExperiment(c, fmi2False, 0.0, r->rows[0], fmi2True, r->rows[(r->n - 1) * r->width]);
     if (*s <= fmi2Warning) WORSE(*s, set_vars(a, c, &r->par, r->params));
-    if (*s <= fmi2Warning) WORSE(*s, a->enter_init(c));
+    if (*s <= fmi2Warning) WORSE(*s, a->EnterInitializationMode(c));
     if (*s <= fmi2Warning) WORSE(*s, set_vars(a, c, &r->in, r->rows));
-    if (*s <= fmi2Warning) WORSE(*s, a->exit_init(c));
+    if (*s <= fmi2Warning) WORSE(*s, a->ExitInitializationMode(c));
     return c;
 }
 
 static void stop(const Run *r, fmi2Component c, fmi2Status s)
 {
-    if (s <= fmi2Warning) r->api.terminate(c);
-    if (s < fmi2Fatal) r->api.free_instance(c);
+    if (s <= fmi2Warning) r->api.Terminate(c);
+    if (s < fmi2Fatal) r->api.FreeInstance(c);
 }
 
 static void put(FILE *f, double x)
@@ -236,7 +226,7 @@ static void run(const Run *r, FILE *f)
         fputc('\n', f);
         if (s > fmi2Warning || k + 1 == r->n) break;
         s = set_vars(a, c, &r->in, row);
-        if (s <= fmi2Warning) WORSE(s, a->do_step(c, row[0], r->step > 0 ? r->step : row[r->width] - row[0], fmi2True));
+        if (s <= fmi2Warning) WORSE(s, a->DoStep(c, row[0], r->step > 0 ? r->step : row[r->width] - row[0], fmi2True));
     }
     stop(r, c, s);
 }
@@ -261,7 +251,7 @@ static void time_steps(const Run *r, int full, size_t passes, int repeats, doubl
         double t0 = now_ns();
         for (size_t k = 0, row = 0; k < total; k++, row = (row + 1 == steps) ? 0 : row + 1) {
             if (full) WORSE(s, set_vars(a, c, &r->in, r->rows + row * r->width));
-            WORSE(s, a->do_step(c, r->rows[0] + (double)k * h, h, fmi2True));
+            WORSE(s, a->DoStep(c, r->rows[0] + (double)k * h, h, fmi2True));
             if (full) WORSE(s, get_vars(a, c, &r->out, y));
         }
         times[rep] = (now_ns() - t0) / (double)total;
@@ -273,7 +263,8 @@ static void time_steps(const Run *r, int full, size_t passes, int repeats, doubl
 
 static void bench(const Run *r, int repeats, FILE *f)
 {
-    double full[64], step[64];
+    double *full = (double *)malloc(sizeof(double) * 2 * (size_t)repeats), *step = full + repeats;
+    if (full == NULL) die(2, "out of memory");
     time_steps(r, 1, 1, 1, full); /* one pass: how many make a timing of about TIMING_NS */
     double passes = TIMING_NS / (full[0] * (double)(r->n - 1));
     size_t p = passes < 1.0 ? 1 : passes > 1e4 ? 10000 : (size_t)passes;
@@ -282,6 +273,7 @@ static void bench(const Run *r, int repeats, FILE *f)
     fprintf(f, "{\"ns_per_step_with_io\": %.6g, \"ns_per_doStep\": %.6g, \"median_ns_per_step_with_io\": %.6g, "
                "\"median_ns_per_doStep\": %.6g, \"steps_per_timing\": %lu, \"repeats\": %d}\n", full[0], step[0],
             full[repeats / 2], step[repeats / 2], (unsigned long)((r->n - 1) * p), repeats);
+    free(full);
 }
 
 static void read_csv(Run *r, const char *path)
@@ -320,7 +312,7 @@ int main(int argc, char **argv)
     static double params[MAX_VARS];
     if (argc < 11) die(2, "usage: %s run|bench=N LIBRARY URI ID GUID IN.csv OUT.csv OUTPUTS STEP PRELOAD [VAR=VALUE...]", argv[0]);
     int repeats = strncmp(argv[1], "bench=", 6) == 0 ? atoi(argv[1] + 6) : 0;
-    if (strcmp(argv[1], "run") != 0 && (repeats < 1 || repeats > 64)) die(2, "MODE: run or bench=1..64");
+    if (strcmp(argv[1], "run") != 0 && repeats < 1) die(2, "MODE: run or bench=REPEATS (REPEATS > 0)");
     r.uri = argv[3];
     r.id = argv[4];
     r.guid = argv[5];
@@ -329,9 +321,10 @@ int main(int argc, char **argv)
     snprintf(outputs, sizeof outputs, "%s", strcmp(argv[8], "-") ? argv[8] : "");
     if (outputs[0])
         for (char *tok = strtok(outputs, ","); tok; tok = strtok(NULL, ","))
-            if (!add_var(&r.out, tok, r.n_out++)) die(2, "OUTPUTS: bad variable %s", tok);
+            if (r.n_out == MAX_VARS || !add_var(&r.out, tok, r.n_out++)) die(2, "OUTPUTS: bad variable %s", tok);
     r.step = strcmp(argv[9], "-") == 0 ? 0.0 : atof(argv[9]);
     r.params = params;
+    if (argc - 11 > MAX_VARS) die(2, "more than %d VAR=VALUE", MAX_VARS);
     for (int k = 11; k < argc; k++) {
         char *eq = strchr(argv[k], '='), *end;
         if (eq == NULL || !add_var(&r.par, argv[k], (size_t)(k - 11)) || (params[k - 11] = number(eq + 1, &end), *end))
@@ -341,19 +334,8 @@ int main(int argc, char **argv)
     void *lib = load(argv[2], 0);
     if (lib == NULL) die(1, "cannot load the FMU's library %s", argv[2]);
     Api *a = &r.api;
-    sym(lib, "fmi2Instantiate", &a->instantiate);
-    sym(lib, "fmi2FreeInstance", &a->free_instance);
-    sym(lib, "fmi2SetupExperiment", &a->setup);
-    sym(lib, "fmi2EnterInitializationMode", &a->enter_init);
-    sym(lib, "fmi2ExitInitializationMode", &a->exit_init);
-    sym(lib, "fmi2Terminate", &a->terminate);
-    sym(lib, "fmi2DoStep", &a->do_step);
-    sym(lib, "fmi2SetReal", &a->set_real);
-    sym(lib, "fmi2SetInteger", &a->set_int);
-    sym(lib, "fmi2SetBoolean", &a->set_bool);
-    sym(lib, "fmi2GetReal", &a->get_real);
-    sym(lib, "fmi2GetInteger", &a->get_int);
-    sym(lib, "fmi2GetBoolean", &a->get_bool);
+#define LOAD(name) sym(lib, "fmi2" #name, &a->name);
+    FMI_FUNCTIONS(LOAD)
     FILE *f = fopen(argv[7], "w");
     if (f == NULL) die(2, "cannot write %s", argv[7]);
     if (repeats) {
