@@ -405,7 +405,8 @@ def parser() -> argparse.ArgumentParser:
                    help="a shipped vehicle set or a vehicle .toml file (default: each FMU's own); a vehicle "
                         "other than an FMU's default names it NAME_V.fmu, V the set's `name`")
     b.add_argument("--backend", choices=("auto", "c", "python"), default="auto",
-                   help="c: native FMUs (a C compiler is needed), python: pythonfmu FMUs, auto (default): the "
+                   help="c: native FMUs (compiled by zig cc, installed with latobs, and the system C compiler for this "
+                        "machine's platform when there is one), python: pythonfmu FMUs, auto (default): the "
                         "backend of the FMU already in --out, else c where possible, else python with a message. "
                         "An FMU of the other backend already in --out is not replaced (exit 2): one folder per "
                         "backend")

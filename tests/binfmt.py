@@ -166,6 +166,7 @@ CPU_X86_64, CPU_ARM64 = 0x01000007, 0x0100000C
 MH_DYLIB = 6
 LC_SYMTAB, LC_ID_DYLIB, LC_LOAD_DYLIB, LC_DYLD_INFO_ONLY = 0x2, 0xD, 0xC, 0x80000022
 LC_BUILD_VERSION, LC_VERSION_MIN_MACOSX, LC_DYLD_EXPORTS_TRIE = 0x32, 0x24, 0x80000033
+LC_CODE_SIGNATURE = 0x1D
 
 
 @dataclass
@@ -177,6 +178,7 @@ class MachOInfo:
     exports: list[str]               # the export trie's symbols (C names: without the leading '_')
     symtab_exports: list[str]        # LC_SYMTAB's external defined symbols (the same, if present)
     min_os: tuple[int, int, int] | None
+    signature: tuple[int, int] | None  # LC_CODE_SIGNATURE (offset, size) in the file, if any
 
 
 def _uleb(raw: bytes, at: int) -> tuple[int, int]:
@@ -210,7 +212,7 @@ def read_macho(raw: bytes) -> MachOInfo:
     magic, cputype, _, filetype, ncmds, _, _, _ = struct.unpack_from("<IiIIIIII", raw, 0)
     if magic != 0xFEEDFACF:
         raise ValueError("not a thin 64-bit little-endian Mach-O file")
-    at, install, dylibs, exports, symtab, min_os = 32, None, [], [], [], None
+    at, install, dylibs, exports, symtab, min_os, signature = 32, None, [], [], [], None, None
     for _ in range(ncmds):
         cmd, size = struct.unpack_from("<II", raw, at)
         if cmd in (LC_ID_DYLIB, LC_LOAD_DYLIB):
@@ -235,5 +237,37 @@ def read_macho(raw: bytes) -> MachOInfo:
         elif cmd in (LC_BUILD_VERSION, LC_VERSION_MIN_MACOSX):
             v = struct.unpack_from("<I", raw, at + (12 if cmd == LC_BUILD_VERSION else 8))[0]
             min_os = (v >> 16, (v >> 8) & 0xFF, v & 0xFF)
+        elif cmd == LC_CODE_SIGNATURE:
+            signature = struct.unpack_from("<II", raw, at + 8)
         at += size
-    return MachOInfo(cputype, filetype, install, dylibs, exports, symtab, min_os)
+    return MachOInfo(cputype, filetype, install, dylibs, exports, symtab, min_os, signature)
+
+
+def code_signature_pages(raw: bytes) -> tuple[int, list[int]]:
+    """Check a thin Mach-O file's code signature (an ad-hoc one, as Apple silicon requires of
+    every library it loads): (pages hashed, [pages whose SHA-256 differs from the code
+    directory's]). ValueError without a signature or with a code directory it cannot read."""
+    import hashlib
+
+    sig = read_macho(raw).signature
+    if sig is None:
+        raise ValueError("no LC_CODE_SIGNATURE")
+    base = sig[0]
+    magic, _, count = struct.unpack_from(">III", raw, base)
+    if magic != 0xFADE0CC0:
+        raise ValueError(f"not an embedded signature (magic {magic:#x})")
+    for k in range(count):
+        _, offset = struct.unpack_from(">II", raw, base + 12 + 8 * k)
+        cd = base + offset
+        if struct.unpack_from(">I", raw, cd)[0] != 0xFADE0C02:          # CodeDirectory
+            continue
+        hash_offset, _, _, n_code, code_limit = struct.unpack_from(">IIIII", raw, cd + 16)
+        hash_size, hash_type, _, page_log2 = struct.unpack_from(">BBBB", raw, cd + 36)
+        if hash_type != 2 or hash_size != 32:
+            raise ValueError(f"code directory hash type {hash_type} is not SHA-256")
+        page = 1 << page_log2
+        bad = [i for i in range(n_code)
+               if hashlib.sha256(raw[i * page:min((i + 1) * page, code_limit)]).digest()
+               != raw[cd + hash_offset + 32 * i: cd + hash_offset + 32 * (i + 1)]]
+        return n_code, bad
+    raise ValueError("no code directory in the signature")

@@ -9,7 +9,7 @@ with the pure-Python readers of ``binfmt.py`` (no objdump, readelf or otool need
   no msvcr*, no MinGW runtime (libgcc, libwinpthread);
 * darwin64: one universal Mach-O of exactly an x86-64 and an arm64 dylib, each exporting every
   fmi2 function, named ``@rpath/<id>.dylib`` (no scratch-folder path), needing only libSystem,
-  for macOS 10.13 and 11.0 and later;
+  for macOS 10.13 and 11.0 and later, the arm64 one ad-hoc signed (its page hashes checked);
 * linux64 and aarch64-linux: ELF shared objects needing libc and libm only, no symbol version
   newer than GLIBC_2.17, exporting the fmi2 functions only;
 * two builds give byte-identical FMUs, every platform;
@@ -131,6 +131,9 @@ def test_darwin_library_is_universal_x86_64_and_arm64_exporting_fmi2(built_fmus,
         assert set(m.exports) <= fmi2 | MACHO_LINKER_SYMBOLS, sorted(set(m.exports) - fmi2)
         if m.symtab_exports:             # the symbol table, where kept, says the same
             assert set(m.symtab_exports) == set(m.exports)
+        if cputype == binfmt.CPU_ARM64:  # Apple silicon loads signed code only: zig's ad-hoc signature, intact
+            pages, bad = binfmt.code_signature_pages(thin)
+            assert pages > 0 and bad == [], f"arm64 slice: pages {bad} do not match their signed hashes"
 
 
 @pytest.mark.slow
@@ -238,6 +241,49 @@ def test_without_a_system_compiler_zig_builds_the_same_fmus_and_the_same_numbers
     for k, v in ref.observers["obs"].items():
         assert np.array_equal(got.observers["obs"][k], v, equal_nan=True), \
             f"observer {k}: max |diff| {np.max(np.abs(got.observers['obs'][k] - v))}"
+
+
+def _zig_twin(fmu: Path, out: Path) -> Path:
+    """A copy of ``fmu`` whose linux64 library zig compiled from the FMU's own sources (as
+    buildDescription.xml lists them) instead of the system compiler: the same guid, the same code."""
+    from xml.etree import ElementTree
+
+    with zipfile.ZipFile(fmu) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    sources = {n.removeprefix("sources/"): raw for n, raw in members.items() if n.startswith("sources/")}
+    c_files = [f.get("name") for f in ElementTree.fromstring(sources["buildDescription.xml"]).iter("SourceFile")]
+    so = f"binaries/linux64/{fmu.stem}.so"
+    members[so] = toolchain.compile_for("linux64", sources, c_files, f"{fmu.stem}.so", zig=True)
+    out.mkdir(parents=True, exist_ok=True)
+    packaging.write_zip(out / fmu.name, members)
+    return out / fmu.name
+
+
+#: the scenario each plant's observers are compared on (short: the first seconds)
+COMPARED_ON = {"CarPlant": "bank-braking", "MotorcyclePlant": "motorcycle-lane-change"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in C_NAMES if n in packaging.OBSERVERS])
+def test_zig_and_the_system_compiler_give_the_same_doubles(built_fmus, name, tmp_path_factory):
+    """Every observer beside its plant, closed loop in fmpy: the linux64 libraries compiled by zig
+    (clang, glibc 2.17 stubs) and by the system compiler (gcc) give the same outputs to the bit:
+    -ffp-contract=off, no fast-math, and the same libm functions bound (glibc_compat.h)."""
+    from latobs.synthesis import designs
+    from latobs.validation import harness
+    from latobs.validation.scenarios import get_scenario
+
+    if toolchain.host_platform() != "linux64" or toolchain.system_compiler() is None or toolchain.zig_cc() is None:
+        pytest.skip("compares zig with this Linux x86-64 machine's system compiler")
+    plant = designs.DESIGNS[name].plant
+    twins = tmp_path_factory.mktemp("zig_twins")
+    sc = get_scenario(COMPARED_ON[plant], duration=3.0)
+    ref = harness.run(sc, built_fmus.c_path(plant), {"obs": built_fmus.c_path(name)}, dt=0.005)
+    got = harness.run(sc, _zig_twin(built_fmus.c_path(plant), twins),
+                      {"obs": _zig_twin(built_fmus.c_path(name), twins)}, dt=0.005)
+    for what, a, b in [*((f"plant {k}", v, got.bus[k]) for k, v in ref.bus.items()),
+                       *((f"{name} {k}", v, got.observers["obs"][k]) for k, v in ref.observers["obs"].items())]:
+        assert np.array_equal(a, b, equal_nan=True), f"{what}: max |diff| {np.max(np.abs(np.subtract(a, b)))}"
 
 
 @pytest.mark.slow

@@ -20,11 +20,12 @@ The FMU holds ``binaries/<platform>/<id><suffix>`` for each platform (default al
 ``toolchain.PLATFORMS``: ``linux64`` and ``aarch64-linux`` with libc and libm only and no symbol
 newer than GLIBC_2.17 (on x86-64 ``glibc_compat.h`` binds the few libm functions that glibc 2.29
 re-versioned to their old versions), ``win64`` with the system's universal C runtime only,
-``darwin64`` one universal x86-64 + arm64 library), ``sources/`` (every file above, the standard FMI 2.0 headers taken from fmpy, and a
-``buildDescription.xml``; the model description lists the sources too, so a tool can compile the
-FMU for another platform), ``resources/<name>.<kind>.json`` (the design or plant file it was built
-from, for the record: the library does not read it), and the model description (both interfaces
-when the model has continuous states). Like the pythonfmu backend it is reproducible (no dates,
+``darwin64`` one universal x86-64 + arm64 library), ``sources/`` (every file above, the
+standard FMI 2.0 headers taken from fmpy, and a ``buildDescription.xml``; the model description
+lists the sources too, so a tool can compile the FMU for another platform),
+``resources/<name>.<kind>.json`` (the design or plant file it was built from, for the record: the
+library does not read it), and the model description (both interfaces when the model has
+continuous states). Like the pythonfmu backend it is reproducible (no dates,
 no build id, relative source names) and its guid is derived from its content.
 """
 from __future__ import annotations
@@ -36,7 +37,6 @@ from xml.etree.ElementTree import Element, SubElement, tostring
 from .. import __version__
 from ..fmu_src import framework as _framework
 from ..native_guard import fmi2_headers
-from . import toolchain
 from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
 from .emit import CModel, c_array, c_define, c_string
 
@@ -79,6 +79,8 @@ def emitter(model_module: str):
 def platforms_of(platforms: list[str] | None) -> list[str]:
     """The platform folders to build: ``platforms`` (each a folder of ``toolchain.PLATFORMS``, in
     that order, once) or, for None, all of them. NativeBuildError naming an unknown one."""
+    from . import toolchain   # (imported when used: `python -m latobs.cbackend.toolchain` runs it as __main__)
+
     if platforms is None:
         return list(toolchain.PLATFORMS)
     unknown = [p for p in platforms if p not in toolchain.PLATFORMS]
@@ -90,6 +92,8 @@ def platforms_of(platforms: list[str] | None) -> list[str]:
 
 def unavailable_reason(model_module: str, platforms: list[str] | None = None) -> str | None:
     """Why the C backend cannot build this model here for ``platforms`` (None: all) (None: it can)."""
+    from . import toolchain
+
     why = toolchain.missing(platforms_of(platforms))
     if why:
         return why
@@ -165,6 +169,7 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     ``base``, ``beside``, ``finish``: as in ``latobs.packaging.build_fmu``."""
     from ..packaging import COPYRIGHT, PackagingError, check_name, identity_file, install, seal_fmu
     from ..synthesis import design_file
+    from . import toolchain
 
     check_name(class_name)
     data = design_file.reproducible(data)       # no wall-clock figure enters an FMU

@@ -2,9 +2,11 @@
 
 Every target is compiled by ``zig cc`` from the ``ziglang`` package (a dependency: ``pip install``
 brings a C compiler and its cross targets; zig builds each target's C runtime once, minutes, and
-keeps it in the user cache folder). The host platform is compiled with the system C compiler when
-there is one (``$CC``, ``cc``, ``gcc``: no first-build cost) and the results are the same
-(``tests/test_cross_build.py``).
+keeps it in the user cache folder; ``python -m latobs.cbackend.toolchain --prepare`` builds them
+all at once). On x86-64 Linux, linux64 is compiled with the system C compiler when there is one
+(``$CC``, ``cc``, ``gcc``: no first-build cost; once zig's runtime is built, zig is as fast); the
+outputs are the same bit for bit (``tests/test_cross_build.py``). The targets of one build are compiled in parallel, a thread per
+target running its compiler.
 
 Platform folders as FMI 2.0.4 names them: ``linux64`` (x86-64, glibc 2.17 and newer), ``win64``
 (x86-64 Windows, the system's universal C runtime only), ``darwin64`` (one universal Mach-O holding
@@ -70,7 +72,8 @@ def host_platform() -> str | None:
     """The platform folder this machine loads, or None."""
     machine = _platform.machine().lower()
     if sys.platform.startswith("linux"):
-        return {"x86_64": "linux64", "amd64": "linux64", "aarch64": "aarch64-linux", "arm64": "aarch64-linux"}.get(machine)
+        return {"x86_64": "linux64", "amd64": "linux64", "aarch64": "aarch64-linux",
+                "arm64": "aarch64-linux"}.get(machine)
     if sys.platform == "win32":
         return "win64" if machine in ("amd64", "x86_64") else None
     if sys.platform == "darwin":
@@ -120,7 +123,9 @@ def _target_flags(target: str, out_name: str, shared: bool, sources=()) -> list[
     flags = list(COMMON_FLAGS)
     if "linux" in target:
         # glibc_compat.h (the native backend's sources): the old-glibc baseline, included first
-        flags += ["-fPIC", "-s", "-Wl,--build-id=none"] + (["-include", GLIBC_COMPAT] if GLIBC_COMPAT in sources else [])
+        flags += ["-fPIC", "-s", "-Wl,--build-id=none"]
+        if GLIBC_COMPAT in sources:
+            flags += ["-include", GLIBC_COMPAT]
     elif "macos" in target:
         # the install name is the file's own name, not the scratch folder it was linked in
         flags += ["-s"] + (["-Wl,-install_name,@rpath/" + out_name] if shared else [])
@@ -140,10 +145,10 @@ def _run(cmd: list[str], cwd: Path) -> None:
 
 def _uses_zig(platform: str, zig: bool) -> bool:
     """Whether ``platform`` is compiled by zig: a cross target always; the host platform when
-    asked (``zig``), when there is no system compiler, or when it is not Linux (the flags above are
-    for a Linux gcc/clang; darwin64 needs both architectures)."""
-    return (zig or platform != host_platform() or system_compiler() is None
-            or not sys.platform.startswith("linux"))
+    asked (``zig``), when there is no system compiler, or when it is not linux64 (the system
+    compiler is used where glibc_compat.h keeps its symbols at glibc 2.17: x86-64 Linux; on
+    aarch64 it would bind the host glibc's newest versions; darwin64 needs both architectures)."""
+    return zig or platform != host_platform() or platform != "linux64" or system_compiler() is None
 
 
 def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_files: list[str], out_name: str,
@@ -194,7 +199,7 @@ def compile_for(platform: str, sources: dict[str, bytes], c_files: list[str], ou
     """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
     names) for ``platform`` (a folder of :data:`PLATFORMS`) into a shared library (``shared``) or a
     program named ``out_name``; returns its bytes (darwin64: one universal file of both
-    architectures). The host platform uses the system compiler when there is one, unless ``zig``.
+    architectures). On x86-64 Linux, linux64 uses the system compiler when there is one, unless ``zig``.
     ToolchainError with the compiler's output."""
     return compile_platforms({platform: out_name}, sources, c_files, shared=shared, libs=libs, zig=zig)[platform]
 
@@ -304,7 +309,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         p.error(str(exc))
     cc = system_compiler()
-    print(f"system C compiler: {_version_line(cc) if cc else 'none'} (builds {host_platform()} when present)")
+    host = host_platform()
+    role = "builds linux64" if host and not _uses_zig(host, False) else "zig builds every platform"
+    print(f"system C compiler: {_version_line(cc) if cc else 'none'} ({role})")
     print(f"zig: {_version_line(shlex.join(zig_cc())) if zig_cc() else 'none (pip install ziglang)'}")
     if args.prepare:
         t0 = time.perf_counter()
