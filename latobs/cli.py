@@ -117,6 +117,17 @@ def _cmd_build(args) -> int:
     return 0
 
 
+def _cmd_check(args) -> int:
+    from .check import check
+
+    results, skipped = check(args.fmu, args.platform)
+    for r in results:
+        print(r.line())
+    for platform, why in skipped:
+        print(f"SKIP  {Path(args.fmu).stem}  {platform}: {why}")
+    return 0 if all(r.passed for r in results) else 1
+
+
 def _cmd_validate(args) -> int:
     from .pipeline import run_validation
 
@@ -495,6 +506,19 @@ def parser() -> argparse.ArgumentParser:
     x.add_argument("--plant-vehicle", default=None, metavar="V", type=_vehicle,
                    help="vehicle of the plant FMU (default: the plant's default vehicle)")
     x.set_defaults(func=_cmd_export_ssp)
+    k = sub.add_parser("check", help="run an FMU's own reference experiments (inside it) and print pass/fail",
+                       description="Runs the reference experiments an FMU carries (FMI-LS-REF, "
+                                   "extra/org.fmi-standard.fmi-ls-ref) and compares its outputs with the reference "
+                                   "outputs: bit for bit on the platform that certified them, within the tolerances "
+                                   "they state elsewhere. One line per experiment and platform. Exit 0: all pass, 1: "
+                                   "any fails, 2: no such FMU, no reference results, or a platform that cannot run "
+                                   "here.")
+    k.add_argument("fmu", metavar="FMU", help="the .fmu file")
+    k.add_argument("--platform", default="host", metavar="P",
+                   help="host (default: this machine's platform folder), all (every platform folder of the FMU that "
+                        "can run here: win64 under Wine, aarch64-linux under qemu), or one platform folder (linux64, "
+                        "win64, darwin64, aarch64-linux)")
+    k.set_defaults(func=_cmd_check)
     return p
 
 
@@ -514,7 +538,8 @@ USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.synthesis.params", "VehicleParameterError"),
                ("latobs.validation.scenarios", "UnknownScenarioError"),
                ("latobs.validation.harness", "WiringError"), ("latobs.validation.harness", "CoSimulationError"),
-               ("latobs.validation.replay", "ReplayError"), ("latobs.validation.campaign", "CampaignError"))
+               ("latobs.validation.replay", "ReplayError"), ("latobs.validation.campaign", "CampaignError"),
+               ("latobs.check", "CheckError"))
 #: (module, function) whose KeyError means "unknown name" (the message names it and the known ones).
 USER_KEY_ERRORS = (("latobs.synthesis.designs", "get"), ("latobs.synthesis.designs", "parse_artefact"))
 

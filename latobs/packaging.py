@@ -260,11 +260,13 @@ def identity_file(data: dict, backend: str, base: identity.Identity | None = Non
 
 
 def install(out_dir: Path, class_name: str, seal: Callable[[Path], list[str]],
-            beside: Mapping[str, bytes] | None = None) -> Path:
+            beside: Mapping[str, bytes] | None = None, finish: Finish | None = None) -> Path:
     """Write ``out_dir/<class_name>.fmu`` and the files ``beside`` it ({file name: bytes}, e.g. its
     design file) as one unit, under the folder's lock: all to temporaries, then renamed, the FMU
     last. ``seal(tmp)`` writes the FMU to ``tmp`` and returns fmpy validate's problems (any:
-    PackagingError, nothing is written)."""
+    PackagingError, nothing is written). ``finish(tmp)``, if given, runs the sealed FMU and returns
+    members to add to it ({archive name: bytes}, e.g. its reference results): they are added
+    before the FMU takes its name (they do not enter its guid: they are made from it)."""
     out_dir = Path(out_dir)
     final = out_dir / f"{check_name(class_name)}.fmu"
     beside = dict(beside or {})
@@ -274,14 +276,34 @@ def install(out_dir: Path, class_name: str, seal: Callable[[Path], list[str]],
         problems = seal(tmps[-1])
         if problems:
             raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
+        if finish is not None:
+            add_members(tmps[-1], finish(tmps[-1]))
     return final
 
 
+#: ``finish(sealed FMU) -> {archive name: bytes}`` of :func:`install`
+Finish = Callable[[Path], Mapping[str, bytes]]
+
+
+def add_members(path: Path, extra: Mapping[str, bytes]) -> None:
+    """Rewrite the reproducible zip ``path`` (:func:`write_zip`) with the members ``extra`` added
+    (none may exist already)."""
+    if not extra:
+        return
+    with zipfile.ZipFile(path) as z:
+        files = {n: z.read(n) for n in z.namelist()}
+    clash = sorted(set(files) & set(extra))
+    if clash:
+        raise PackagingError(f"{path.name}: already holds {', '.join(clash)}")
+    write_zip(path, {**files, **extra})
+
+
 def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
-              base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None) -> Path:
+              base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None,
+              finish: Finish | None = None) -> Path:
     """Build ``out_dir/<class_name>.fmu`` from the runtime and ``data``; returns its path.
-    ``base``: the identity of ``data`` (:func:`identity_file`); ``beside``: files written with the
-    FMU as one unit (:func:`install`)."""
+    ``base``: the identity of ``data`` (:func:`identity_file`); ``beside``, ``finish``: files
+    written with the FMU as one unit, members added to it (:func:`install`)."""
     check_name(class_name)
     data = design_file.reproducible(data)       # no wall-clock figure enters an FMU
     out_dir = Path(out_dir)
@@ -340,7 +362,8 @@ def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
     files.update(datasheet.files(spec, data, class_name, data_kind=kind.data_kind, backend="python",
                                  platforms=platforms, generation_tool=tool, copyright=COPYRIGHT))
 
-    return install(out_dir, class_name, lambda tmp: seal_fmu(files, class_name, md, guard_variables, tmp), beside)
+    return install(out_dir, class_name, lambda tmp: seal_fmu(files, class_name, md, guard_variables, tmp), beside,
+                   finish)
 
 
 BACKENDS = ("c", "python")
@@ -363,32 +386,34 @@ def resolve_backend(requested: str, kind: FmuKind, platforms: list[str] | None =
 
 def _build(kind: FmuKind, class_name: str, data: dict, out_dir: Path, backend: str,
            base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None,
-           platforms: list[str] | None = None) -> Path:
+           platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
     if backend == "c":
         from . import cbackend
 
         try:
             return cbackend.build_c_fmu(kind, class_name, data, out_dir, base=base, beside=beside,
-                                        platforms=platforms)
+                                        platforms=platforms, finish=finish)
         except cbackend.NativeBuildError as exc:
             raise PackagingError(str(exc)) from exc
     if platforms is not None:   # pythonfmu's binaries are pythonfmu's platforms
         raise PackagingError(f"{class_name}: the pythonfmu backend ships pythonfmu's binaries; platforms "
                              f"({', '.join(platforms)}) are chosen for native FMUs only")
-    return build_fmu(kind, class_name, data, out_dir, base=base, beside=beside)
+    return build_fmu(kind, class_name, data, out_dir, base=base, beside=beside, finish=finish)
 
 
 def package_design(design_path: Path, out_dir: Path, backend: str = "python",
-                   platforms: list[str] | None = None) -> Path:
+                   platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
     """Re-certify a design file and package its observer FMU (never an uncertified one) with
     ``backend`` "python" (pythonfmu) or "c" (native, ``latobs.cbackend``, for ``platforms``:
-    FMI platform folders, None: all of ``latobs.cbackend.toolchain.PLATFORMS``)."""
+    FMI platform folders, None: all of ``latobs.cbackend.toolchain.PLATFORMS``); ``finish``: see
+    :func:`install`."""
     return package_design_data(design_file.read(design_path), out_dir, backend, origin=str(design_path),
-                               platforms=platforms)
+                               platforms=platforms, finish=finish)
 
 
 def package_design_data(data: dict, out_dir: Path, backend: str = "python", write_design: bool = False,
-                        origin: str | None = None, platforms: list[str] | None = None) -> Path:
+                        origin: str | None = None, platforms: list[str] | None = None,
+                        finish: Finish | None = None) -> Path:
     """:func:`package_design` of a design dict; with ``write_design`` its design file
     ``out_dir/NAME.design.json`` is written with the FMU, as one unit (:func:`install`)."""
     from .synthesis import certificate  # scipy: only when packaging a design
@@ -405,7 +430,7 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
                              f"(known: {', '.join(OBSERVERS)})")
     beside = {design_file.path_of(data, out_dir).name: design_file.dumps(data).encode("utf-8")} if write_design \
         else None
-    return _build(kind, data["name"], data, out_dir, backend, beside=beside, platforms=platforms)
+    return _build(kind, data["name"], data, out_dir, backend, beside=beside, platforms=platforms, finish=finish)
 
 
 def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, Vehicle, str, identity.Identity]:
@@ -422,8 +447,9 @@ def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, V
 
 
 def package_plant(name: str, vehicle: str | Vehicle | None, out_dir: Path, backend: str = "python",
-                  platforms: list[str] | None = None) -> Path:
+                  platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
     """Package the plant ``name``'s FMU for ``vehicle`` (:func:`plant_artefact`) with ``backend``
-    (native: for ``platforms``, as :func:`package_design`)."""
+    (native: for ``platforms``, as :func:`package_design`; ``finish``: see :func:`install`)."""
     kind, veh, class_name, base = plant_artefact(name, vehicle)
-    return _build(kind, class_name, plant_data(veh), out_dir, backend, base=base, platforms=platforms)
+    return _build(kind, class_name, plant_data(veh), out_dir, backend, base=base, platforms=platforms,
+                  finish=finish)

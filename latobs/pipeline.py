@@ -85,6 +85,7 @@ class _Artefact:
     why: str | None             # why "auto" fell back to pythonfmu
     fmu: Path
     platforms: list[str] | None = None   # native FMUs: the platform folders it holds binaries for
+    reference: str = ""         # identity of its reference results (:func:`reference_identity`)
 
     @property
     def design_path(self) -> Path | None:
@@ -106,6 +107,11 @@ class _Artefact:
         found = identity.read_fmu(self.fmu)
         if found is None or found.sha256 != expected.sha256:
             return False, f"rebuilding {self.fmu.name}: {expected.changes(found)}"
+        from . import reference
+
+        if reference.identity_of(self.fmu) != self.reference:
+            return False, (f"rebuilding {self.fmu.name}: its reference results are missing or were made from another "
+                           "plant, scenario or code")
         if self.design_path is not None and (design_file_needed or self.design_path.exists()):
             try:
                 with zipfile.ZipFile(self.fmu) as z:
@@ -155,7 +161,8 @@ def _plan(names: list[str], vehicle, out: Path, backend: str, platforms: list[st
             held = _platforms_held(fmu) if host_suffices and existing == "c" else None
             if held and toolchain.host_platform() in held:
                 planned = held
-        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu, planned))
+        plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu, planned,
+                               reference_identity(name, vehicle, chosen)))
     if conflicts:
         raise PipelineError(f"{'; '.join(conflicts)}: refusing to replace {'it' if len(conflicts) == 1 else 'them'} "
                             f"with {BACKEND_LABEL[backend]} FMUs of the same name; build into another --out "
@@ -224,28 +231,232 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
         for p in plans:
             print(f"reusing {p.fmu.name} (identical inputs)")
         return [p.fmu for p in plans]
-    built = []
-    with locked_folder(out, "build"):
+    built = {}
+    with locked_folder(out, "build"), _ReferencePlants(out) as plants:
         plans = _plan(names, vehicle, out, backend, platforms, host_suffices)   # again: another build may have written
-        for p in plans:
+        # plants first: an observer's reference experiment runs beside the plant built here
+        for p in sorted(plans, key=lambda p: p.design_path is not None):
             ok, what = p.current(design_files)
             if ok:
                 print(f"reusing {p.fmu.name} (identical inputs)")
-                built.append(p.fmu)
+                built[p.name] = p.fmu
                 continue
             if p.why:
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
             if p.design_path is None:
-                path = packaging.package_plant(p.model, p.vehicle, out, p.backend, platforms=p.platforms)
+                path = package_plant(p.model, p.vehicle, out, p.backend, plants, platforms=p.platforms)
             else:
                 data = _current_design(p) or solve(p.model, p.vehicle)
-                path = packaging.package_design_data(data, out, p.backend, write_design=True,
-                                                     origin=str(p.design_path), platforms=p.platforms)
+                path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
+                                           origin=str(p.design_path), plants=plants, platforms=p.platforms)
             print(f"built {path} ({BACKEND_LABEL[p.backend]}"
                   f"{': ' + ', '.join(p.platforms) if p.platforms else ''})")
-            built.append(path)
-    return built
+            built[p.name] = path
+    return [built[p.name] for p in plans]
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    """The reference experiment an FMU carries: the first ``seconds`` of its own validation
+    ``scenario``, with the scenario fields ``overrides`` (``note`` says why) that bring the
+    manoeuvre into those seconds."""
+    scenario: str
+    seconds: float
+    overrides: tuple[tuple[str, object], ...] = ()
+    note: str = ""
+
+
+_BANK = ((0.0, 0.0), (0.5, 0.0), (0.5, 2.0), (8.0, 2.0), (12.0, 5.0), (18.0, 5.0), (18.0, -2.0), (22.0, -2.0),
+         (26.0, 0.0))
+_SECONDS = 2.0          # 401 rows at the default step of 5 ms: a few tens of kB in an FMU
+_MOTORCYCLE = ReferenceSpec("motorcycle-lane-change", _SECONDS,
+                            (("t_rise", 0.0), ("t_first", 0.2), ("pulse", 0.8), ("t_second", 1.1)),
+                            "the speed rise and both torque pulses (0.8 s each) within the first 2 s")
+#: Each FMU's reference experiment (``latobs check``): its own validation scenario, two seconds
+#: at the FMU's default step. An observer's inputs are its plant's signals in that scenario (the
+#: plant of the same backend, for the observer's vehicle; for the plant's default vehicle when the
+#: plant cannot be built for it, e.g. a vehicle without roll data); a plant's are the scenario's.
+REFERENCE_EXPERIMENTS = {
+    **dict.fromkeys(("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
+                     "SideslipBankObserverTirePaper", "CarPlant"),
+                    ReferenceSpec("bank-braking", _SECONDS, (("bank_knots_deg", _BANK), ("t_brake", 1.0)),
+                                  "the 2 deg bank step at 0.5 s and the braking from 1 s")),
+    "LateralIntervalObserver": ReferenceSpec("double-lane-change-15", _SECONDS, (("t_start", 0.2),),
+                                             "the lane change from 0.2 s"),
+    "SideslipFixedOrderEstimator": ReferenceSpec("w1-steer", _SECONDS),
+    **dict.fromkeys(("SideslipFixedOrderEstimatorScheduled", "SideslipKalmanFilter"),
+                    ReferenceSpec("double-lane-change", _SECONDS, (("t_start", 0.2),), "the lane change from 0.2 s")),
+    "MotorcycleFaultObserver": _MOTORCYCLE, "MotorcyclePlant": _MOTORCYCLE,
+}
+
+
+def _reference_spec(model: str) -> ReferenceSpec:
+    spec = REFERENCE_EXPERIMENTS.get(model)
+    if spec is None:
+        raise PipelineError(f"{model}: no reference experiment (latobs.pipeline.REFERENCE_EXPERIMENTS)")
+    return spec
+
+
+def reference_plant(model: str, vehicle) -> tuple[str, object] | None:
+    """(plant, its vehicle as given to :func:`build`) beside which the observer ``model`` for
+    ``vehicle`` (None: its default) runs its reference experiment; None for a plant."""
+    from importlib import import_module
+
+    from . import fmu_src, packaging
+    from .synthesis.params import load_vehicle
+
+    if model not in designs.DESIGNS:
+        return None
+    plant = designs.DESIGNS[model].plant
+    kind = packaging.PLANTS[plant]
+    given = vehicle or designs.DESIGNS[model].default_vehicle
+    veh = load_vehicle(given)
+    if veh.name == kind.default_vehicle:
+        return plant, None
+    spec = import_module(f"{fmu_src.__name__}.models.{kind.model_module}").SPEC
+    try:
+        spec.runtime(packaging.plant_data(veh), {})
+    except (ValueError, KeyError, TypeError):
+        return plant, None            # e.g. a vehicle without the plant's roll data
+    return plant, given
+
+
+def reference_identity(model: str, vehicle, backend: str) -> str:
+    """What the reference results of ``model``'s FMU for ``vehicle`` are made from besides the FMU
+    itself: the experiment, the plant FMU's identity (observers) and the code that runs them."""
+    from . import check, identity, packaging, reference
+    from .cbackend.toolchain import host_platform
+    from .validation import harness, scenarios
+
+    beside = reference_plant(model, vehicle)
+    plant = None
+    if beside is not None:            # the plant's binary that runs here
+        _, _, _, base = packaging.plant_artefact(*beside)
+        plant = identity.of_fmu(base, backend, [host_platform()] if backend == "c" else None).sha256
+    code = reference.code_hash(*(Path(m.__file__) for m in (check, reference, harness, scenarios)))
+    return identity.sha256_json({"experiment": _reference_spec(model), "plant": plant, "code": code})
+
+
+class _ReferencePlants:
+    """The plant FMUs of one build's reference runs: the one in ``out`` when it is current, else
+    built once into a scratch folder (removed at the end)."""
+
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self._tmp = None
+        self._made: dict[tuple, Path] = {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def get(self, plant: str, vehicle, backend: str) -> Path:
+        import tempfile
+
+        from .cbackend.toolchain import host_platform
+
+        key = (plant, str(vehicle), backend)
+        if key not in self._made:
+            try:                          # any platforms, so long as this machine's is among them
+                p, = _plan([plant], vehicle, self.out, backend, host_suffices=True)
+                here = p.current(design_file_needed=False)[0]
+            except PipelineError:         # e.g. an FMU of the other backend there
+                here = False
+            if here:
+                self._made[key] = p.fmu
+            else:
+                if self._tmp is None:
+                    self._tmp = tempfile.TemporaryDirectory(prefix="latobs-reference-")
+                print(f"{plant}: building it for the observers' reference experiments")
+                host = [host_platform()] if backend == "c" else None    # the reference runs here
+                self._made[key], = build([plant], vehicle, Path(self._tmp.name) / backend, backend,
+                                         design_files=False, platforms=host)
+        return self._made[key]
+
+
+def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _ReferencePlants):
+    """``finish`` of ``packaging.install`` for ``model``'s FMU: runs the sealed FMU on its
+    reference experiment (:data:`REFERENCE_EXPERIMENTS`) and returns its FMI-LS-REF members."""
+
+    def finish(fmu: Path) -> dict[str, bytes]:
+        from fmpy import read_model_description
+
+        from . import packaging, reference
+        from .cbackend.toolchain import host_platform
+        from .check import run_host
+        from .synthesis.params import load_vehicle
+        from .validation import get_scenario
+        from .validation.harness import run as cosimulate
+
+        spec = _reference_spec(model)
+        h = float(read_model_description(str(fmu)).defaultExperiment.stepSize)
+        sc = get_scenario(spec.scenario, duration=spec.seconds, **dict(spec.overrides))
+        beside = reference_plant(model, vehicle)
+        if beside is None:                # a plant: the scenario's driver inputs
+            veh = load_vehicle(vehicle or packaging.PLANTS[model].default_vehicle)
+            t = sc.time_grid(h)
+            signals = sc.sampled(t, veh)
+            names = [v.name for v in read_model_description(str(fmu)).modelVariables if v.causality == "input"]
+            inputs = {n: signals[n] for n in names if n in signals}
+            source = f"the scenario's inputs (vehicle {veh.name})"
+        else:                             # an observer: its plant's signals in the scenario
+            plant, pveh = beside
+            veh = load_vehicle(pveh or packaging.PLANTS[plant].default_vehicle)
+            run = cosimulate(sc, plants.get(plant, pveh, backend), {"observer": fmu}, dt=h, vehicle=veh)
+            t = run.time
+            inputs = {n: run.measured[n] for n in run.inputs["observer"]}
+            source = f"the signals of {plant} (vehicle {veh.name}) at the communication points"
+        what = (f"scenario {spec.scenario}, first {spec.seconds:g} s" + (f" ({spec.note})" if spec.note else "")
+                + f": inputs {source}; outputs this FMU's own, on them.")
+        probe = reference.Experiment(spec.scenario, what, t, h, inputs, {}, host_platform() or "")
+        outputs = run_host(fmu, probe)
+        e = reference.Experiment(spec.scenario, what, t, h, inputs, outputs, host_platform() or "")
+        return reference.files([e], model_identifier(fmu), ident)
+
+    return finish
+
+
+def package_design_data(data: dict, out: Path, backend: str, vehicle=None, write_design: bool = False,
+                        origin: str | None = None, plants: _ReferencePlants | None = None,
+                        platforms: list[str] | None = None) -> Path:
+    """``packaging.package_design_data`` with the FMU's reference experiment inside it (the
+    observer designed for ``vehicle``, None: its default); the plant it runs beside comes from
+    ``plants`` (default: ``out`` if current there, else built into a scratch folder)."""
+    from contextlib import nullcontext
+
+    from . import packaging
+
+    model = data.get("design", "")
+    if model not in designs.DESIGNS:
+        raise PipelineError(f"{origin or data.get('name')}: no catalogue design {model!r} (known: "
+                            f"{', '.join(designs.DESIGNS)})")
+    with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
+        finish = reference_finish(model, vehicle, backend, reference_identity(model, vehicle, backend), pl)
+        return packaging.package_design_data(data, out, backend, write_design=write_design, origin=origin,
+                                             platforms=platforms, finish=finish)
+
+
+def package_plant(name: str, vehicle, out: Path, backend: str, plants: _ReferencePlants | None = None,
+                  platforms: list[str] | None = None) -> Path:
+    """``packaging.package_plant`` with the FMU's reference experiment inside it."""
+    from contextlib import nullcontext
+
+    from . import packaging
+
+    with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
+        finish = reference_finish(name, vehicle, backend, reference_identity(name, vehicle, backend), pl)
+        return packaging.package_plant(name, vehicle, out, backend, platforms=platforms, finish=finish)
+
+
+def model_identifier(path: Path) -> str:
+    """The modelIdentifier of a (temporary) FMU file."""
+    from fmpy import read_model_description
+
+    return read_model_description(str(path)).coSimulation.modelIdentifier
 
 
 def _current_design(p: _Artefact) -> dict | None:

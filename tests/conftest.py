@@ -43,8 +43,9 @@ class SessionBuild:
 
     ``design(name)``  the design dict of an observer, as ``designs.run(name)`` returns it (shared
                       by the whole session: copy it before changing it)
-    ``path(name)``    the FMU, built into ``out`` by the packaging step (observers from their
-                      design file ``out/NAME.design.json``, re-certified by ``package_design``)
+    ``path(name)``    the FMU, built into ``out`` as ``latobs build`` builds it (``pipeline.build``:
+                      observers from their design file ``out/NAME.design.json``, re-certified by
+                      the packaging step; every FMU with its reference experiment inside)
     ``all()``         {name: path} of every FMU in :data:`FMU_NAMES`
     ``c_path(name)``  the same FMU built by the native C backend into ``out/c`` (skips the test
                       when this machine cannot build it: no C compiler, or no C model yet)
@@ -65,17 +66,24 @@ class SessionBuild:
 
     def path(self, name: str) -> Path:
         if name not in self._paths:
-            from latobs.synthesis import design_file
-
-            if name in packaging.OBSERVERS:
-                path = packaging.package_design(design_file.write(self.design(name), self.out), self.out)
-            elif name in packaging.PLANTS:
-                path = packaging.package_plant(name, None, self.out)
-            else:
-                raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
-            assert path == self.out / f"{name}.fmu", path
-            self._paths[name] = path
+            self._paths[name] = self._build(name, "python", self.out)
         return self._paths[name]
+
+    def _build(self, name: str, backend: str, out: Path) -> Path:
+        """``latobs build NAME --backend BACKEND --out OUT``, the design solved once per session."""
+        from latobs import pipeline
+        from latobs.synthesis import design_file
+
+        if name in packaging.OBSERVERS:
+            beside = pipeline.reference_plant(name, None)
+            if beside is not None and beside[1] is None:    # its reference runs beside this session's plant
+                self.get(beside[0], backend)
+            design_file.write(self.design(name), out)
+        elif name not in packaging.PLANTS:
+            raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
+        path, = pipeline.build([name], None, out, backend)
+        assert path == out / f"{name}.fmu", path
+        return path
 
     def all(self) -> dict[str, Path]:
         return {name: self.path(name) for name in FMU_NAMES}
@@ -94,13 +102,7 @@ class SessionBuild:
             why = cbackend.unavailable_reason(kind.model_module)
             if why:
                 pytest.skip(f"{name}: no native C FMU here: {why}")
-            out = self.out / "c"
-            if name in packaging.OBSERVERS:
-                self.path(name)      # designed and certified once; the C build packages the same file
-                path = packaging.package_design(self.out / f"{name}.design.json", out, backend="c")
-            else:
-                path = packaging.package_plant(name, None, out, backend="c")
-            self._c_paths[name] = path
+            self._c_paths[name] = self._build(name, "c", self.out / "c")
         return self._c_paths[name]
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pytest
 
-from latobs import identity, packaging
+from latobs import identity, packaging, pipeline
 from latobs.atomic import LOCK_TIMEOUT_ENV, locked_folder, stale_temporaries
 from latobs.cli import main
 from latobs.native_guard import find_compiler
@@ -187,11 +187,11 @@ def test_every_fmu_built_twice_is_byte_identical(variant, built_fmus, tmp_path):
     if name in packaging.OBSERVERS:
         data = copy.deepcopy(built_fmus.design(name))
         _perturb_wall_time(data)
-        second = packaging.package_design_data(data, again, backend)
+        second = pipeline.package_design_data(data, again, backend)
         inner = _inner(second, f"resources/{name}.design.json")
         assert not _wall_time_keys(inner) and inner == _plain(design_file.reproducible(data))
     else:
-        second = packaging.package_plant(name, None, again, backend)
+        second = pipeline.package_plant(name, None, again, backend)
     assert second.read_bytes() == first.read_bytes()
     assert identity.read_fmu(second).parts["backend"] == backend
 

@@ -171,7 +171,7 @@ def test_fmpy_validate_and_fmutool_check_a_five_platform_fmu(built_fmus):
 @pytest.mark.slow
 def test_two_builds_are_byte_identical_on_every_platform(built_fmus, tmp_path):
     first = built_fmus.c_path("CarPlant")
-    again = packaging.package_plant("CarPlant", None, tmp_path, backend="c")
+    again = pipeline.package_plant("CarPlant", None, tmp_path, "c")
     a, b = _binaries(first), _binaries(again)
     assert sorted(a) == sorted(b)
     assert [m for m in a if a[m] != b[m]] == []

@@ -158,7 +158,7 @@ def _build_description(model_identifier: str, sources: list[str]) -> bytes:
 
 
 def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None,
-                platforms: list[str] | None = None) -> Path:
+                platforms: list[str] | None = None, finish=None) -> Path:
     """Build ``out_dir/<class_name>.fmu`` with the native C backend for ``platforms`` (FMI platform
     folders of ``toolchain.PLATFORMS``; None: all), compiled in parallel; returns its path.
 
@@ -166,7 +166,7 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     checks as the pythonfmu backend), then the model's emitter writes its C data. Raises
     NativeBuildError when there is no C compiler or no C model for this runtime (see
     :func:`unavailable_reason`) or the compiler fails, PackagingError when ``fmpy validate`` does.
-    ``base`` and ``beside``: as in ``latobs.packaging.build_fmu`` (identity, files written with it)."""
+    ``base``, ``beside``, ``finish``: as in ``latobs.packaging.build_fmu``."""
     from ..packaging import COPYRIGHT, PackagingError, check_name, identity_file, install, seal_fmu
     from ..synthesis import design_file
     from . import toolchain
@@ -222,4 +222,4 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     # the compilers' identity and the platforms are part of what the binaries are made from
     stamp = toolchain.describe() + b"\0" + ",".join(platforms).encode()
     return install(Path(out_dir), class_name, lambda tmp: seal_fmu(
-        files, class_name, md, [], tmp, native=compiled, native_sources=stamp), beside)
+        files, class_name, md, [], tmp, native=compiled, native_sources=stamp), beside, finish)

@@ -1,0 +1,189 @@
+"""``latobs check``: run an FMU's own reference experiments (FMI-LS-REF, inside the FMU) and
+compare its outputs with the references (:mod:`latobs.reference`).
+
+The host platform runs the FMU with fmpy (:func:`run_host`, the same run that made the
+references at build time); another platform folder of the FMU runs in the cross-platform runner
+(``latobs.cbackend.runner``: a small C host under Wine or qemu) where that is available here.
+"""
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import reference
+
+__all__ = ["CheckError", "Result", "run_host", "platforms", "check"]
+
+
+class CheckError(ValueError):
+    """A user error of ``latobs check``: no such file, not an FMU, no reference results, an
+    unknown platform or one that cannot run here (the message says why)."""
+
+
+@dataclass
+class Result:
+    fmu: str
+    experiment: str
+    platform: str
+    comparison: reference.Comparison
+    rows: int
+    outputs: int
+    failure: str = ""           # the run itself failed (a call's error status, the host's crash)
+
+    @property
+    def passed(self) -> bool:
+        return not self.failure and self.comparison.passed
+
+    def line(self) -> str:
+        c = self.comparison
+        head = f"{'PASS' if self.passed else 'FAIL'}  {self.fmu}  {self.experiment}  {self.platform}: "
+        if self.failure:
+            return head + self.failure
+        if c.exact:
+            return head + f"bit for bit ({self.rows} rows x {self.outputs} outputs)"
+        name, t, y, ref, dev, allowed = c.worst
+        return head + (f"{'within tolerance, ' if c.passed else ''}worst {name} at t = {t:.6g} s: {y!r} vs reference "
+                       f"{ref!r} (deviation {dev:.3g}, allowed {allowed:.3g}; {c.rule})")
+
+
+def run_host(fmu: str | Path, e: reference.Experiment) -> dict[str, np.ndarray]:
+    """Run ``e`` on ``fmu`` in this process with fmpy, as :data:`reference.RUN_RULE` says: the
+    outputs {name: values at e.time} (Integer outputs as integers)."""
+    from .validation.harness import FmuInstance
+
+    f = FmuInstance("reference", Path(fmu))
+    try:
+        missing = sorted(set(e.inputs) - {v.name for v in f.inputs})
+        if missing:
+            raise CheckError(f"{fmu}: the reference inputs {', '.join(missing)} are not inputs of the FMU")
+        n = len(e.time)
+        row = lambda k: {name: float(v[k]) for name, v in e.inputs.items()}  # noqa: E731
+        first = f.start(row(0), {}, start_time=e.start, stop_time=e.stop)
+        out = {name: np.zeros(n, dtype=float if v.type == "Real" else np.int64)
+               for name, v in ((v.name, v) for v in f.outputs)}
+        for name, val in first.items():
+            out[name][0] = val
+        for k in range(n - 1):
+            try:
+                f.set_inputs(row(k))
+                f.slave.doStep(float(e.time[k]), e.step)
+                values = f.get_outputs()
+            except Exception as exc:                # fmpy's error status: this run failed
+                raise RuntimeError(f"at t = {e.time[k]:.6g} s: {exc}; log: {f.log_tail()}") from exc
+            for name, val in values.items():
+                out[name][k + 1] = val
+        return out
+    finally:
+        f.close()
+
+
+def _runner():
+    try:
+        from .cbackend import runner
+    except ImportError:
+        return None
+    return runner
+
+
+def _folders(fmu: Path) -> list[str]:
+    """The platform folders under ``binaries/``, the FMI platforms first in their order."""
+    from .cbackend.toolchain import PLATFORMS
+
+    with zipfile.ZipFile(fmu) as z:
+        held = {n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") >= 2}
+    order = list(PLATFORMS)
+    return sorted(held - {""}, key=lambda p: (order.index(p) if p in order else len(order), p))
+
+
+def _why_not(fmu: Path, platform: str, host: str | None) -> str | None:
+    """Why ``platform`` of ``fmu`` cannot run here (None: it can)."""
+    if platform == host:
+        return None
+    with zipfile.ZipFile(fmu) as z:
+        if "resources/slavemodule.txt" in z.namelist():
+            return "a pythonfmu FMU runs only where its Python runtime is (the host)"
+    runner = _runner()
+    if runner is None:
+        return "no cross-platform runner in this installation"
+    return runner.available(platform)
+
+
+def platforms(fmu: Path, requested: str) -> tuple[list[str], list[tuple[str, str]]]:
+    """(platforms to run, [(platform, why skipped)]) for ``--platform requested``: "host", "all"
+    (every platform folder of the FMU that can run here) or one platform folder. CheckError for an
+    unknown platform, one the FMU does not hold, or one that cannot run here (saying why)."""
+    from .cbackend.toolchain import PLATFORMS, host_platform
+
+    host = host_platform()
+    held = _folders(fmu)
+    if requested == "all":
+        run, skipped = [], []
+        for p in held:
+            why = _why_not(fmu, p, host)
+            (skipped.append((p, why)) if why else run.append(p))
+        if not run:
+            raise CheckError(f"{fmu}: none of its platforms ({', '.join(held) or 'none'}) can run here: "
+                             + "; ".join(f"{p}: {w}" for p, w in skipped))
+        return run, skipped
+    p = host if requested == "host" else requested
+    if p is None:
+        raise CheckError("this machine is none of the FMU platforms " + ", ".join(PLATFORMS))
+    if p not in PLATFORMS:
+        raise CheckError(f"unknown platform {requested!r} (host, all, or one of: {', '.join(PLATFORMS)})")
+    if p not in held:
+        raise CheckError(f"{fmu} holds no binaries/{p} (it holds: {', '.join(held) or 'none'})")
+    why = _why_not(fmu, p, host)
+    if why:
+        raise CheckError(f"{fmu}: platform {p} cannot run here: {why}")
+    return [p], []
+
+
+def run_on(fmu: Path, e: reference.Experiment, platform: str, host: str | None) -> dict[str, np.ndarray]:
+    """The outputs of ``e`` run on ``platform``'s binary: in this process with fmpy on the host,
+    else in the cross-platform runner with the experiment's fixed step. RuntimeError saying why
+    when the run fails."""
+    if platform == host:
+        return run_host(fmu, e)
+    runner = _runner()
+    try:
+        r = runner.run(fmu, platform, e.time, e.inputs, list(e.outputs), {}, step=e.step)
+    except runner.RunnerError as exc:
+        raise RuntimeError(str(exc)) from None
+    if not r.ok:
+        raise RuntimeError(r.failure())
+    return r.outputs
+
+
+def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[tuple[str, str]]]:
+    """Run every reference experiment of ``fmu`` on ``platform`` ("host", "all" or a platform
+    folder): the results (one per experiment and platform) and the platforms skipped (with why).
+    CheckError for a user error (the message says which)."""
+    from .cbackend.toolchain import host_platform
+
+    fmu = Path(fmu)
+    if not fmu.is_file():
+        raise CheckError(f"{fmu}: no such file")
+    if not zipfile.is_zipfile(fmu):
+        raise CheckError(f"{fmu}: not an FMU (not a zip archive)")
+    with zipfile.ZipFile(fmu) as z:
+        if "modelDescription.xml" not in z.namelist():
+            raise CheckError(f"{fmu}: not an FMU (no modelDescription.xml)")
+    try:
+        experiments = reference.read(fmu)
+    except reference.ReferenceResultsError as exc:
+        raise CheckError(str(exc)) from None
+    run, skipped = platforms(fmu, platform)
+    host = host_platform()
+    results = []
+    for p in run:
+        for e in experiments:
+            try:
+                got, failure = run_on(fmu, e, p, host), ""
+            except RuntimeError as exc:         # the FMU or the host failed: this run fails
+                got, failure = {}, f"the run failed: {' '.join(str(exc).split())}"
+            results.append(Result(fmu.stem, e.name, p, reference.compare(e, got, p), len(e.time), len(e.outputs),
+                                  failure))
+    return results, skipped
