@@ -205,13 +205,17 @@ def _members(fmu: Path) -> dict[str, bytes]:
         raise ReferenceResultsError(f"{fmu}: not an FMU (not a zip archive: {exc})") from None
 
 
+def _xml(fmu: Path, member: str, raw: bytes) -> ET.Element:
+    try:
+        return ET.fromstring(raw)
+    except ET.ParseError as exc:
+        raise ReferenceResultsError(f"{fmu}: {member} is not well-formed XML: {exc}") from None
+
+
 def _experiments_member(fmu: Path, members: dict[str, bytes]) -> str:
     if MANIFEST not in members:
         raise ReferenceResultsError(f"{fmu}: no reference results ({MANIFEST} is missing)")
-    try:
-        man = ET.fromstring(members[MANIFEST])
-    except ET.ParseError as exc:
-        raise ReferenceResultsError(f"{fmu}: {MANIFEST} is not well-formed XML: {exc}") from None
+    man = _xml(fmu, MANIFEST, members[MANIFEST])
     if man.tag != "fmiReferences" or man.get(f"{{{LS_NS}}}fmi-ls-name") != LS_NAME:
         raise ReferenceResultsError(f"{fmu}: {MANIFEST} is not an {LS_NAME} manifest")
     for rel in man.iter("Related"):
@@ -247,10 +251,7 @@ def read(fmu: str | Path) -> list[Experiment]:
     exp_name = _experiments_member(fmu, members)
     if exp_name not in members:
         raise ReferenceResultsError(f"{fmu}: {exp_name} (listed in the manifest) is missing")
-    try:
-        root = ET.fromstring(members[exp_name])
-    except ET.ParseError as exc:
-        raise ReferenceResultsError(f"{fmu}: {exp_name} is not well-formed XML: {exc}") from None
+    root = _xml(fmu, exp_name, members[exp_name])
     base = posixpath.dirname(exp_name)
     out = []
     for x in root.findall("Experiment"):
