@@ -205,7 +205,7 @@ def _members(fmu: Path) -> dict[str, bytes]:
         raise ReferenceResultsError(f"{fmu}: not an FMU (not a zip archive: {exc})") from None
 
 
-def _xml(fmu: Path, member: str, raw: bytes) -> ET.Element:
+def _parse_xml(fmu: Path, member: str, raw: bytes) -> ET.Element:
     try:
         return ET.fromstring(raw)
     except ET.ParseError as exc:
@@ -215,7 +215,7 @@ def _xml(fmu: Path, member: str, raw: bytes) -> ET.Element:
 def _experiments_member(fmu: Path, members: dict[str, bytes]) -> str:
     if MANIFEST not in members:
         raise ReferenceResultsError(f"{fmu}: no reference results ({MANIFEST} is missing)")
-    man = _xml(fmu, MANIFEST, members[MANIFEST])
+    man = _parse_xml(fmu, MANIFEST, members[MANIFEST])
     if man.tag != "fmiReferences" or man.get(f"{{{LS_NS}}}fmi-ls-name") != LS_NAME:
         raise ReferenceResultsError(f"{fmu}: {MANIFEST} is not an {LS_NAME} manifest")
     for rel in man.iter("Related"):
@@ -251,7 +251,7 @@ def read(fmu: str | Path) -> list[Experiment]:
     exp_name = _experiments_member(fmu, members)
     if exp_name not in members:
         raise ReferenceResultsError(f"{fmu}: {exp_name} (listed in the manifest) is missing")
-    root = _xml(fmu, exp_name, members[exp_name])
+    root = _parse_xml(fmu, exp_name, members[exp_name])
     base = posixpath.dirname(exp_name)
     out = []
     for x in root.findall("Experiment"):

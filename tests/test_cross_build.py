@@ -287,9 +287,11 @@ def test_zig_and_the_system_compiler_give_the_same_doubles(built_fmus, name, tmp
 
 
 @pytest.mark.slow
-def test_prepare_readies_every_target():
+def test_prepare_readies_every_target(tmp_path):
+    # from a folder of its own: in the repository's root `-m latobs...` would find the source
+    # folder latobs/ first, which is not the installed package (no latobs.fmu_src there)
     proc = subprocess.run([sys.executable, "-m", "latobs.cbackend.toolchain", "--prepare"], capture_output=True,
-                          text=True, timeout=1800)
+                          text=True, timeout=1800, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     for platform in toolchain.PLATFORMS:
         assert f"{platform}: ready" in proc.stdout
