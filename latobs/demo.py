@@ -378,7 +378,7 @@ class _Tee:
 def _replays(out: Path, report: Path, platforms: list[str] | None = None) -> dict:
     """Paper 001 on the real MBDS record (vehicle mbds_250lm): the default design and a wider box."""
     from . import packaging
-    from .pipeline import replay
+    from .pipeline import package_design_data, replay
     from .validation import replay as rp
 
     runs = {}
@@ -386,7 +386,10 @@ def _replays(out: Path, report: Path, platforms: list[str] | None = None) -> dic
     runs["LateralIntervalObserver_mbds_250lm, +-20 % box"] = (m, report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm")
     wide = designs.run("LateralIntervalObserver", "mbds_250lm", box=WIDE_BOX)
     wide_dir = out / "wide-box"
-    fmu = packaging.package_design(design_file.write(wide, wide_dir), wide_dir)
+    # packaged as `latobs build` packages, with its reference results, by the demo's backend
+    backend, _ = packaging.resolve_backend("auto", packaging.OBSERVERS["LateralIntervalObserver"], platforms)
+    fmu = package_design_data(wide, wide_dir, backend, "mbds_250lm", write_design=True,
+                              platforms=platforms if backend == "c" else None)
     mdir = report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm_wide_box"
     m, _ = rp.run(rp.resolve_csv("mbds"), fmu, mdir, split=rp.default_split(rp.resolve_csv("mbds")),
                   observer="LateralIntervalObserver", vehicle="mbds_250lm", mass=wide["model"]["m"])
