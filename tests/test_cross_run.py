@@ -37,9 +37,8 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 
 from conftest import C_NAMES
-from latobs import packaging
+from latobs import packaging, pipeline
 from latobs.cbackend import runner, toolchain
-from latobs.synthesis import designs
 from latobs.validation import harness
 from latobs.validation.scenarios import get_scenario
 
@@ -49,16 +48,9 @@ CROSS = ("win64", "aarch64-linux")
 SECONDS = 2.5
 RELATIVE = 1e-12
 PROBE = Path(__file__).resolve().parent / "c_host" / "libm_probe.c"
-_MOTORCYCLE = ("motorcycle-lane-change", {"t_rise": 0.0, "t_first": 0.3, "t_second": 1.4})
-#: each FMU's own validation scenario (its first SECONDS; the motorcycle's manoeuvre brought into them)
-SCENARIO = {
-    **dict.fromkeys(("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
-                     "SideslipBankObserverTirePaper", "CarPlant"), ("bank-braking", {})),
-    "LateralIntervalObserver": ("double-lane-change-15", {}),
-    "SideslipFixedOrderEstimator": ("w1-steer", {}),
-    **dict.fromkeys(("SideslipFixedOrderEstimatorScheduled", "SideslipKalmanFilter"), ("double-lane-change", {})),
-    "MotorcycleFaultObserver": _MOTORCYCLE, "MotorcyclePlant": _MOTORCYCLE,
-}
+#: each FMU's own validation scenario: the reference experiment latobs build embeds
+#: (``pipeline.REFERENCE_EXPERIMENTS``), run a little longer here
+SCENARIO = pipeline.REFERENCE_EXPERIMENTS
 #: the C99 <math.h> functions whose results may differ between C libraries (the probe measures
 #: them); the others used by the FMUs (fabs, sqrt, floor, ceil, fmod, ...) are exact by IEEE 754
 PROBED = ("sin", "cos", "tan", "atan", "atan2", "exp", "expm1", "log2", "pow")
@@ -123,17 +115,14 @@ _PLANTS: dict[tuple[str, str], tuple[Path, str]] = {}
 
 
 def _plant_for(built_fmus, name: str) -> tuple[Path, str]:
-    """(the native plant FMU beside which observer ``name`` runs, its vehicle): the plant built for
-    the observer's vehicle, or the default plant when the vehicle has no plant data for it."""
-    plant, vehicle = designs.DESIGNS[name].plant, designs.DESIGNS[name].default_vehicle
+    """(the native plant FMU beside which observer ``name`` runs its reference experiment, its
+    vehicle), as ``pipeline.reference_plant`` chooses them."""
+    plant, vehicle = pipeline.reference_plant(name, None)
     if (plant, vehicle) not in _PLANTS:
-        default = packaging.PLANTS[plant].default_vehicle
-        found = (built_fmus.c_path(plant), default)
-        if vehicle != default:
-            try:
-                found = (packaging.package_plant(plant, vehicle, built_fmus.out / "c" / vehicle, backend="c"), vehicle)
-            except packaging.PackagingError:     # e.g. a vehicle without the plant's roll data
-                pass
+        if vehicle is None:
+            found = (built_fmus.c_path(plant), packaging.PLANTS[plant].default_vehicle)
+        else:
+            found = (packaging.package_plant(plant, vehicle, built_fmus.out / "c" / vehicle, backend="c"), vehicle)
         _PLANTS[(plant, vehicle)] = found
     return _PLANTS[(plant, vehicle)]
 
@@ -143,8 +132,8 @@ def _case(built_fmus, name: str) -> Case:
         fmu = built_fmus.c_path(name)
         md = read_model_description(str(fmu))
         step = float(md.defaultExperiment.stepSize)
-        scenario, overrides = SCENARIO[name]
-        sc = get_scenario(scenario, duration=SECONDS, **overrides)
+        spec = SCENARIO[name]
+        sc = get_scenario(spec.scenario, duration=SECONDS, **dict(spec.overrides))
         if name in packaging.PLANTS:
             res = harness.run(sc, fmu, {}, dt=step, vehicle=packaging.PLANTS[name].default_vehicle)
             inputs = {k: res.bus[k] for k in res.inputs[harness.PLANT_LABEL]}
