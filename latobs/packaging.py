@@ -106,7 +106,9 @@ def plant_data(vehicle: str | Vehicle) -> dict:
     data = {"schema": "latobs.plant/1", "vehicle": veh.as_dict()}
     if veh.kind == "motorcycle":
         data.update(motorcycle_data(veh))
-    return data
+    from .synthesis import tables
+
+    return tables.attach(data)
 
 
 def motorcycle_data(veh) -> dict:
@@ -416,9 +418,10 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
                         finish: Finish | None = None) -> Path:
     """:func:`package_design` of a design dict; with ``write_design`` its design file
     ``out_dir/NAME.design.json`` is written with the FMU, as one unit (:func:`install`)."""
-    from .synthesis import certificate  # scipy: only when packaging a design
+    from .synthesis import certificate, tables  # scipy: only when packaging a design
 
     origin = origin or f"design {data.get('name')!r}"
+    tables.attach(data)   # a design file written without its runtime's tables gets them here
     ok, checks = certificate.certify(data)
     if not ok or not data.get("certified"):
         failed = [c.name for c in checks if not c.passed]

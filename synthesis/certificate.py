@@ -108,6 +108,8 @@ def certify(data: dict) -> tuple[bool, list[Check]]:
     elif paper == "003": checks = _certify_003(data)
     else:
         raise ValueError(f"design {data.get('name')!r}: no certificate for paper {paper!r}")
+    from .table_checks import checks as table_checks
+    checks = checks + table_checks(data)      # the runtime's tables, checked independently
     return all(c.passed for c in checks) and bool(checks), checks
 
 

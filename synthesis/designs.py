@@ -205,7 +205,7 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     (carrying the failed checks) when the certificate fails.
     """
     from ..identity import of_design
-    from . import certificate
+    from . import certificate, tables
 
     entry = get(name)
     veh = load_vehicle(vehicle or entry.default_vehicle)
@@ -214,6 +214,7 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     data = entry.solve(veh, opts)
     data["design"] = name          # the catalogue entry (the FMU model), whatever the artefact name
     data["identity"] = ident.as_dict()
+    tables.attach(data)            # what the runtimes evaluate, computed once here (certified below)
     ok, checks = certificate.certify(data)
     data["certified"] = ok
     data["checks"] = certificate.as_dicts(checks)
