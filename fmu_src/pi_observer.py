@@ -169,6 +169,11 @@ class SwitchedPIObserver:
             return [_dot(row, x) for row in self._fixed[idx]]
         return self.rk4(idx, v, h, x)
 
+    def model_v(self, mode: int, vx: float) -> float:
+        """v = 1/vx of the mode's model: its fixed speed, or the measured vx clamped to its range."""
+        ms = self.modes[mode]
+        return ms["fixed_v"] if ms["fixed_v"] is not None else 1.0 / min(max(vx, ms["vx_range"][0]), ms["vx_range"][1])
+
     # -- switching, validity --------------------------------------------------------------------
     def estimates01(self, w) -> tuple[float, float]:
         """beta^, r^: the first two rows of x^ = z + N y."""
@@ -242,7 +247,7 @@ class SwitchedPIObserver:
         speed (speed bands); the first-order hold restarts (slope 0)."""
         w = [u["yaw_rate"], u["roll_angle"], u["roll_rate"]]
         ny = [_dot(row, w) for row in self.N]
-        self.s[: self.n] = [x - p for x, p in zip([0.0] + w, ny)]
+        self.s = [x - p for x, p in zip([0.0] + w, ny)] + self.s[self.n:]
         self._started, self._prev = True, None
         if self.edges and u["vx"] >= self.vx_hold:
             self.mode = self.band(u["vx"])
@@ -279,9 +284,7 @@ class SwitchedPIObserver:
             prev, self._prev = self._prev, (w, h)
             e = [0.0] * len(w) if prev is None else [(a - p) * (h / prev[1]) for a, p in zip(w, prev[0])]
             x += e
-        ms = self.modes[self.mode]     # the model at its fixed speed, or at vx clamped to its range
-        v = ms["fixed_v"] if ms["fixed_v"] is not None else 1.0 / min(max(vx, ms["vx_range"][0]), ms["vx_range"][1])
-        self.s = s = self.advance(idx, v, h, x)
+        self.s = s = self.advance(idx, self.model_v(self.mode, vx), h, x)
         for i, name in enumerate(ESTIMATES):   # x^ = z + N y with the hold's y at t + h
             acc = s[i]
             for c, y in zip(self.N[i], w):

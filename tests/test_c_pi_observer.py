@@ -33,7 +33,7 @@ from latobs import cbackend, packaging
 from latobs.fmu_src.pi_observer import SwitchedPIObserver
 from latobs.native_guard import find_compiler
 from latobs.pipeline import PLANT_NOISE
-from latobs.synthesis import design_file
+from latobs.synthesis import design_file, tables
 from latobs.validation import harness
 from latobs.validation.harness import FmuInstance, NoiseSpec
 from latobs.validation.scenarios import SCENARIOS, StiffnessSweep
@@ -273,6 +273,7 @@ def test_design_variants_equal_the_python_runtime(built_fmus, tmp_path, variant)
     name, change, steps = VARIANTS[variant]
     data = json.loads(design_file.dumps(built_fmus.design(name)))          # a copy, as plain data
     change(data)
+    data["tables"] = tables.compute(data)                                 # the changed design's tables
     fmu = cbackend.build_c_fmu(packaging.OBSERVERS[name], name, data, tmp_path)
     u0 = {"vx": 20.0, "delta": 0.0, "yaw_rate": 0.05, "roll_angle": 0.0, "roll_rate": 0.0}
     steps = [(min(h, declared_max_step(fmu)), u) for h, u in steps]
@@ -358,14 +359,14 @@ def test_me_derivatives_equal_the_python_runtimes_matrices(built_fmus, tmp_path,
         u = dict(zip(INPUTS, (w[3], vx, *w[:3])))
         _me_event(m, vr, u)                                  # the discrete state of these inputs
         mode, valid = m.getInteger([vr["mode"], vr["valid"]])
-        idx = mode - 1 + (rt._nm if rt._freeze and not valid else 0)
+        idx = mode - 1 + (rt.nm if rt.freeze and not valid else 0)
         seen.add(idx)
-        M, G = rt._system(idx, rt._model_speed(mode - 1, vx))
+        M, G = rt.system(idx, rt.model_v(mode - 1, vx))
         for _ in range(3):
             s = 0.05 * rng.standard_normal(5)
             want = np.array(M) @ s + np.array(G) @ np.array(w)
             np.testing.assert_allclose(_me_derivatives(m, vr, s, u), want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
-    assert len(seen) >= 2 and (not rt._freeze or max(seen) >= rt._nm)
+    assert len(seen) >= 2 and (not rt.freeze or max(seen) >= rt.nm)
     _me_event(m, vr, dict(zip(INPUTS, (0.01, 0.4, 0.1, 0.0, 0.0))))
     assert not np.any(_me_derivatives(m, vr, rng.standard_normal(5), dict(zip(INPUTS, (0.01, 0.4, 0.1, 0.0, 0.0)))))
     m.terminate()

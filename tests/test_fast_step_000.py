@@ -1,4 +1,5 @@
-"""Paper-000 runtime: the compiled step maps equal classical RK4 substeps to 1e-12.
+"""Paper-000 runtime: the tables' step maps (and the maps built for other steps) equal classical RK4
+substeps to 1e-12.
 
 The reference below is independent of the runtime: numpy, eq. (5) written out from the design
 file's T, N, C, K_P, K_I and the 1/Vx coefficient lists of A, B, F, integrated by classical RK4
@@ -8,13 +9,15 @@ selection, clamps and hold.
 from __future__ import annotations
 
 import copy
+import json
 import math
 
 import numpy as np
 import pytest
 
-from latobs.fmu_src import pi_observer
 from latobs.fmu_src.pi_observer import SwitchedPIObserver
+from latobs.synthesis import tables
+from latobs.synthesis.tables import sideslip_bank_observer as tables_000
 
 OUT = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat", "bank_angle_hat")
 
@@ -45,6 +48,24 @@ def variant(design: dict, *, hold=KEEP, validity=KEEP, speeds=KEEP) -> dict:
             else:
                 m["model_speed"] = {"kind": "measured", "range": list(speeds)}
     return d
+
+
+_TABLES: dict = {}
+
+
+def with_tables(design: dict) -> dict:
+    """A copy of the design with the tables of ITS keys (a variant's own, never those it was copied
+    with), cached by content: what ``designs.run`` and the packaging step attach."""
+    key = json.dumps({k: design.get(k) for k in ("structure", "modes", "switching", "runtime", "validity")},
+                     sort_keys=True, default=lambda o: o.tolist())
+    if key not in _TABLES:
+        _TABLES[key] = tables.compute(design)
+    return dict(design, tables=_TABLES[key])
+
+
+def observer(design: dict, params: dict | None = None) -> SwitchedPIObserver:
+    """The runtime of a design dict (or a variant of one) with its own tables."""
+    return SwitchedPIObserver(with_tables(design), params or {})
 
 
 def legacy(design: dict) -> dict:
@@ -216,7 +237,7 @@ def tire_run(lo: float = 10.0, hi: float = 25.0):
 
 
 def compare(design: dict, run) -> tuple[float, set, list]:
-    rt, ref = SwitchedPIObserver(design, {}), ReferenceObserver(design)
+    rt, ref = observer(design), ReferenceObserver(design)
     worst, modes, speeds = 0.0, set(), []
     for i, (h, u) in enumerate(run):
         rt.step(h, u)
@@ -231,21 +252,8 @@ def compare(design: dict, run) -> tuple[float, set, list]:
     return worst, modes, speeds
 
 
-def clear_cache():
-    pi_observer._MAPS.clear()
-    pi_observer._HELD[0] = 0
-
-
-@pytest.fixture
-def empty_cache():
-    """The runtime's map cache is shared by the instances of a process: start from empty."""
-    clear_cache()
-    yield
-    clear_cache()
-
-
 @pytest.mark.parametrize("form", ["legacy", "as designed"])
-def test_speed_modes_equal_rk4_substeps(design_speed, empty_cache, form):
+def test_speed_modes_equal_rk4_substeps(design_speed, form):
     """legacy: grid-speed models, inputs held, no validity; as designed: whatever the design emits
     (issue 9: models at the measured speed per band, first-order hold, validity with freeze)."""
     design = legacy(design_speed) if form == "legacy" else design_speed
@@ -257,89 +265,66 @@ def test_speed_modes_equal_rk4_substeps(design_speed, empty_cache, form):
 
 
 @pytest.mark.parametrize("form", ["legacy", "as designed"])
-def test_tire_modes_equal_rk4_substeps(design_tire, empty_cache, form):
+def test_tire_modes_equal_rk4_substeps(design_tire, form):
     design = legacy(design_tire) if form == "legacy" else design_tire
     lo, hi = design["modes"][0]["model_speed"]["range"]
     worst, modes, speeds = compare(design, tire_run(lo, hi))
     assert modes == {1, 2}
     assert min(speeds) < lo and max(speeds) > hi
     assert worst <= 1e-12, worst
-    # the tables in use are Taylor polynomials (not the RK4 fallback) of bounded degree; one per
-    # (mode, h), plus those of the frozen-integral maps if the design has them
-    tables = {key: m for key, m in pi_observer._MAPS.items() if isinstance(m, pi_observer._TireTable)}
-    assert len([key for key in tables if key[1] < 2]) == 6
-    tables = tables.values()
-    fns = [f for tab in tables for f in tab.fns if f is not None]
-    assert fns and all(getattr(f, "degree", 99) <= SwitchedPIObserver.TAYLOR_DEGREE + 1 for f in fns)
+    # the tables at the default step are Taylor polynomials (no RK4 fallback) of bounded degree, one
+    # per map index (the modes, and the frozen-integral maps if the design has them)
+    maps = with_tables(design)["tables"]["maps"]
+    assert len(maps) == len(design["modes"]) * (2 if (design.get("validity") or {}).get("freeze_integral") else 1)
+    coefs = [iv["coef"] for m in maps for iv in m["intervals"]]
+    assert all(c is not None and len(c) <= tables_000.TAYLOR_DEGREE + 2 for c in coefs)
 
 
-def test_each_step_map_is_built_once(design_speed, empty_cache, monkeypatch):
+def test_each_step_map_is_built_once(design_speed, monkeypatch):
+    """Fixed model speeds: the default step evaluates the tables (nothing built); another step
+    builds each mode's composite map once, in the instance, one step size at a time."""
     calls = []
-    real = pi_observer._compile
-    monkeypatch.setattr(pi_observer, "_compile", lambda *a, **k: calls.append(1) or real(*a, **k))
-    design_speed = legacy(design_speed)                                 # grid-speed models: one map per mode
-    rt = SwitchedPIObserver(design_speed, {})
+    real = SwitchedPIObserver.fixed_map
+    monkeypatch.setattr(SwitchedPIObserver, "fixed_map", lambda self, *a: calls.append(a) or real(self, *a))
+    rt = observer(legacy(design_speed))                                 # grid-speed models: one map per mode
     for k in range(3000):
         rt.step(0.005, dict(measurements(k * 0.005, 0.02), vx=18.0 + 13.0 * math.cos(k / 300)))
-    assert len(calls) == 3                                              # one map per mode
-    rt2 = SwitchedPIObserver(design_speed, {})                          # same design: shared
-    for k in range(600):
-        rt2.step(0.005, dict(measurements(k * 0.005, 0.02), vx=18.0 + 13.0 * math.cos(k / 60)))
-    assert len(calls) == 3
+    assert calls == []
+    for h in (0.002, 0.003, 0.002):
+        for k in range(3000):
+            rt.step(h, dict(measurements(k * h, 0.02), vx=18.0 + 13.0 * math.cos(k / 300)))
+        assert len(rt._fixed) == 3
+    assert [a[1] for a in calls] == [0.002] * 3 + [0.003] * 3 + [0.002] * 3
 
 
-def _held_consistent() -> bool:
-    held = sum(m.built if isinstance(m, pi_observer._TireTable) else 1 for m in pi_observer._MAPS.values())
-    return held == pi_observer._HELD[0]
-
-
-def test_map_cache_stays_bounded_under_many_step_sizes(design_speed, design_tire, empty_cache, monkeypatch):
+def test_many_step_sizes_equal_rk4_substeps(design_speed, design_tire):
+    """Random step sizes, each used twice: composite maps (fixed speeds) and RK4 substeps (measured
+    speeds) against the reference; the instance keeps the maps of one step size."""
     rng = np.random.default_rng(0)
-    # speed modes, default limits: 400 distinct step sizes, each used twice (so that a map is built)
-    design_speed = legacy(design_speed)                                 # grid-speed models: composite maps
-    rt, ref = SwitchedPIObserver(design_speed, {}), ReferenceObserver(design_speed)
-    worst = 0.0
-    for i in range(400):
-        h = float(rng.uniform(0.0005, 0.02))
-        for j in range(2):
-            u = dict(measurements(0.01 * i, 0.02), vx=float(rng.uniform(3.0, 32.0)))
-            rt.step(h, u)
-            ref.step(h, u)
-            worst = max(worst, max(abs(rt.y[k] - ref.y[k]) for k in OUT))
-        assert len(pi_observer._MAPS) <= SwitchedPIObserver.MAP_CACHE_SIZE
-        assert pi_observer._HELD[0] <= SwitchedPIObserver.MAX_COMPILED
-        assert len(rt._seen) <= 4 * SwitchedPIObserver.MAP_CACHE_SIZE
-    assert len(pi_observer._MAPS) == SwitchedPIObserver.MAP_CACHE_SIZE and _held_consistent()
-    assert worst <= 1e-12
-    # tire modes with small limits: the number of compiled intervals is bounded too
-    monkeypatch.setattr(SwitchedPIObserver, "MAP_CACHE_SIZE", 3)
-    monkeypatch.setattr(SwitchedPIObserver, "MAX_COMPILED", 10)
-    clear_cache()
-    rt, ref = SwitchedPIObserver(design_tire, {}), ReferenceObserver(design_tire)
-    worst = 0.0
-    for i in range(12):
-        h = float(rng.uniform(0.001, 0.006))
-        for j in range(6):
-            u = dict(measurements(0.03 * (6 * i + j), 0.03), vx=float(rng.uniform(8.0, 27.0)))
-            rt.step(h, u)
-            ref.step(h, u)
-            worst = max(worst, max(abs(rt.y[k] - ref.y[k]) for k in OUT))
-            assert len(pi_observer._MAPS) <= 3 and pi_observer._HELD[0] <= 10 and _held_consistent()
-    assert worst <= 1e-12
+    for design, n, lo, hi in ((legacy(design_speed), 400, 3.0, 32.0), (design_tire, 72, 8.0, 27.0)):
+        rt, ref = observer(design), ReferenceObserver(design)
+        worst = 0.0
+        for i in range(n):
+            h = float(rng.uniform(0.0005, 0.02))
+            for j in range(2):
+                u = dict(measurements(0.01 * i, 0.02), vx=float(rng.uniform(lo, hi)))
+                rt.step(h, u)
+                ref.step(h, u)
+                worst = max(worst, max(abs(rt.y[k] - ref.y[k]) for k in OUT))
+            assert rt._map_h in (None, h) and len(rt._fixed) <= len(design["modes"])
+        assert worst <= 1e-12
 
 
-def test_results_do_not_depend_on_what_other_instances_cached(design_tire, empty_cache):
-    """Bitwise: an instance that finds every map cached gives what the one that built them gave."""
+def test_results_do_not_depend_on_other_instances(design_tire):
+    """Bitwise: two instances of one design, one after the other, give the same outputs."""
     run = tire_run()[:3000]                      # 5 ms then 2 ms
 
     def outputs():
-        rt = SwitchedPIObserver(design_tire, {})
+        rt = observer(design_tire)
         out = []
         for h, u in run:
             rt.step(h, u)
             out.append(tuple(rt.y[k] for k in (*OUT, "mode")))
         return out
 
-    cold = outputs()
-    assert pi_observer._MAPS
-    assert outputs() == cold
+    assert outputs() == outputs()

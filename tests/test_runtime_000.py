@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from latobs.fmu_src.pi_observer import SwitchedPIObserver
 from latobs.synthesis import bicycle_roll_model as brm
 from latobs.synthesis.params import load_vehicle
-from test_fast_step_000 import variant
+from test_fast_step_000 import observer, variant
 
 H = 0.005  # s, communication step
 
@@ -85,7 +84,7 @@ def _reference_observer(design, ts, X):
 
 
 def _run_runtime(design, ts, X):
-    obs = SwitchedPIObserver(design, {})
+    obs = observer(design)
     C = np.asarray(design["structure"]["C"])
     beta, w, modes = [], [], []
     for k in range(len(ts) - 1):
@@ -122,7 +121,7 @@ def test_observer_converges_on_its_own_model(design_speed):
     mode = design_speed["modes"][1]
     vx = mode["scheduling"]["value"]                 # the mode's grid speed
     M = brm.model(vehicle, vx)
-    obs = SwitchedPIObserver(design_speed, {})
+    obs = observer(design_speed)
     x = np.zeros(4)
     bank = 0.05
     for k in range(int(20.0 / H)):
@@ -140,21 +139,24 @@ def test_observer_converges_on_its_own_model(design_speed):
 
 
 def test_tire_mode_switching_has_hysteresis(design_tire):
-    obs = SwitchedPIObserver(design_tire, {})
+    obs = observer(design_tire)
     a_star = design_tire["switching"]["alpha_star"]
     hyst = design_tire["switching"]["hysteresis"]
     y0 = [0.0, 0.0, 0.0]      # no yaw rate and beta^ = 0: the premise is |delta|
-    assert obs._select_mode(20.0, a_star + 0.5 * hyst, y0) == 0
-    assert obs._select_mode(20.0, a_star + 1.5 * hyst, y0) == 1
-    obs.mode = 1
-    assert obs._select_mode(20.0, a_star - 0.5 * hyst, y0) == 1
-    assert obs._select_mode(20.0, a_star - 1.5 * hyst, y0) == 0
+
+    def mode_of(obs, delta):
+        obs.decide(20.0, y0 + [delta], 0.0)
+        return obs.mode
+    assert mode_of(obs, a_star + 0.5 * hyst) == 0
+    assert mode_of(obs, a_star + 1.5 * hyst) == 1
+    assert mode_of(obs, a_star - 0.5 * hyst) == 1
+    assert mode_of(obs, a_star - 1.5 * hyst) == 0
 
 
 @pytest.mark.parametrize("vx", [0.0, 0.5, -3.0, 2.0, 40.0, 300.0])
 def test_speed_outside_grid_is_clamped_with_a_warning(design_speed, design_tire, vx):
     for design in (design_speed, design_tire):
-        obs = SwitchedPIObserver(design, {})
+        obs = observer(design)
         for _ in range(400):
             obs.step(H, {"delta": 0.01, "vx": vx, "yaw_rate": 0.02, "roll_angle": 0.01, "roll_rate": 0.0})
         assert all(math.isfinite(obs.y[k]) for k in obs.y)
@@ -172,8 +174,8 @@ def test_frozen_means_every_estimate_held_and_vx_hold_positive(design_speed, des
     vx_hold = 0 is refused (it would reach the 1/vx terms at standstill)."""
     for design in (design_speed, design_tire):
         with pytest.raises(ValueError, match="vx_hold must be finite and > 0"):
-            SwitchedPIObserver(design, {"vx_hold": 0.0})
-        obs = SwitchedPIObserver(design, {})
+            observer(design, {"vx_hold": 0.0})
+        obs = observer(design)
         u = {"delta": 0.01, "vx": 20.0, "yaw_rate": 0.05, "roll_angle": 0.01, "roll_rate": 0.0}
         for _ in range(200):
             obs.step(H, u)
