@@ -280,7 +280,8 @@ class SwitchedPIObserver:
         idx = self.decide(vx, w, t)
         x = self.s + w
         e = []
-        if self.foh:                   # the increment of w_k + tau (w_k - w_{k-1}) / h_{k-1} over h
+        if self.foh:                   # (not in the paper, whose measurements are continuous) the
+            # increment e of the first-order hold w_k + tau (w_k - w_{k-1}) / h_{k-1} over the step h
             prev, self._prev = self._prev, (w, h)
             e = [0.0] * len(w) if prev is None else [(a - p) * (h / prev[1]) for a, p in zip(w, prev[0])]
             x += e

@@ -70,7 +70,10 @@ def test_observers_equal_python_runtime(built_fmus, sweep_plant, scenario, dt, n
                       vehicle=SWEEP_VEHICLE if sweep else "sedan",
                       noise=NoiseSpec(signals=PLANT_NOISE[PLANT]) if noise else None)
     for n in NAMES:
-        assert_equivalent(res.observers[f"py:{n}"], res.observers[f"c:{n}"], f"{n} on {scenario} dt={dt} noise={noise}")
+        py, c = res.observers[f"py:{n}"], res.observers[f"c:{n}"]
+        assert_equivalent(py, c, f"{n} on {scenario} dt={dt} noise={noise}")
+        # the Python runtime evaluates the same tables and maps with C's operations in C's order
+        assert all(np.array_equal(py[k], c[k]) for k in (*ESTIMATES, "mode", "valid")), f"{n}: not bit-identical"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -285,6 +288,7 @@ def test_design_variants_equal_the_python_runtime(built_fmus, tmp_path, variant)
         rt.step(h, u)
         py.append(dict(rt.y))
     assert_equivalent({k: [o[k] for o in py] for k in py[0]}, {k: [o[k] for o in c] for k in py[0]}, variant)
+    assert [o[k] for o in py for k in ESTIMATES] == [o[k] for o in c for k in ESTIMATES]   # bit for bit
     assert [m.split(": ", 1)[1] for m in c_log] == [msg for _, msg in rt.events]
     assert len({o["mode"] for o in c}) >= 2
 

@@ -1,13 +1,14 @@
 /*
  * pi_observer.c - paper 000's switched H-infinity PI observer of sideslip and road bank angle
- * (Menhour, Koenig, d'Andrea-Novel, ECC 2014), eq. (5) in the ERRATA-000 form; the native twin of
- * fmu_src/pi_observer.py, whose module docstring defines the behaviour (same clamps, warnings,
- * start, input hold and discretisation). C99, libc and libm only.
+ * (Menhour, Koenig, d'Andrea-Novel, ECC 2014), eq. (5) written out with Pi = T A - K_P C; the
+ * behaviour (clamps, warnings, start, input hold, discretisation) is specified in
+ * docs/runtime/sideslip_bank_observer.md, and the Python reference fmu_src/pi_observer.py gives
+ * the same outputs bit for bit. C99, libc and libm only.
  *
  * States s = [z (4); w^ (1)], w^ the bank angle; w = [y; delta], y = [yaw rate, roll angle, roll rate]:
  *     x^ = z + N y
  *     z'  = T A x^ + T B delta + T F w^ + K_P (y - C x^)
- *     w^' = K_I (y - C x^)                                            (eq. 5, ERRATA 000)
+ *     w^' = K_I (y - C x^)                                            (eq. 5)
  * i.e. s' = M(v) s + G(v) w with M, G polynomials in v = 1/vx (model_data.h: PI_MC, PI_GC per map
  * index: the mode, or PI_N_MODES + mode with the integral frozen, w^'s row zero).
  *
@@ -20,10 +21,10 @@
  * RK4 substeps of s' = M s + G w(tau), evaluated as
  *   - h = PI_H0 (0.005 s, the FMU's default step): the composed map s+ = Phi s + Gam w (+ Gam_e e)
  *     from model_data.h: per map index a table over v of Taylor polynomials in d = v - center,
- *     the Python runtime's own coefficients (a fixed-speed index: one exact map); about 0.3k
+ *     the design's tables (synthesis/tables; a fixed-speed index: one exact map); about 0.3k
  *     multiply-adds per step, no matrix work;
  *   - another h, fixed model speed: the same composed map computed at the first step of each map
- *     index with that h (the Python runtime's algorithm: one substep's affine map, binary powering)
+ *     index with that h (one substep's affine map, binary powering)
  *     and cached in the instance, one h at a time;
  *   - another h, measured model speed: the RK4 substeps themselves (about 0.15k multiply-adds per
  *     substep, so ~0.3 us for h = 2 ms at max_step 1 ms);
@@ -35,8 +36,7 @@
  * alpha_max or |vx yaw_rate| > ay_max, back to 1 below the release fraction of both, one warning
  * per entry into valid = 0, at most one per INVALID_LOG_PERIOD of simulated time (the next counts
  * the entries not logged). A step needing more than MAX_SUBSTEPS RK4 substeps (h > 1000 s at
- * max_step 1 ms) is refused with an error, the state kept (the Python runtime would spend minutes
- * to hours on it).
+ * max_step 1 ms) is refused with an error, the state kept.
  *
  * ModelExchange: the continuous states are s, the derivatives s' = M(v) s + G(v) w at the current
  * (continuous, not held) measurements, with the mode's model at the measured vx clamped as above;
@@ -253,7 +253,7 @@ static int check_hold(Model *m, double vx, const Log *log)
 }
 
 /* ------------------------------------------------------------------ the model and its step maps */
-/* M(v), G(v) of map index idx: sum_k PI_MC[idx][k] v**k (the runtime's _shift(..., v)[0]) */
+/* M(v), G(v) of map index idx: sum_k PI_MC[idx][k] v**k */
 static void system_at(int idx, double v, double M[NS][NS], double G[NS][NW])
 {
     memset(M, 0, sizeof(double) * NS * NS);
@@ -273,7 +273,7 @@ static void stage(double M[NS][NS], const double s[NS], const double b[NS], doub
     for (int i = 0; i < NS; i++) k[i] = dot_from(0.0, M[i], s, NS) + b[i];
 }
 
-/* nsub classical RK4 substeps of s' = M s + G w(tau) at v (the runtime's _rk4): x = [s; w(; e)]
+/* nsub classical RK4 substeps of s' = M s + G w(tau) at v: x = [s; w(; e)]
  * in, s+ out; w(tau) = w + (tau / h) e with the first-order hold */
 static void rk4(int idx, double v, double h, int nsub, const double x[NCOL], double s[NS])
 {
@@ -313,8 +313,8 @@ static int interval(int idx, double v)
     return PI_TAB_FIRST[idx] + k;
 }
 
-/* s+ of interval t at d = v - center: per degree j the rows p_j = C_j x (the additions in the
- * Python runtime's order, column by column), then Horner in d per row. The loops over j and r are
+/* s+ of interval t at d = v - center: per degree j the rows p_j = C_j x (the additions column by
+ * column, as the Python reference runtime), then Horner in d per row. The loops over j and r are
  * unrolled so that the (PI_DEG + 1) NS sums stay in registers over the column loop (measured on
  * the default design: 70 ns per step, 84 ns with one block of NS sums per degree). */
 static void eval_interval(int t, double d, const double x[NCOL], double a[NS])
@@ -352,8 +352,8 @@ static void compose(double W2[NA][NA + NW], double W1[NA][NA + NW], double out[N
         for (int c = NA; c < NA + NW; c++) out[i][c] += W2[i][c];
 }
 
-/* One RK4 substep of hs with held input as the affine map W = [R | S Gi] of a' = Ma a + Gi i (the
- * runtime's _substep): X = hs Ma, Q = I + X/2 (I + X/3 (I + X/4)), R = I + X Q, S Gi = hs Q Gi */
+/* One RK4 substep of hs with held input as the affine map W = [R | S Gi] of a' = Ma a + Gi i (as
+ * synthesis/tables/series.py): X = hs Ma, Q = I + X/2 (I + X/3 (I + X/4)), R = I + X Q, S Gi = hs Q Gi */
 static void substep_map(double Ma[NA][NA], double Gi[NA][NW], double hs, double W[NA][NA + NW])
 {
     double X[NA][NA], Q[NA][NA], T[NA][NA];
@@ -379,8 +379,7 @@ static void substep_map(double Ma[NA][NA], double Gi[NA][NW], double hs, double 
     }
 }
 
-/* The composed map of nsub substeps for fixed-speed map index idx at step h (the runtime's
- * _fixed_map): first-order hold on the augmented system [s; w]' = [[M, G], [0, 0]] [s; w] +
+/* The composed map of nsub substeps for fixed-speed map index idx at step h: first-order hold on the augmented system [s; w]' = [[M, G], [0, 0]] [s; w] +
  * [[0], [I / h]] e (input e), else s' = M s + G w (input w); top rows into m->map[idx]. */
 static void build_map(Model *m, int idx, double h, int nsub)
 {

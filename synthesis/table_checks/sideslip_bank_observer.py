@@ -56,6 +56,31 @@ def _norm(P: np.ndarray) -> float:
     return float(np.max(np.sum(np.abs(P), axis=1)))
 
 
+def _constants_mismatch(d: dict, tab: dict, foh: bool) -> float:
+    """Sum of |table - design| over the runtime's constants (0: all equal)."""
+    sw, val, rt = d["switching"], d.get("validity"), d["runtime"]
+    want = [np.asarray(d["structure"]["N"], dtype=float), float(rt["max_step"]), float(rt.get("vx_hold", 1.0))]
+    got = [np.asarray(tab["N"], dtype=float), tab["max_step"], tab["vx_hold"]]
+    if sw["kind"] == "speed_bands":
+        want += [np.asarray(sw["edges"], dtype=float), sw["edges"][0], sw["edges"][-1]]
+        got += [np.asarray(tab["switching"].get("edges", np.nan)), *tab["grid"]]
+    else:
+        ranges = np.array([m["model_speed"]["range"] for m in d["modes"] if m["model_speed"]["kind"] == "measured"])
+        want += [sw["lf"], sw["lr"], sw["alpha_star"] + sw["hysteresis"], sw["alpha_star"] - sw["hysteresis"],
+                 ranges[:, 0].min(), ranges[:, 1].max()]
+        got += [tab["switching"].get(k, np.nan) for k in ("lf", "lr", "up", "down")] + list(tab["grid"])
+    tv = tab["validity"]
+    if (val is None) != (tv is None):
+        return math.inf
+    if val is not None:
+        want += [val["alpha_max"], val["ay_max"], val["release"] * val["alpha_max"], val["release"] * val["ay_max"],
+                 val.get("lf", sw.get("lf")), val.get("lr", sw.get("lr")), bool(val.get("freeze_integral", False))]
+        got += [tv[k] for k in ("alpha_max", "ay_max", "alpha_release", "ay_release", "lf", "lr", "freeze_integral")]
+    pairs = [(np.asarray(a, dtype=float), np.asarray(b, dtype=float)) for a, b in zip(want, got)]
+    mismatch = sum(float(np.max(np.abs(a - b), initial=0.0)) if a.shape == b.shape else math.inf for a, b in pairs)
+    return mismatch + (tab["input_hold"] != ("first_order" if foh else "zero_order"))
+
+
 def checks(data: dict) -> list:
     from ..certificate import Check
 
@@ -72,15 +97,13 @@ def checks(data: dict) -> list:
     nmap = nm * (2 if freeze else 1)
     out = [le("tables: map indices (modes, frozen-integral maps)", abs(len(tab["maps"]) - nmap)
               + abs(len(tab["M"]) - nmap) + abs(len(tab["G"]) - nmap), 0.0),
-           le("tables: N, max_step and input hold are the design's",
-              float(np.max(np.abs(np.asarray(tab["N"]) - np.asarray(data["structure"]["N"], dtype=float))))
-              + abs(float(tab["max_step"]) - max_step) + (tab["input_hold"] != ("first_order" if foh else "zero_order")),
-              0.0)]
+           le("tables: N, switching, grid, validity, vx_hold, max_step and input hold are the design's",
+              _constants_mismatch(data, tab, foh), 0.0)]
     if len(tab["maps"]) != nmap:
         return out
-    model_err, worst = 0.0, {}
     for idx in range(nmap):
         i = idx % nm
+        what = f"mode {i + 1}" + (" (integral frozen)" if idx >= nm else "")
         ms = modes[i]["model_speed"]
         tm = tab["modes"][i]
         if ms["kind"] == "fixed":
@@ -90,11 +113,14 @@ def checks(data: dict) -> list:
             lo, hi = (float(x) for x in ms["range"])
             speeds = [lo, 0.5 * (lo + hi), hi]
             layout = abs(tm["vx_range"][0] - lo) + abs(tm["vx_range"][1] - hi)
+        model_err = 0.0
         for vx in speeds:
             M, G = _model(data, i, 1.0 / vx, idx >= nm)
             Mt = sum(np.asarray(P) * (1.0 / vx) ** k for k, P in enumerate(tab["M"][idx]))
             Gt = sum(np.asarray(P) * (1.0 / vx) ** k for k, P in enumerate(tab["G"][idx]))
             model_err = max(model_err, _norm(np.hstack([Mt - M, Gt - G])) / _norm(np.hstack([M, G])))
+        out.append(le(f"tables: M(v), G(v) of eq. (5) from the design's model and gains, {what}", model_err,
+                      MODEL_LIMIT, f"at {len(speeds)} model speed(s)"))
         m = tab["maps"][idx]
         K = len(m["intervals"])
         if ms["kind"] == "fixed":
@@ -108,6 +134,7 @@ def checks(data: dict) -> list:
                 a, b = v_lo + k * width / K, v_lo + (k + 1) * width / K
                 layout += abs(iv["center"] - 0.5 * (a + b)) / max(v_hi, 1e-300)
                 points += [(iv, v) for v in (a, iv["center"], b)]
+        out.append(le(f"tables: model speed and Taylor intervals cover the range of {what}", layout, 1e-12))
         err = 0.0
         for iv, v in points:
             if iv["coef"] is None:     # this interval runs the RK4 substeps themselves: nothing stored
@@ -116,10 +143,6 @@ def checks(data: dict) -> list:
             d = v - iv["center"]
             poly = sum(np.asarray(P) * d**j for j, P in enumerate(iv["coef"]))
             err = max(err, _norm(poly - ref) / _norm(ref) if poly.shape == ref.shape else math.inf)
-        what = f"mode {i + 1}" + (" (integral frozen)" if idx >= nm else "")
         out.append(le(f"tables: step map {what} at h = {h:g} s equals the RK4 substeps", err, MAP_LIMIT,
                       f"{K} interval(s), {len(points)} points in v = 1/vx"))
-        worst[what] = layout
-    out.append(le("tables: M(v), G(v) of eq. (5) from the design's model and gains", model_err, MODEL_LIMIT))
-    out.append(le("tables: model speeds and Taylor intervals cover each mode's range", max(worst.values()), 1e-12))
     return out
