@@ -28,7 +28,9 @@ def _matmul(A, B):
 
 def _substep_map(Ma, Gi, hs):
     """One classical RK4 substep of a' = Ma a + Gi i with the input i held, as the affine map
-    [R | S Gi]: X = hs Ma, Q = I + X/2 (I + X/3 (I + X/4)), R = I + X Q, S Gi = hs Q Gi."""
+    [R | S Gi]: X = hs Ma, Q = I + X/2 (I + X/3 (I + X/4)), R = I + X Q, S Gi = hs Q Gi (the
+    degree-0 case of ``synthesis/tables/series.py``, which an FMU cannot import: the same operations,
+    so that a map built here for another step equals the C model's)."""
     n = len(Ma)
     X = [[x * hs for x in row] for row in Ma]
     Q = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
@@ -170,7 +172,8 @@ class SwitchedPIObserver:
         return self.rk4(idx, v, h, x)
 
     def model_v(self, mode: int, vx: float) -> float:
-        """v = 1/vx of the mode's model: its fixed speed, or the measured vx clamped to its range."""
+        """v = 1/vx of the mode's model: its fixed speed (eq. 25 literally), or the measured vx clamped
+        to the mode's range (a departure: the model follows the speed inside the mode, LPV)."""
         ms = self.modes[mode]
         return ms["fixed_v"] if ms["fixed_v"] is not None else 1.0 / min(max(vx, ms["vx_range"][0]), ms["vx_range"][1])
 
@@ -243,8 +246,8 @@ class SwitchedPIObserver:
         return [z + _dot(row, y_meas) for z, row in zip(self.s, self.N)]
 
     def initialize(self, u: dict) -> None:
-        """Start from the first measurement: x^(0) = [0, y(0)] (z = x^ - N y), the mode of the initial
-        speed (speed bands); the first-order hold restarts (slope 0)."""
+        """Start from the first measurement (the paper gives no initial state): x^(0) = [0, y(0)]
+        (z = x^ - N y), the mode of the initial speed (speed bands); the first-order hold restarts."""
         w = [u["yaw_rate"], u["roll_angle"], u["roll_rate"]]
         ny = [_dot(row, w) for row in self.N]
         self.s = [x - p for x, p in zip([0.0] + w, ny)] + self.s[self.n:]
@@ -260,7 +263,8 @@ class SwitchedPIObserver:
             self.initialize(u)
         if self.validity is not None:
             self._t = t + h
-        if vx < self.vx_hold:          # standstill or reversing: frozen, every output held as it is
+        if vx < self.vx_hold:          # not in the paper (its model has 1/vx terms): standstill or
+            # reversing freezes the observer, every output held as it is
             if not self._holding:
                 self.events.append(("warning", f"vx = {vx:.3g} m/s < vx_hold = {self.vx_hold:g} m/s (standstill "
                                                "or reversing): observer frozen, every estimate held"))
@@ -269,7 +273,7 @@ class SwitchedPIObserver:
         if self._holding:
             self.events.append(("warning", f"vx = {vx:.3g} m/s: observer resumes"))
             self._holding = False
-        if self.lo <= vx <= self.hi:
+        if self.lo <= vx <= self.hi:   # outside the design grid: the nearest mode / model speed
             self._outside = False
         else:
             if not self._outside:

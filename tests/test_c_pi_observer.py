@@ -4,8 +4,9 @@ Python twin (``fmu_src/pi_observer.py``), for the four FMUs of the model file
 validity with integral freeze), ...Tire (tire-slip modes with hysteresis), ...Paper (speed bands
 at fixed grid speeds) and ...TirePaper; all four with the first-order input hold.
 
-1. Co-simulation equivalence, max |c - py| <= 1e-9 max |py| per output (integers equal), on every
-   scenario on which ``latobs validate`` runs these observers by default (every CarPlant
+1. Co-simulation equivalence, bit for bit (the Python runtime evaluates the same tables and maps
+   with C's operations in C's order; the 1e-9 relative bound is checked first, to report the size
+   of a difference), on every scenario on which ``latobs validate`` runs these observers by default (every CarPlant
    scenario; the stiffness sweeps on the plant vehicle they need, delibasi) and ``latobs demo``'s
    noisy bank-braking run: the four Python and the four C FMUs in one harness run per scenario (so
    all see the same inputs), at the default step (the emitter's tables) and at 2 ms (maps and RK4

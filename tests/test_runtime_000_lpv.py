@@ -56,7 +56,7 @@ def test_lpv_speed_modes_equal_rk4_at_the_clamped_measured_speed(design_speed, r
     run, t = [], 0.0
     for h in (0.005, 0.002):
         for vx in _speeds_at_and_around_edges(edges):
-            for _ in range(3):                 # first step: the RK4 substeps; then the tables
+            for _ in range(3):                 # 5 ms: the tables; 2 ms: the RK4 substeps
                 run.append((h, dict(measurements(t, 0.02), vx=vx)))
                 t += h
     assert lockstep(d, run) <= 1e-12
@@ -97,9 +97,9 @@ def test_bad_model_speed_and_keys_are_refused(design_speed):
 
 # -- 2. first-order hold --------------------------------------------------------------------------
 def test_first_order_hold_equals_rk4_with_the_ramp_at_the_stage_times(design_speed, design_tire):
-    """Fixed-speed maps, LPV tables and tire tables with the first-order hold, through the direct
-    RK4 first step of every (mode, h) and the compiled maps; h changes (5, 2, 10 ms and random
-    sizes), and the vx dip below vx_hold restarts the slope."""
+    """Fixed-speed maps, LPV tables and tire tables with the first-order hold: the tables at the
+    default step, the maps built for other steps and the RK4 substeps; h changes (5, 2, 10 ms and
+    random sizes), and the vx dip below vx_hold restarts the slope."""
     rng = np.random.default_rng(1)
     sizes = [float(x) for x in rng.choice([0.001, 0.0025, 0.004, 0.005, 0.007], 400)]
     t, random_h = 0.0, []
@@ -345,7 +345,7 @@ def test_fmu_exposes_valid(tmp_path, design_speed):
     from latobs.synthesis import design_file
     from latobs.validation.harness import FmuInstance
 
-    d = variant(design_speed, hold="first_order", speeds="measured", validity=VALIDITY)
+    d = with_tables(variant(design_speed, hold="first_order", speeds="measured", validity=VALIDITY))
     path = packaging.package_design(design_file.write(d, tmp_path), tmp_path)
     md = read_model_description(str(path))
     var = {v.name: v for v in md.modelVariables}
