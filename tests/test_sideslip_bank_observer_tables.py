@@ -45,7 +45,8 @@ def _coef_norm(iv) -> float:
     return max(sum(abs(x) for x in row) for row in iv["coef"][0])
 
 
-@pytest.mark.parametrize("corrupt", ["taylor coefficient", "fixed map", "model", "interval layout", "missing"])
+@pytest.mark.parametrize("corrupt", ["taylor coefficient", "fixed map", "model", "interval layout", "missing",
+                                     "stale"])
 def test_a_corrupted_table_fails_the_certificate(design_speed, built_fmus, corrupt):
     d = copy.deepcopy(design_speed if corrupt != "fixed map" else built_fmus.design("SideslipBankObserverPaper"))
     tab = d["tables"]
@@ -61,6 +62,9 @@ def test_a_corrupted_table_fails_the_certificate(design_speed, built_fmus, corru
     elif corrupt == "interval layout":
         tab["maps"][0]["scale"] *= 1.01
         want = "tables: model speed and Taylor intervals cover the range of mode 1"
+    elif corrupt == "stale":                                     # the design changed, its tables not
+        d["validity"]["alpha_max"] *= 1.1
+        want = "tables: N, switching, grid, validity"
     else:
         d["tables"] = {}
         want = "tables: present"
