@@ -25,11 +25,11 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 
 from latobs import demo, packaging
-from latobs.fmu_src.interval_observer import (OUTPUT_NAMES, IntervalObserver, lemma3_constant, omega_bounds,
-                                              structured_stiffness)
+from latobs.fmu_src.interval_observer import OUTPUT_NAMES, IntervalObserver, lemma3_constant, omega_bounds
 from latobs.pipeline import PLANT_NOISE
 from latobs.synthesis import design_file
 from latobs.synthesis import relaxation_model as rm
+from latobs.synthesis.tables import lateral_interval_observer as tables
 from latobs.validation import get_scenario, harness
 from latobs.validation.harness import FmuInstance, NoiseSpec
 
@@ -183,8 +183,11 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     bounds = rm.stiffness_bounds(md, cf, cr)
     for key, value in zip(("dA_lower", "dA_upper", "dB1_lower", "dB1_upper"), bounds):
         md[key] = value.tolist()
+    data["tables"] = tables.compute(data)
+    data["runtime"]["max_communication_step"] = IntervalObserver(data).max_communication_step()
+    data["tables"] = tables.compute(data)
     rt = IntervalObserver(data)
-    assert not rt.model["stiff"]["symmetric"]
+    assert not data["tables"]["stiffness"]["symmetric"]
     path = cbackend.build_c_fmu(packaging.OBSERVERS[NAME], "LateralIntervalObserverAsym", data, tmp_path)
     u, h = synthetic_drive(data, n=1200, seed=5)
     b, _ = drive(path, u, h)
@@ -233,6 +236,26 @@ def test_refused_step_keeps_the_state(fmus, h):
 
 
 # ------------------------------------------------------------------ model exchange (eq. 23)
+def structured_stiffness(sk, vx: float, d: float, xl, xu):
+    """Reference form (vx > 0) of the structured stiffness bound, through the slip angles of eq. (4):
+    [af] = d - ([x1] + lf [x2])/vx, [ar] = (-[x1] + lr [x2])/vx, p in [dcf][af], q in [dcr][ar]
+    (exact interval products), rows 3 and 4 the hulls of vx k3 (p + q) and vx (k4f p - k4r q)."""
+    lf, lr = sk["lf"], sk["lr"]
+    afl, afu = d - (xu[0] + lf * xu[1]) / vx, d - (xl[0] + lf * xl[1]) / vx
+    arl, aru = (-xu[0] + lr * xl[1]) / vx, (-xl[0] + lr * xu[1]) / vx
+
+    def mul(a, b, c, e):
+        ps = (a * c, a * e, b * c, b * e)
+        return min(ps), max(ps)
+
+    pl, pu = mul(*sk["dcf"], afl, afu)
+    ql, qu = mul(*sk["dcr"], arl, aru)
+    lo, hi = [0.0] * 4, [0.0] * 4
+    lo[2], hi[2] = vx * sk["k3"] * (pl + ql), vx * sk["k3"] * (pu + qu)
+    lo[3], hi[3] = vx * (sk["k4f"] * pl - sk["k4r"] * qu), vx * (sk["k4f"] * pu - sk["k4r"] * ql)
+    return lo, hi
+
+
 def test_model_exchange_derivatives_are_eq_23(fmus):
     """fmi2GetDerivatives at random states and inputs against eq. (23) with Omega by eq. (24) from
     eq. (25)'s omega bounds, written with the runtime's reference functions (Lemma 3, the
@@ -271,7 +294,7 @@ def test_model_exchange_derivatives_are_eq_23(fmus):
             y, d, E = np.array(u[2:]), u[0], np.array(mode["E"])
             xl, xu = xi[:4] + E @ y, xi[4:] + E @ y
             wl, wu = lemma3_constant((vx - mode["vx"]) * A1, xl, xu)
-            sl, su = structured_stiffness(rt.model["stiff"], vx, d, xl, xu)
+            sl, su = structured_stiffness(data["tables"]["stiffness"], vx, d, xl, xu)
             bd = (vx - mode["vx"]) * B1 * d
             Ol, Ou = omega_bounds(mode["P"], np.add(wl, sl) + bd, np.add(wu, su) + bd)
             base = np.array(mode["J"]) @ y + np.array(mode["H"]) * d

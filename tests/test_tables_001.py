@@ -66,3 +66,14 @@ def test_bad_design_data_raises_naming_it(design):
     bad["modes"][0]["H"] = [0.0, 0.0, 0.0, 0.0]
     with pytest.raises(ValueError, match="mode 1 field H violates H = P B_j"):
         tables.compute(bad)
+
+
+def test_runtime_step_maps_continue_the_tables_bit_for_bit(design):
+    """The runtimes compute the step maps at other step sizes by the tables' algorithm: at the default
+    step the runtime's own ``phi_gamma`` gives the stored doubles exactly (so a step of any size is
+    evaluated by the same mathematics)."""
+    from latobs.fmu_src.interval_observer import phi_gamma
+
+    for m in design["tables"]["modes"]:
+        assert [list(map(list, b)) for b in phi_gamma(m["N"], design["tables"]["h0"], m["eta"], order=3)] \
+            == m["maps_h0"]

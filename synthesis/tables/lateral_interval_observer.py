@@ -322,11 +322,13 @@ def compute(data: dict) -> dict:
                              f"{rt['max_communication_step']!r}")
     vx_hold = float(rt.get("vx_hold", 1.0))
     damped, smooth = damped_rows(model), smooth_rows(model, meas)
+    probe_smooth = smooth_rows({**model, "w": [0.0] * NX}, meas)     # the decay probes run without w
     for i, m in enumerate(modes):
         # enclosure substeps: hs rho(|A|) <= substep_rho_h at the band's top speed (the damped
         # diagonal, integrated exactly, left out)
         m["rho"] = _perron(majorant(model, max(abs(m["vx"]), edges[i + 1]), damped))
         m["maps_h0"] = phi_gamma(m["N"], DEFAULT_STEP, m["eta"], order=3)
     return {"h0": DEFAULT_STEP, "model": model, "meas": meas, "damped": damped, "smooth": smooth,
+            "probe_smooth": probe_smooth,
             "stiffness": stiff, "edges": edges, "modes": modes, "nu": nu, "x0_halfwidth": w0,
             "vx_hold": vx_hold, "max_communication_step": hmax, "tuning": dict(TUNING)}
