@@ -7,6 +7,8 @@ the step maps at the default step) with the standard library only; the native C 
 departure from the printed paper and the tuning are specified in
 docs/runtime/lateral_interval_observer.md; the departures are also commented where they happen.
 State x = [vy, r, ay, x4]; a box is [lower0..3, upper0..3]; y = [r, ay] = [x2, x3].
+Over ~600 lines because the guarantee between the samples needs more than eq. (23): the a priori
+enclosure of each step, the sampled-measurement correction and the probes of the longest step.
 """
 from __future__ import annotations
 
