@@ -7,7 +7,7 @@ default step and at another one, on a speed sweep across the three bands, on the
 (slow), on a synthetic drive through every branch of the runtime (frozen, resumed, out of the
 grid, reversing, the comparison enclosure, non-finite bounds, inconsistent measurements, variable
 step sizes with enclosure substeps) with the same warnings, and with an asymmetric stiffness box.
-(In practice the two agree bit for bit: the C file evaluates the runtime's generated sums in the
+(In practice the two agree bit for bit: the C file evaluates the reference runtime's sums in the
 same order.)
 
 ModelExchange is the paper's continuous observer eq. (23) without the co-simulation's
@@ -236,30 +236,10 @@ def test_refused_step_keeps_the_state(fmus, h):
 
 
 # ------------------------------------------------------------------ model exchange (eq. 23)
-def structured_stiffness(sk, vx: float, d: float, xl, xu):
-    """Reference form (vx > 0) of the structured stiffness bound, through the slip angles of eq. (4):
-    [af] = d - ([x1] + lf [x2])/vx, [ar] = (-[x1] + lr [x2])/vx, p in [dcf][af], q in [dcr][ar]
-    (exact interval products), rows 3 and 4 the hulls of vx k3 (p + q) and vx (k4f p - k4r q)."""
-    lf, lr = sk["lf"], sk["lr"]
-    afl, afu = d - (xu[0] + lf * xu[1]) / vx, d - (xl[0] + lf * xl[1]) / vx
-    arl, aru = (-xu[0] + lr * xl[1]) / vx, (-xl[0] + lr * xu[1]) / vx
-
-    def mul(a, b, c, e):
-        ps = (a * c, a * e, b * c, b * e)
-        return min(ps), max(ps)
-
-    pl, pu = mul(*sk["dcf"], afl, afu)
-    ql, qu = mul(*sk["dcr"], arl, aru)
-    lo, hi = [0.0] * 4, [0.0] * 4
-    lo[2], hi[2] = vx * sk["k3"] * (pl + ql), vx * sk["k3"] * (pu + qu)
-    lo[3], hi[3] = vx * (sk["k4f"] * pl - sk["k4r"] * qu), vx * (sk["k4f"] * pu - sk["k4r"] * ql)
-    return lo, hi
-
-
 def test_model_exchange_derivatives_are_eq_23(fmus):
     """fmi2GetDerivatives at random states and inputs against eq. (23) with Omega by eq. (24) from
-    eq. (25)'s omega bounds, written with the runtime's reference functions (Lemma 3, the
-    structured stiffness bound): xi_up' = N xi_up + J y + H delta + Omega_up (lower alike)."""
+    eq. (25)'s omega bounds, written with the runtime's reference functions (Lemma 3, eq. 24) and its
+    structured stiffness bound: xi_up' = N xi_up + J y + H delta + Omega_up (lower alike)."""
     from fmpy import extract
     from fmpy.fmi2 import FMU2Model, fmi2Real
 
@@ -294,7 +274,8 @@ def test_model_exchange_derivatives_are_eq_23(fmus):
             y, d, E = np.array(u[2:]), u[0], np.array(mode["E"])
             xl, xu = xi[:4] + E @ y, xi[4:] + E @ y
             wl, wu = lemma3_constant((vx - mode["vx"]) * A1, xl, xu)
-            sl, su = structured_stiffness(data["tables"]["stiffness"], vx, d, xl, xu)
+            s = rt.stiffness_bounds(vx, d, [*xl, *xu])
+            sl, su = s[:4], s[4:]
             bd = (vx - mode["vx"]) * B1 * d
             Ol, Ou = omega_bounds(mode["P"], np.add(wl, sl) + bd, np.add(wu, su) + bd)
             base = np.array(mode["J"]) @ y + np.array(mode["H"]) * d
