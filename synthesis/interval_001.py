@@ -263,5 +263,7 @@ def to_design_dict(d: Design) -> dict:
     # the longest communication step at which the bounds contract, decided by running the runtime
     # itself (one source for both FMU backends; the FMUs then need not probe at their first step)
     from ..fmu_src.interval_observer import IntervalObserver
-    data["runtime"]["max_communication_step"] = IntervalObserver(data).max_communication_step()
+    from .tables import lateral_interval_observer as tables
+    probe = {**data, "tables": tables.compute(data)}      # the runtime evaluates the tables
+    data["runtime"]["max_communication_step"] = IntervalObserver(probe).max_communication_step()
     return data

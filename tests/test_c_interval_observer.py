@@ -7,7 +7,7 @@ default step and at another one, on a speed sweep across the three bands, on the
 (slow), on a synthetic drive through every branch of the runtime (frozen, resumed, out of the
 grid, reversing, the comparison enclosure, non-finite bounds, inconsistent measurements, variable
 step sizes with enclosure substeps) with the same warnings, and with an asymmetric stiffness box.
-(In practice the two agree bit for bit: the C file evaluates the runtime's generated sums in the
+(In practice the two agree bit for bit: the C file evaluates the reference runtime's sums in the
 same order.)
 
 ModelExchange is the paper's continuous observer eq. (23) without the co-simulation's
@@ -25,11 +25,11 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 
 from latobs import demo, packaging
-from latobs.fmu_src.interval_observer import (OUTPUT_NAMES, IntervalObserver, lemma3_constant, omega_bounds,
-                                              structured_stiffness)
+from latobs.fmu_src.interval_observer import OUTPUT_NAMES, IntervalObserver, lemma3_constant, omega_bounds
 from latobs.pipeline import PLANT_NOISE
 from latobs.synthesis import design_file
 from latobs.synthesis import relaxation_model as rm
+from latobs.synthesis.tables import lateral_interval_observer as tables
 from latobs.validation import get_scenario, harness
 from latobs.validation.harness import FmuInstance, NoiseSpec
 
@@ -183,8 +183,11 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     bounds = rm.stiffness_bounds(md, cf, cr)
     for key, value in zip(("dA_lower", "dA_upper", "dB1_lower", "dB1_upper"), bounds):
         md[key] = value.tolist()
+    data["tables"] = tables.compute(data)
+    data["runtime"]["max_communication_step"] = IntervalObserver(data).max_communication_step()
+    data["tables"] = tables.compute(data)
     rt = IntervalObserver(data)
-    assert not rt.model["stiff"]["symmetric"]
+    assert not data["tables"]["stiffness"]["symmetric"]
     path = cbackend.build_c_fmu(packaging.OBSERVERS[NAME], "LateralIntervalObserverAsym", data, tmp_path)
     u, h = synthetic_drive(data, n=1200, seed=5)
     b, _ = drive(path, u, h)
@@ -235,8 +238,8 @@ def test_refused_step_keeps_the_state(fmus, h):
 # ------------------------------------------------------------------ model exchange (eq. 23)
 def test_model_exchange_derivatives_are_eq_23(fmus):
     """fmi2GetDerivatives at random states and inputs against eq. (23) with Omega by eq. (24) from
-    eq. (25)'s omega bounds, written with the runtime's reference functions (Lemma 3, the
-    structured stiffness bound): xi_up' = N xi_up + J y + H delta + Omega_up (lower alike)."""
+    eq. (25)'s omega bounds, written with the runtime's reference functions (Lemma 3, eq. 24) and its
+    structured stiffness bound: xi_up' = N xi_up + J y + H delta + Omega_up (lower alike)."""
     from fmpy import extract
     from fmpy.fmi2 import FMU2Model, fmi2Real
 
@@ -271,7 +274,8 @@ def test_model_exchange_derivatives_are_eq_23(fmus):
             y, d, E = np.array(u[2:]), u[0], np.array(mode["E"])
             xl, xu = xi[:4] + E @ y, xi[4:] + E @ y
             wl, wu = lemma3_constant((vx - mode["vx"]) * A1, xl, xu)
-            sl, su = structured_stiffness(rt.model["stiff"], vx, d, xl, xu)
+            s = rt.stiffness_bounds(vx, d, [*xl, *xu])
+            sl, su = s[:4], s[4:]
             bd = (vx - mode["vx"]) * B1 * d
             Ol, Ou = omega_bounds(mode["P"], np.add(wl, sl) + bd, np.add(wu, su) + bd)
             base = np.array(mode["J"]) @ y + np.array(mode["H"]) * d

@@ -1,10 +1,10 @@
 /*
  * interval_observer.c - paper 001's switched interval observer (Ifqir, Ichalal, Ait-Oufroukh,
  * Mammar, ACC 2020), eq. (23), with guaranteed bounds between the communication points; the native
- * twin of fmu_src/interval_observer.py (read its module docstring first: this file implements the
+ * twin of fmu_src/interval_observer.py (specified in docs/runtime/lateral_interval_observer.md; this file implements the
  * same steps, in the same floating-point order, so that both give the same bounds). C99, libm.
  *
- * Model (eq. 9, ERRATA 001): x = [vy (m/s), r (rad/s), x3 = ay (m/s^2), x4 (rad/s^2)],
+ * Model (eq. 9, the relaxation term's sign corrected): x = [vy (m/s), r (rad/s), x3 = ay (m/s^2), x4 (rad/s^2)],
  *     x' = (A0 + vx A1 + dA) x + vx (B1 + dB1) delta,  y = [r, ay] = C x,
  * dA, dB1 in the elementwise bounds of the stiffness box (eq. 18). Mode j (eq. 44: speed bands)
  * has the gains N, E, J, H, P = I - E C of eq. (23)/(30)/(33) (model_data.h, IV_*).
@@ -19,7 +19,7 @@
  *     ``comparison_enclosure``, one warning per episode; substeps when h rho(|A|) > IV_SUBSTEP_RHO_H);
  *  5. the predicted box at t + h (``predict``), published; its correction waits for y(t + h);
  *  6. outputs: vy, beta = atan(vy / vx), r, and the axle forces by eq. (8) inverted (eq. 45, with
- *     the lower bound of Fyr from the UPPER bound of x4: ERRATA 001).
+ *     the lower bound of Fyr from the UPPER bound of x4: eq. (45)'s misprint).
  * The step maps (Phi, Gam, Gam1, Gam2) of (mode, h) are the runtime's ``phi_gamma``: from the
  * emitter for the default step IV_H0, otherwise computed here by the same algorithm; the
  * correction's coefficients derived from them are cached per mode (one step size at a time).
@@ -27,7 +27,7 @@
  * ``_sampled_predict`` at step 5 and ``_sampled_correct`` at step 2; not in the paper): x propagated
  * by the model alone over IV_SAMPLED_SUBSTEP substeps, the measurement entering only at the samples
  * through gains L (x = (I - L C) x + L y, exact for any L); both boxes are intersected (the
- * predicted one too), for steps h >= IV_SAMPLED_MIN_STEP. Its maps (``sampled_fill``: the runtime's ``sampled_maps``, same order of
+ * predicted one too), for steps h >= IV_SAMPLED_MIN_STEP. Its maps (``sampled_fill``: the runtime's ``_sampled_maps``, same order of
  * operations) are computed here per (model speed, step), the model speed vx rounded to
  * IV_SAMPLED_DV (the mismatch bounded exactly), and cached (SM_CACHE entries).
  * A step longer than IV_MAX_COMM_STEP (the runtime's ``max_communication_step``: the longest at
@@ -42,7 +42,7 @@
  * co-simulation's). It has no measurement intersection, so no consistency test (consistent = 1) and
  * no restart but at the resumption from a freeze, and no one-step delay. The discrete state changes
  * only in model_me_event_update: a mode switch re-bases xi := hull of P_new x over the box (eq. 20;
- * the bounds of x stay continuous, ERRATA 001), a freeze holds the bounds. Event indicators (of the
+ * the bounds of x stay continuous), a freeze holds the bounds. Event indicators (of the
  * current discrete state: mode j, frozen or not):
  *     z0 = vx - (edges[j] - ME_HYST)   (j > 0, else 1)    band j left downward
  *     z1 = edges[j + 1] - vx           (j < last, else 1) band j left upward
@@ -71,7 +71,7 @@ static const int UNMEAS[NY] = {0, 3};
 #define ROW_AY 2                   /* rows of the stiffness part (x3', x4'), eq. (9) */
 #define ROW_YAW_ACC 3
 
-/* The correction of one (mode, h) (the runtime's ``_source_correct`` coefficients): with
+/* The correction of one (mode, h) (the runtime's ``_core`` coefficients): with
  * W1 = Gam1/h, W0 = Gam - W1, W2 = |h Gam1/2 - Gam2|, W3 = 2 W2/h (all >= 0) */
 typedef struct {
     double h;                      /* s; 0: empty */
@@ -99,7 +99,7 @@ typedef struct {
     double sm_mo[IV_SAMPLED_MAX_SUBSTEPS][NX], sm_ro[IV_SAMPLED_MAX_SUBSTEPS][NX];
 } Pending;
 
-/* one gain of the sampled-measurement correction (the runtime's ``sampled_maps``: cands) */
+/* one gain of the sampled-measurement correction (the runtime's ``_sampled_maps``: gains) */
 typedef struct {
     double L[NX][NY], aL[NX][NY];  /* L, |L| */
     double kphi[NX][NX], akphi[NX][NX], kgb[NX];    /* K phi[n], |K phi[n]|, K gamb[n]; K = I - L C */
@@ -159,8 +159,8 @@ static double py_max(double a, double b)
     return b > a ? b : a;
 }
 
-/* s + sum_j c[j] x[j] over the NONZERO c[j], left to right: the sums the runtime generates
- * (``_lin``/``_sum`` skip zero coefficients and chain the terms onto the running sum) */
+/* s + sum_j c[j] x[j] over the NONZERO c[j], left to right (the runtime's ``_acc``: zero
+ * coefficients skipped, the terms chained onto the running sum) */
 static double acc(double s, const double *c, const double *x, int n)
 {
     for (int j = 0; j < n; j++)
@@ -205,7 +205,7 @@ static int row_nonzero(const double *row)
     return 0;
 }
 
-/* A0 and A1 without the diagonal of the damped rows (``_damped_rows``: integrated exactly) */
+/* A0 and A1 without the diagonal of the damped rows (the tables' damped rows: integrated exactly) */
 static double a0u(int i, int j)
 {
     return (i == j && IV_DAMPED[i]) ? 0.0 : IV_A0[i][j];
@@ -223,7 +223,7 @@ static double decay(int i, double vx)
 }
 
 /* ------------------------------------------------------------------ Lemma 3 and the stiffness part */
-/* [al, au] * [l, u] (``_product_terms``, "hull"): the exact interval product, by the signs of the
+/* [al, au] * [l, u] (the runtime's ``_product_hull``): the exact interval product, by the signs of the
  * constant factor; symmetric (up to rounding): +-a max(|l|, |u|) */
 static void product_hull(double al, double au, double l, double u, double *lo, double *hi)
 {
@@ -279,7 +279,7 @@ static void intersect_elementwise(const double *l, const double *u, int with_inp
 }
 
 /* Adds to lo/hi (rows x3', x4') the bound of the stiffness part dA(dc) x + vx dB1(dc) delta over x in
- * [l, u] and the stiffness box, by its structure (``_emit_structured``): with the slip angles of
+ * [l, u] and the stiffness box, by its structure (the runtime's ``_stiffness``): with the slip angles of
  * eq. (4) multiplied out, uf = vx af = vx delta - x1 - lf x2, ur = vx ar = -x1 + lr x2,
  *     dA x + vx dB1 delta = [0, 0, (p + q)/(m sigma), (lf p - lr q)/(Iz sigma)], p = dcf uf, q = dcr ur,
  * by interval arithmetic (exact: p and q are independent). with_input = 0: dA x alone. */
@@ -302,7 +302,7 @@ static void stiffness(const double *l, const double *u, int with_input, double v
 }
 
 /* ------------------------------------------------------------------ the model's right-hand side */
-/* G (``_source_G``): the hull [Fg[0..3], Fg[4..7]] of A(vx, c) x + B(vx, c) delta over x in the box
+/* G (the runtime's ``G``): the hull [Fg[0..3], Fg[4..7]] of A(vx, c) x + B(vx, c) delta over x in the box
  * X and c in the stiffness box, WITHOUT the diagonal terms of the damped rows; the point matrix
  * A0 + vx A1 by eq. (20) in midpoint-radius form, plus the disturbance bound w. */
 static void G(double vx, double d, const double X[NB], double Fg[NB])
@@ -442,7 +442,7 @@ static void mul_nxx(const double A[NX][NX], const double B[NX][NX], double C[NX]
         }
 }
 
-/* the correction coefficients of (mode, h) from its maps (``_source_correct``) */
+/* the correction coefficients of (mode, h) from its maps (the runtime's ``_core``) */
 static void core_fill(Core *k, int mode, double h, const double maps[N_MAPS][NX][NX])
 {
     const double (*Gam)[NX] = maps[1], (*Gam1)[NX] = maps[2], (*Gam2)[NX] = maps[3];
@@ -513,7 +513,7 @@ static const Core *core_for(Model *m, int mode, double h, const Log *log)
 }
 
 /* ------------------------------------------------------------------ a priori enclosure (step 4) */
-/* T(S) (``_emit_extents``): the enclosure of x over a substep hs from the box X and G's values Fg
+/* T(S) (the runtime's ``_extents``): the enclosure of x over a substep hs from the box X and G's values Fg
  * over S: a damped row with a = -d_i > 0 by the convex combination x_i(s) = x_i(0) +
  * theta(s) (gbar/a - x_i(0)), th = -expm1(-a hs)/a; otherwise x_i(s) in x_i(0) + [0, hs] F_i(S). */
 static void extents(double hs, const double a[NX], const double th[NX], const double X[NB],
@@ -538,7 +538,7 @@ static void extents(double hs, const double a[NX], const double th[NX], const do
     }
 }
 
-/* The a priori enclosure T of x over [0, hs] from the box X (``_source_enclose``): S is accepted
+/* The a priori enclosure T of x over [0, hs] from the box X (the runtime's ``_enclose``): S is accepted
  * when T(S) lies in S (then x(s) is in T(S) for all s), starting from X extended by
  * IV_ENCLOSURE_GROW times the extents of T(X), then by that factor times the never-shrinking
  * extents of the last T(S); one refining pass T(T). 0, or -1 after IV_ENCLOSURE_TRIES tries. */
@@ -662,7 +662,7 @@ static void matvec_y(const double A[NX][NY], const double *x, double *y)
     }
 }
 
-/* The maps of (vq, h) (the runtime's ``sampled_maps``, same order of operations): 0, or -1 (none). */
+/* The maps of (vq, h) (the runtime's ``_sampled_maps``, same order of operations): 0, or -1 (none). */
 static int sampled_fill(Sampled *sm, double vq, double h)
 {
     double A[NX][NX], Bv[NX], phid[NX][NX], gamd[NX][NX], Mj[NX][NX], gm[2][NX][NX], gdb[NX], t[NX];
@@ -704,7 +704,7 @@ static int sampled_fill(Sampled *sm, double vq, double h)
         mul_nxx(sm->phi[m], gamd, sm->pg[m]);
         mul_nxx(sm->aphi[m], gm[1], sm->apg[m]);
     }
-    /* the gains: the deadbeat one, one column by one measurement (``sampled_maps``) */
+    /* the gains: the deadbeat one, one column by one measurement (``_sampled_maps``) */
     const double (*ph)[NX] = sm->phi[n];
     double opts[1 + NY * NY][NY][NY];   /* per option: the unmeasured rows' L (row k = UNMEAS[k]) */
     int nopt = 0;
@@ -874,7 +874,7 @@ static void intersect_box(double *B, const double *S)
     }
 }
 
-/* The prediction (``_source_predict``): out = [Fbar (8), B (8)], Fbar the hull of F over T and B the
+/* The prediction (the runtime's ``_predict``): out = [Fbar (8), B (8)], Fbar the hull of F over T and B the
  * box of x(t + h) from the box X of x(t): a damped row with a > 0 exactly (convex combination),
  * the others x(h) in x(0) + h Fbar; intersected with T. */
 static void predict(double h, double vx, double d, const double X[NB], const double T[NB], double out[2 * NB])
@@ -906,7 +906,7 @@ static void predict(double h, double vx, double d, const double X[NB], const dou
 /* ------------------------------------------------------------------ eq. (23) over a step (step 2) */
 /* midpoint oc and radius orad of omega = (vx - vx_j) A1 x + the stiffness part over the box
  * [lo, hi] (midpoint c, radius r), plus, with_input, the input part (vx - vx_j) B1 delta (exact)
- * and the disturbance bound (``_emit_omega``; eq. 25 via Lemma 3) */
+ * and the disturbance bound (the runtime's ``_omega``; eq. 25 via Lemma 3) */
 static void omega(int mode, double vx, double d, const double *lo, const double *hi, const double c[NX],
                   const double r[NX], int with_input, double oc[NX], double orad[NX])
 {
@@ -947,7 +947,7 @@ static void rebase(const double P[NX][NX], const double c[NX], const double r[NX
     }
 }
 
-/* The correction of the pending step [t - h', t] once y(t) is known (``_source_correct``): xi(t) =
+/* The correction of the pending step [t - h', t] once y(t) is known (the runtime's ``_correct``): xi(t) =
  * Phi xi + int_0^h' exp(N (h' - s)) (J y(s) + H delta + P omega(s)) ds, bounded term by term with
  * nonnegative kernels (order preserving); y(s) the interpolation of its samples (weights W0, W1)
  * plus a remainder (W2 with [y''] on the smooth rows, W3 otherwise); omega over the box at the
@@ -1091,7 +1091,7 @@ static void start(Model *m, const double *u, const Log *log)
 
 /* The runtime's ``_publish``: vy; beta = atan(vy / vx) (monotone in vy, decreasing when reversing);
  * r; the axle forces Fyf = (m lr x3 + Iz x4)/L, Fyr = (m lf x3 - Iz x4)/L (eq. 8 inverted, eq. 45)
- * by interval arithmetic: the lower bound of Fyr takes the UPPER bound of x4 (ERRATA 001). */
+ * by interval arithmetic: the lower bound of Fyr takes the UPPER bound of x4 (eq. 45's misprint). */
 static void outputs_of(const double X[NB], double vx, int mode, int consistent, double *y, int *yi)
 {
     const double *l = X, *u = X + NX;

@@ -27,7 +27,8 @@ def _variant(data: dict) -> str:
 def max_communication_step(data: dict) -> float:
     """The longest communication step (s) of this design: a longer one is refused with an error,
     the state kept (``IntervalObserver.max_communication_step``: the bounds would not contract)."""
-    return IntervalObserver(data).max_communication_step()
+    stored = data.get("runtime", {}).get("max_communication_step")
+    return float(stored) if stored is not None else IntervalObserver(data).max_communication_step()
 
 
 SPEC = ModelSpec(
