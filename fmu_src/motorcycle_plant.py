@@ -106,24 +106,6 @@ def _vec(obj, n, name):
     return _mat([obj], 1, n, name)[0]
 
 
-def _inv(a):
-    """Inverse of a small square matrix (Gauss-Jordan with partial pivoting), lists of floats."""
-    n = len(a)
-    m = [list(row) + [1.0 if i == j else 0.0 for j in range(n)] for i, row in enumerate(a)]
-    for c in range(n):
-        p = max(range(c, n), key=lambda i: abs(m[i][c]))
-        if abs(m[p][c]) < 1e-12:
-            raise ValueError("MotorcyclePlant: structure 'M' (mass matrix) is singular")
-        m[c], m[p] = m[p], m[c]
-        piv = m[c][c]
-        m[c] = [x / piv for x in m[c]]
-        for i in range(n):
-            if i != c and m[i][c] != 0.0:
-                f = m[i][c]
-                m[i] = [x - f * y for x, y in zip(m[i], m[c])]
-    return [row[n:] for row in m]
-
-
 class MotorcyclePlantModel:
     """Sharp's motorcycle with Magic Formula tyres and relaxation (module docstring).
 
@@ -224,17 +206,17 @@ class MotorcyclePlantModel:
         self._relax = p["sigma"] > 0.0
         self._sigma = p["sigma"]
         self._linear = p["linear_tires"] == 1.0
-        self._Minv = _inv(self.M)
-        Mi = self._Minv
+        t = data.get("tables")
+        if not isinstance(t, dict) or "Minv" not in t or "kt" not in t:
+            raise ValueError("MotorcyclePlant data lacks its 'tables' (Minv, kt; computed when the plant file is "
+                             "built: synthesis.tables.attach)")
+        self._Minv = _mat(t["Minv"], 4, 4, "tables Minv")
+        self._kt = float(t["kt"])
         # tyre constants: (slip velocity row, heading, camber row, C1, C2/C1, D, B, C, E)
         self._tc = []
         for sl, hd, cb, c1, c2, fz, _ in tyres:
             D = p["mu"] * fz
             self._tc.append((sl, hd, cb, c1, c2 / c1, D, c1 / (p["mf_C"] * D)))
-        # kt = max row sum |diag(C1) S M^-1 B_F| (S: the slip-velocity rows), for lam_est
-        MiBF = [[sum(Mi[i][k] * self.BF[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
-        self._kt = max(sum(abs(sum(c[3] * c[0][k] * MiBF[k][j] for k in range(4))) for j in range(2))
-                       for c in self._tc)
 
         self.x = [0.0] * 8
         self.events: list = []
