@@ -22,6 +22,7 @@ from latobs import packaging
 from latobs.fmu_src.kalman_observer import KalmanObserver
 from latobs.synthesis import certificate, design_file
 from latobs.synthesis import kalman_baseline as kb
+from latobs.synthesis.tables import sideslip_kalman_filter as kft
 from latobs.synthesis.params import VehicleParameterError, load_vehicle
 from latobs.validation import replay as rp
 from latobs.validation.harness import FmuInstance
@@ -90,8 +91,8 @@ def test_design_file_is_certified_and_complete(design, tmp_path):
     # written and read back, it certifies again; the runtime reads it like to_data_dict's dict
     back = design_file.read(design_file.write(d, tmp_path))
     assert certificate.certify(back)[0]
-    flat = KalmanObserver(kb.to_data_dict(kb.vehicle_dict(load_vehicle("mbds_250lm")), kb.TUNED["q"],
-                                          kb.TUNED["r_meas"]), {})
+    flat_data = kb.to_data_dict(kb.vehicle_dict(load_vehicle("mbds_250lm")), kb.TUNED["q"], kb.TUNED["r_meas"])
+    flat = KalmanObserver({**flat_data, "tables": kft.compute(flat_data)}, {})
     assert KalmanObserver(back, {}).model(20.0) == flat.model(20.0)
 
 
