@@ -22,7 +22,7 @@ RNG_SEED = 2014
 
 def _tf(data: dict) -> TfEstimator:
     """The runtime of an estimator data dict with its build-time tables."""
-    return _tf({**data, "tables": tft.compute(data)})
+    return TfEstimator({**data, "tables": tft.compute(data)}, {})
 
 
 def _kf(data: dict) -> KalmanObserver:
