@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from ...fmu_src.framework import DEFAULT_STEP
-from .sideslip_fixed_order_estimator import bounded, rel_err, zoh_expm
+from .sideslip_fixed_order_estimator import absent, bounded, rel_err, zoh_expm
 
 
 def checks(data: dict) -> list:
+    if absent(data, "paper-003 observer"):
+        return absent(data, "paper-003 observer")
     t = data["tables"]
     modes = data["modes"]
 

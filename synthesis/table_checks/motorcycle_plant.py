@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sideslip_fixed_order_estimator import bounded, rel_err
+from .sideslip_fixed_order_estimator import absent, bounded, rel_err
 
 
 def checks(data: dict) -> list:
+    if absent(data, "motorcycle plant"):
+        return absent(data, "motorcycle plant")
     t, s = data["tables"], data["structure"]
     M, BF = np.asarray(s["M"], float), np.asarray(s["B_F"], float)
 

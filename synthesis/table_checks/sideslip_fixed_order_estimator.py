@@ -33,6 +33,14 @@ def bounded(name: str, compute, limit: float):
     return Check(name, value, float(limit), bool(value <= limit), "<=", detail)
 
 
+def absent(data: dict, runtime: str) -> list:
+    """[a failing check] when ``data`` carries no tables (they are attached when a design or
+    plant file is built), else []."""
+    if isinstance(data.get("tables"), dict) and data["tables"]:
+        return []
+    return [bounded(f"{runtime} tables present (attached when the file is built)", lambda: math.inf, 0.0)]
+
+
 def zoh_expm(A, B, h: float):
     """(Phi, Gam) of z' = A z + B u over h by scipy's expm of the Van Loan block matrix."""
     import scipy.linalg
@@ -50,6 +58,8 @@ def _estimators(data: dict) -> list[dict]:
 def checks(data: dict) -> list:
     import scipy.signal
 
+    if absent(data, "fixed-order estimator"):
+        return absent(data, "fixed-order estimator")
     t = data["tables"]
     ests = _estimators(data)
     out = [bounded("fixed-order estimator tables: default step h0 = the FMU's default step (difference)",

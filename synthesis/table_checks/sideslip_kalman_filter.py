@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tables.sideslip_kalman_filter import P0_DEFAULT, VX_RANGE_DEFAULT
-from .sideslip_fixed_order_estimator import bounded, rel_err
+from .sideslip_fixed_order_estimator import absent, bounded, rel_err
 
 
 def _force_model(p: dict):
@@ -19,6 +19,8 @@ def _force_model(p: dict):
 
 
 def checks(data: dict) -> list:
+    if absent(data, "Kalman filter"):
+        return absent(data, "Kalman filter")
     from ..params import parse_vehicle
 
     t = data["tables"]
