@@ -7,7 +7,8 @@ Standard library only; the model's speed-free coefficients come from the design 
 from __future__ import annotations
 
 import math
-from operator import mul
+from functools import reduce
+from operator import add, mul
 
 from .tf_estimator import tables_of
 
@@ -17,36 +18,38 @@ OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat")
 # Small dense algebra on lists of rows. Every dot product is summed left to right from its first
 # term (not math.fsum, not from 0.0), so the results are those of the C model (kalman_observer.c).
 def _dot(a, b) -> float:
-    products = map(mul, a, b)
-    s = next(products)
-    for p in products:
-        s += p
-    return s
+    return reduce(add, map(mul, a, b))
 
 
 def _matmul(A, B):
     cols = list(zip(*B))
-    return [[_dot(row, col) for col in cols] for row in A]
+    return [[reduce(add, map(mul, row, col)) for col in cols] for row in A]
 
 
 def _transpose(A):
     return [list(col) for col in zip(*A)]
 
 
+def _norm_inf(M) -> float:
+    """Induced infinity norm: the largest row sum of |m| (each summed from 0, left to right)."""
+    return max([sum(map(abs, row)) for row in M])
+
+
 def _expm(M):
     """exp(M) by scaling and squaring: s the least integer >= 0 with ||M||_inf 2^-s <= 1/2, the
     Taylor series of exp(M 2^-s) summed until a term is below 1e-18 relative, squared s times."""
     n = len(M)
-    norm = max(sum(abs(a) for a in row) for row in M)
+    norm = _norm_inf(M)
     s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
     sc = 2.0 ** -s
     X = [[a * sc for a in row] for row in M]
     E = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
     T = [row[:] for row in E]
+    X_cols = list(zip(*X))
     for k in range(1, 40):
-        T = [[t / k for t in row] for row in _matmul(T, X)]
+        T = [[reduce(add, map(mul, row, col)) / k for col in X_cols] for row in T]      # T X / k
         E = [[e + t for e, t in zip(re, rt)] for re, rt in zip(E, T)]
-        if max(sum(abs(a) for a in row) for row in T) <= 1e-18 * max(sum(abs(a) for a in row) for row in E):
+        if _norm_inf(T) <= 1e-18 * _norm_inf(E):
             break
     for _ in range(s):
         E = _matmul(E, E)
