@@ -170,7 +170,7 @@ class KalmanObserver:
         if not h > 0 or not math.isfinite(h):
             self.events.append(("warning", f"step size h = {h!r} s is not finite and > 0: no step, outputs held"))
             return
-        v = self._speed(vx)
+        v = self._speed(vx)        # the model has 1/vx: evaluated inside [vx_min, vx_max]
         A, B, C, D = self.model(v)
         x, P = self.x, self.P
         # 1. update: S = C P C' + R, K = P C' S^-1 (P symmetric: P C' = (C P)'), x += K (y - C x - D delta)

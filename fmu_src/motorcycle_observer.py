@@ -73,8 +73,8 @@ class MotorcycleFaultObserver:
         e, k, cur = self._edges, self.n_modes, self.mode
         lo = e[cur] - self._hyst if cur > 0 else -math.inf
         hi = e[cur + 1] + self._hyst if cur < k - 1 else math.inf
-        if lo <= vx < hi:
-            return cur
+        if lo <= vx < hi:          # departure: hysteresis at the band edges (no chattering; the
+            return cur             # dwell-time analysis assumes it)
         i = bisect_right(e, vx) - 1
         return 0 if i < 0 else min(i, k - 1)
 
@@ -99,6 +99,8 @@ class MotorcycleFaultObserver:
     # -- stepping --------------------------------------------------------------------------------
     def initialize(self, u: dict) -> None:
         """x^(0) = C' y(0) (measured states), f^(0) = 0, the mode of the initial speed."""
+        # departure: the paper leaves the initial estimate free; the measured states start at
+        # their measurement, the others (vy, steer rate, f) at 0
         y = [u[k] for k in MEASUREMENTS]
         C = self._C[0]
         x0 = [sum(C[r][j] * y[r] for r in range(self.NY)) for j in range(self.N)]
@@ -126,7 +128,7 @@ class MotorcycleFaultObserver:
         vx = u["vx"]
         y = [u["steer_angle"], u["yaw_rate"], u["roll_rate"]]
         hold = self.vx_hold
-        if -hold < vx < hold:
+        if -hold < vx < hold:      # departure: below vx_hold the 1/vx model is meaningless: estimates held
             if not self._holding:
                 self.events.append(("warning", f"|vx| = {abs(vx):.3g} m/s < vx_hold = {hold:g} m/s: "
                                                "observer frozen, estimates held"))
@@ -138,6 +140,7 @@ class MotorcycleFaultObserver:
             self._holding = False
         self._check_grid(vx)
         self.mode = mode = self._select(vx)
+        # eq. (13) in continuous time, stepped exactly with y held over h (zero-order hold)
         W = self._fns.get((mode, h)) or self._map(mode, h)
         v = self.s + y
         self.s = [sum(map(mul, row, v)) for row in W]

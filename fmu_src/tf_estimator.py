@@ -116,6 +116,8 @@ class TfEstimator:
 
     def initialize(self, u: dict) -> None:
         """Steady state for the current yaw rate: z = [r / a_0, 0, .., 0], beta^ = (y_0/x_0) r."""
+        # departure: the paper states no initial condition; starting in steady state avoids a
+        # start-up transient of the filter (A z + B r = 0, a_0 > 0 as x(s) is Hurwitz)
         r = float(u["yaw_rate"])
         if self.edges is not None and "vx" in u:
             self.mode = self._band(float(u["vx"]))
@@ -133,8 +135,11 @@ class TfEstimator:
             self.events.append(("warning", f"step size h = {h!r} s <= 0: no step, outputs held"))
             return
         if self.edges is not None and "vx" in u:
-            self.mode = self._band(u["vx"])    # bumpless: the state z is kept as it is
+            # departure: the paper designs one estimator for the whole speed box; a scheduled file
+            # holds one per band, switched bumplessly (the state z is kept as it is)
+            self.mode = self._band(u["vx"])
         if self.n:
+            # the paper's continuous-time filter, stepped exactly with r held over h (zero-order hold)
             Phi, Gam = self._map(self.mode, h)
             z = self.z
             zn = [sum([p * x for p, x in zip(row, z)], g * r) for row, g in zip(Phi, Gam)]
