@@ -10,7 +10,7 @@ import math
 from functools import reduce
 from operator import add, mul
 
-from .tf_estimator import tables_of
+from .spec import tables_of
 
 OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat")
 

@@ -12,7 +12,7 @@ from bisect import bisect_right
 from operator import mul
 
 from .linalg import zoh_map
-from .tf_estimator import tables_of
+from .spec import tables_of
 
 OUTPUT_NAMES = ("roll_angle_hat", "rider_torque_hat", "vy_hat", "steer_rate_hat", "Ff_hat", "Fr_hat",
                 "residual_norm", "mode")

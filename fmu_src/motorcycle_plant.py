@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from .spec import runtime_parameters
+from .spec import runtime_parameters, tables_of
 
 _atan = math.atan
 _sin = math.sin
@@ -130,12 +130,11 @@ class MotorcyclePlantModel:
         self._relax = p["sigma"] > 0.0
         self._sigma = p["sigma"]
         self._linear = p["linear_tires"] == 1.0
-        t = data.get("tables")
-        if not isinstance(t, dict) or "Minv" not in t or "kt" not in t:
-            raise ValueError("MotorcyclePlant data lacks its 'tables' (Minv, kt; computed when the plant file is "
-                             "built: synthesis.tables.attach)")
-        self._Minv = _mat(t["Minv"], 4, 4, "tables Minv")
-        self._kt = float(t["kt"])
+        t = tables_of(data, "MotorcyclePlant")
+        self._Minv = _mat(t.get("Minv"), 4, 4, "tables Minv")   # (E1) solved for du/dt
+        self._kt = float(t.get("kt", math.nan))                  # the substep rule's tyre-spring bound
+        if not (math.isfinite(self._kt) and self._kt >= 0):
+            raise ValueError(f"MotorcyclePlant: tables kt must be finite and >= 0, got {self._kt}")
         # tyre constants: (slip velocity row, heading, camber row, C1, C2/C1, D, B, C, E)
         self._tc = []
         for sl, hd, cb, c1, c2, fz, _ in tyres:

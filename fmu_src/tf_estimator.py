@@ -10,6 +10,7 @@ import math
 import threading
 
 from .linalg import zoh_map
+from .spec import tables_of
 
 OUTPUT_NAMES = ("beta_hat", "mode")
 
@@ -22,15 +23,6 @@ def zoh(A, B, h: float):
     n = len(A)
     E = zoh_map(A, [[b] for b in B], h)
     return [row[:n] for row in E], [row[n] for row in E]
-
-
-def tables_of(data: dict, runtime: str) -> dict:
-    """``data["tables"]`` (computed at build time by ``synthesis.tables``), or a ValueError."""
-    t = data.get("tables") if isinstance(data, dict) else None
-    if not isinstance(t, dict) or not t:
-        raise ValueError(f"data file lacks the 'tables' of the {runtime} runtime (computed when the design "
-                         "or plant file is built: synthesis.tables.attach)")
-    return t
 
 
 class TfEstimator:
