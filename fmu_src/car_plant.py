@@ -20,7 +20,7 @@ _REQUIRED = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr", "sigma",
 
 
 class CarPlantModel:
-    """Nonlinear two-track lateral/yaw/roll car with Magic-Formula tires (see module docstring).
+    """Nonlinear two-track lateral/yaw/roll car with Magic-Formula tires (docs/runtime/car_plant.md).
 
     ``CarPlantModel(data, params)`` with ``data = {"vehicle": Vehicle.as_dict()}`` and ``params``
     the FMU parameters (missing or None entries take their defaults):
@@ -378,7 +378,7 @@ class CarPlantModel:
 
     def _clamp_scales(self, u, warn: bool):
         """The stiffness_scale_f/r inputs of ``u`` (1.0 if absent), clamped to [SCALE_IN_MIN,
-        SCALE_IN_MAX]; a non-finite value holds the last valid one (module docstring)."""
+        SCALE_IN_MAX]; a non-finite value holds the last valid one (docs/runtime/car_plant.md)."""
         get = u.get
         out = []
         lo, hi = self.SCALE_IN_MIN, self.SCALE_IN_MAX
@@ -450,7 +450,7 @@ class CarPlantModel:
     def step(self, h: float, u: dict) -> None:
         """Advance ``h`` seconds with inputs ``u`` (delta, vx, bank_angle and optionally
         stiffness_scale_f, stiffness_scale_r, default 1.0) held; Heun's method, <= 1 ms substeps
-        (module docstring, "Numerics")."""
+        (docs/runtime/car_plant.md, "Numerics")."""
         h = float(h)
         delta, vx, phir = self._clamp_inputs(u, warn=True)
         sf, sr = self._clamp_scales(u, warn=True)
@@ -545,7 +545,7 @@ class CarPlantModel:
         y["Fyr"] = Fyr
         y["alpha_f"] = af
         y["alpha_r"] = ar
-        vy_cg = x[0] - self._hr * x[3] * _cos(x[2])   # CG lateral velocity (module docstring)
+        vy_cg = x[0] - self._hr * x[3] * _cos(x[2])   # CG lateral velocity (docs/runtime/car_plant.md)
         y["vy_cg"] = vy_cg
         y["beta_cg"] = _atan(vy_cg / vs)
         if ar > self.ALPHA_SPIN or ar < -self.ALPHA_SPIN:

@@ -31,7 +31,7 @@ def _vec(obj, n, name):
 
 
 class MotorcyclePlantModel:
-    """Sharp's motorcycle with Magic Formula tyres and relaxation (module docstring).
+    """Sharp's motorcycle with Magic Formula tyres and relaxation (docs/runtime/motorcycle_plant.md).
 
     ``MotorcyclePlantModel(data, params)`` with ``data`` the plant data file
     (``latobs.packaging.plant_data`` of a motorcycle: ``{"vehicle": ..., "structure": ...}``) and
