@@ -1,169 +1,7 @@
 """Nonlinear car plant: two-track lateral / yaw / roll model, the truth model of every car observer.
 
-Pure Python (``math`` only): this module runs inside an FMU on machines that have nothing but a
-Python interpreter. No FMI code here; the glue (``framework.py``) drives :class:`CarPlantModel`
-through the runtime protocol of ``spec.py``.
-
-Axes and signs
---------------
-Body (road-plane) axes x forward, y left, z up. ``delta`` > 0 steers left (both front wheels
-the same road-wheel angle, no Ackermann). Roll angle ``phi`` > 0 is a rotation about +x, i.e.
-the body leans to the RIGHT; a positive total lateral tire force (left turn) rolls the body to
-phi > 0. Road bank ``phi_r`` (input ``bank_angle``) > 0 gives a gravity component
--g sin(phi_r) along body +y (the sign of the design model, F = [-g/Vx, 0, 0, 0]^T).
-
-States (SI): ``vy`` (m/s) lateral velocity of the body-frame point on the roll axis below the
-CG, ``yaw_rate`` r (rad/s), ``roll_angle`` phi (rad), ``roll_rate`` phidot (rad/s) and, when the
-tire relaxation is on, the four wheel lateral forces Fy_fl, Fy_fr, Fy_rl, Fy_rr (N, wheel frame).
-
-Equations (S = sum of the tire forces along body y, Mz their yaw moment about the CG)
----------------------------------------------------------------------------------------
-Front wheel i at (lf, +-t/2) carries (-Fy_i sin delta, Fy_i cos delta) in body axes, a rear
-wheel at (-lr, +-t/2) carries (0, Fy_i); the moment of (Fx, Fy) at (x, y) is x Fy - y Fx:
-
-    S  = (Fy_fl + Fy_fr) cos(delta) + Fy_rl + Fy_rr
-    Mz = lf (Fy_fl + Fy_fr) cos(delta) + (t/2)(Fy_fl - Fy_fr) sin(delta) - lr (Fy_rl + Fy_rr)
-
-(E1) roll about the CG (the roll-axis reaction, lateral S and vertical m g cos(phi_r), acts
-     hr below the CG; gravity acts at the CG and has no moment about it):
-        Ix phi'' = hr S cos(phi) + m g cos(phi_r) hr sin(phi) - Kr phi - br phidot
-(E2) lateral Newton for the CG, whose lateral offset from the roll axis is -hr sin(phi):
-        m (vy' + vx r - hr (phi'' cos(phi) - phidot^2 sin(phi))) = S - m g sin(phi_r)
-     (phi'' is taken from E1 first, then vy' from E2)
-(E3) yaw:  Iz r' = Mz
-(E4) slip angle of the wheel at (xw, yw), from the planar motion of the body frame:
-        alpha = delta_w - atan2(vy + r xw, vx - r yw),   delta_w = delta front, 0 rear,
-     evaluated in wheel axes as alpha = -atan(v_w / max(u_w, V_SLIP_MIN)) with
-     u_w = (vx - r yw) cos(delta_w) + (vy + r xw) sin(delta_w) (along the wheel) and
-     v_w = (vy + r xw) cos(delta_w) - (vx - r yw) sin(delta_w) (across it): identical for
-     u_w >= V_SLIP_MIN, and never a division by zero.
-(E5) vertical loads per wheel (clamped so that every Fz >= 0 and each axle keeps its total):
-        static        m g cos(phi_r) l_other / (2 L),                     L = lf + lr
-        longitudinal  -+ m ax h_cg / (2 L) (front -, rear +: braking, ax < 0, loads the front),
-                      h_cg = h_rc + hr
-        lateral       dFz_axle = (m l_other/L * ay_eff * h_rc + share_axle (Kr phi + br phidot)) / t,
-                      left wheels -dFz, right wheels +dFz; share_f = roll_share_f,
-                      share_r = 1 - roll_share_f; ay_eff = S / m.
-(E6) simplified Magic Formula per wheel
-        Fy_ss = mu Fz sin(C atan(B a - E (B a - atan(B a))))
-     C = mf_C, E = mf_E; B is fixed per axle so that mu Fz_static B C = scale * C_axle / 2 with
-     Fz_static the flat-road static wheel load: at nominal load the wheel's linear cornering
-     stiffness is exactly C_axle/2 (times the scale) for ANY mu. The scale of an axle is the
-     product of the parameter (scale_f, scale_r: fixed for the run) and the input
-     (stiffness_scale_f, stiffness_scale_r: time-varying, see "Time-varying cornering stiffness"
-     below); it multiplies B only, so the peak force mu Fz is unchanged.
-     Parameter linear_tires = 1: the Magic Formula is replaced by its linearisation at zero slip,
-        Fy_ss = mu Fz B C a          (same B, C: no saturation, no peak),
-     i.e. a cornering stiffness per unit load mu B C, so that at nominal load each axle's
-     stiffness is exactly scale * C_axle; the load transfer (E5) still acts through Fz, and
-     relaxation, roll and the slip-angle geometry (E4) are unchanged. This is the tire of the
-     linear design models (bicycle model with relaxation, paper 001); |S| is then unbounded.
-(E7) relaxation (sigma > 0):  Fy' = (max(vx, V_RELAX_MIN) / sigma) (Fy_ss - Fy);
-     sigma <= 0: algebraic tires, Fy = Fy_ss (the tire states are not integrated).
-
-At straight driving with linear tires and no relaxation, E1-E4 linearise exactly to the design
-model of ``synthesis/bicycle_roll_model.py`` (beta = vy/vx); tests/test_car_plant.py checks it.
-With relaxation, linear_tires = 1 and hr -> 0 they linearise to the bicycle model with tire
-relaxation of paper 001 (states vy, r, (Fyf + Fyr)/m, (lf Fyf - lr Fyr)/Iz); tests/test_car_plant_001.py.
-
-Time-varying cornering stiffness (inputs stiffness_scale_f, stiffness_scale_r)
-------------------------------------------------------------------------------
-Two optional inputs (unit 1, start 1.0) multiply the front / rear axle cornering stiffness on
-top of the parameters scale_f / scale_r: C_axle,eff(t) = C_axle * scale * stiffness_scale(t).
-Like every input they are sampled at the communication point and held over the ``step`` call
-(zero-order hold; within one step B is constant). At 1.0 (their start value) every result is
-bit-identical to a plant without them (x * 1.0 == x in IEEE arithmetic, same substeps).
-Used to sweep a stiffness box during a run (paper 002's validation: the delibasi box).
-Clamping (documented departure; the step never raises):
-* a finite input outside [SCALE_IN_MIN, SCALE_IN_MAX] = [0.1, 10] (the range of the parameters
-  scale_f / scale_r; non-positive values included) is clamped into it, with a warning on
-  entering the clamp;
-* a non-finite value (only possible when the runtime is driven directly: the FMU glue refuses a
-  step with any non-finite input, logs an error, returns fmi2Discard and keeps the state) holds
-  the last valid value (1.0 before the first one), with a warning.
-The substep rule below scales its stiffness-dependent mode estimate by max(1, scales).
-
-Outputs at the centre of gravity
---------------------------------
-``vy`` and ``beta`` are those of the roll-axis point P below the CG. The CG sits at
-rho = (0, -hr sin(phi), hr cos(phi)) from P (E2's lateral offset; phi > 0 leans right, the CG
-moves to -y). In the yawing road-plane frame (angular velocity r about z) its velocity is
-v_P + d(rho)/dt + r e_z x rho, and e_z x rho = (hr sin(phi), 0, 0) has no y component, so
-
-    vy_cg   = vy + d/dt(-hr sin(phi)) = vy - hr phidot cos(phi)          (m/s)
-    beta_cg = atan(vy_cg / max(vx, V_SLIP_MIN))                         (rad)
-
-(the x component r hr sin(phi) is neglected like the CG's other in-plane terms: vx is that of P).
-E2 reads m (d(vy_cg)/dt + vx r) = S - m g sin(phi_r): Newton's law for the CG's lateral velocity.
-These are the lateral velocity and sideslip of paper 001 and of the measured datasets.
-
-Modelling assumptions
----------------------
-* One rigid sprung body of mass m (the unsprung masses are ignored: the whole mass rolls), rolling
-  about a fixed roll axis parallel to x at height h_rc above the ground at the CG (same height
-  front and rear); the CG is hr above the roll axis. Roll stiffness Kr and damping br are linear.
-* Longitudinal speed vx is prescribed (input); no longitudinal tire forces are modelled (the
-  body-x components of the front lateral forces are taken up by the implied drive/brake forces).
-  The longitudinal acceleration ax (only used for load transfer) is the finite difference of the
-  vx inputs of consecutive ``step`` calls, 0 on the first call, clamped to +-AX_MAX.
-* Vertical accelerations of the CG (hr cos(phi) changing) and pitch are ignored: the roll-axis
-  vertical reaction is m g cos(phi_r). The in-plane terms of order r^2 y_cg and the Coriolis
-  term of the CG lateral offset are neglected; yaw inertia is constant (no roll-yaw product).
-* Slip angles come from the planar (road-plane) motion only: roll rate, roll steer, compliance
-  steer and camber thrust are ignored; no Ackermann, no self-aligning moment.
-* Load transfer (E5): the geometric part uses the roll-centre height h_rc for both axles and
-  the axle's mass share; the elastic part splits Kr phi + br phidot by roll_share_f.
-  ay_eff = S/m is the CURRENT value: with relaxation S comes from the states (no algebraic
-  loop); with algebraic tires the loop is solved by one fixed-point iteration (pass 1 with
-  ay_eff = 0, pass 2 with ay_eff = S_pass1/m). Because Fy is proportional to Fz at a given slip
-  (B fixed per axle), lateral transfer only changes an axle's force through the small left/right
-  slip difference and through wheel lift-off, so the loop gain is small.
-  Clamping: the longitudinal transfer is limited so that neither axle goes below zero load, and
-  each axle's lateral transfer to +-(its wheel load), so every Fz >= 0 and sum(Fz) stays
-  m g cos(phi_r) (the spec's "clamp each Fz >= 0", done without creating load). Hence
-  |S| <= mu m g cos(phi_r) with algebraic Magic Formula tires.
-* Road bank enters as gravity only (E1, E2, E5); the bank is a body-frame input (the road's
-  slope across the car's x axis), not a map of the road.
-
-Numerics and input clamping (documented departures, the step never raises for finite inputs)
----------------------------------------------------------------------------------------------
-* Heun's method (explicit trapezoidal rule, 2nd order, two right-hand-side evaluations per
-  substep), inputs held over a ``step`` call; ``step(h)`` uses n = ceil(h/1e-3 - 1e-9) equal
-  substeps (<= 1 ms), more if an estimate of the fastest mode (relaxation rate vx/sigma, tire
-  stiffness / speed, roll) times the substep exceeds 1 (only for unusual parameters: tiny sigma,
-  huge stiffness scales). Stability: Heun's region |1 + z + z^2/2| <= 1 (z = lambda dt) contains
-  the disc |z + 1| <= 1, i.e. real modes up to |lambda| dt = 2 and oscillatory ones of damping
-  ratio zeta up to |lambda| dt = 2 zeta; on the eigenvalues of the linearisation (vx 0..100 m/s,
-  sigma 0.01..0.5 m and algebraic tires, stiffness scales 0.5..10, mu 0.3..1, h 1..20 ms) the
-  rule above keeps |R(lambda dt)| <= 1 (the least damped mode, at standstill, has
-  |lambda| dt ~ 0.07 at zeta ~ 0.04). Accuracy, against a tight reference with the same held
-  inputs (5 ms steps, bank-braking, double-lane-change, fishhook): max errors <= 2e-5 rad in
-  beta, 1e-4 rad/s in r, 5e-6 rad in phi, 6e-4 m/s^2 in ay (fishhook, ay peak 9.7 m/s^2;
-  <= 1e-6 in r on the gentle manoeuvres), 70-2000x smaller than the effect of the input hold
-  itself (held vs. linearly interpolated delta and bank over each 5 ms step). Classical RK4 at
-  the same substeps is ~1000x more accurate there but needs twice the evaluations (the 1 ms
-  bound on the substep is kept: ``step(h)`` = n ``step(h/n)`` calls, up to the ax of the first).
-* vx < 0 is clamped to 0, vx > VX_MAX to VX_MAX (warning). Below V_SLIP_MIN the slip-angle
-  denominator is floored (E4, the wheel's velocity along its own heading, max(u_w, V_SLIP_MIN))
-  and the relaxation rate uses max(vx, V_RELAX_MIN) (E7): the model is meant for vx >= 5 m/s
-  and is only kept finite and damped below 1 m/s (a warning is issued on entering that range).
-  Flooring the wheel-frame velocity (not the body vx) makes the tires act as stiff lateral
-  dampers at standstill: a car at vx = 0 with steered wheels does not start to yaw, and on a
-  bank it creeps downhill at about m g sin(phi_r) V_SLIP_MIN / (Cf + Cr) (mm/s). The sideslip
-  output uses the same floor: beta = atan(vy / max(vx, V_SLIP_MIN)).
-* |delta| is clamped to DELTA_MAX, |bank_angle| to BANK_MAX (warning on entering the clamp).
-* h <= 0: no integration (negative h gives a warning).
-* If the state ever became non-finite the call is undone and an "error" event issued.
-
-Validity limit: spin-out
-------------------------
-Because vx is prescribed in BODY axes, a car that spins (e.g. a sine-with-dwell at 6.5 x the
-0.3 g angle at 80 km/h on this sedan) cannot lose forward speed: once every tire slides near
-90 deg slip the yaw rate is hardly damped and the term -vx r keeps feeding vy (it grows about
-linearly, finite but unphysical). A warning event is issued when the mean rear slip angle
-|alpha_r| first exceeds ALPHA_SPIN (the rear is then far past its force peak; |beta| is not used
-because tight low-speed turns have a large kinematic sideslip); results after it are outside the
-model's validity.
+Standard library only; runs inside the FMU (``framework.py`` drives it). Equations, states,
+clamps and numerics: docs/runtime/car_plant.md.
 """
 from __future__ import annotations
 
@@ -182,7 +20,7 @@ _REQUIRED = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr", "sigma",
 
 
 class CarPlantModel:
-    """Nonlinear two-track lateral/yaw/roll car with Magic-Formula tires (see module docstring).
+    """Nonlinear two-track lateral/yaw/roll car with Magic-Formula tires (docs/runtime/car_plant.md).
 
     ``CarPlantModel(data, params)`` with ``data = {"vehicle": Vehicle.as_dict()}`` and ``params``
     the FMU parameters (missing or None entries take their defaults):
@@ -540,7 +378,7 @@ class CarPlantModel:
 
     def _clamp_scales(self, u, warn: bool):
         """The stiffness_scale_f/r inputs of ``u`` (1.0 if absent), clamped to [SCALE_IN_MIN,
-        SCALE_IN_MAX]; a non-finite value holds the last valid one (module docstring)."""
+        SCALE_IN_MAX]; a non-finite value holds the last valid one (docs/runtime/car_plant.md)."""
         get = u.get
         out = []
         lo, hi = self.SCALE_IN_MIN, self.SCALE_IN_MAX
@@ -612,7 +450,7 @@ class CarPlantModel:
     def step(self, h: float, u: dict) -> None:
         """Advance ``h`` seconds with inputs ``u`` (delta, vx, bank_angle and optionally
         stiffness_scale_f, stiffness_scale_r, default 1.0) held; Heun's method, <= 1 ms substeps
-        (module docstring, "Numerics")."""
+        (docs/runtime/car_plant.md, "Numerics")."""
         h = float(h)
         delta, vx, phir = self._clamp_inputs(u, warn=True)
         sf, sr = self._clamp_scales(u, warn=True)
@@ -707,7 +545,7 @@ class CarPlantModel:
         y["Fyr"] = Fyr
         y["alpha_f"] = af
         y["alpha_r"] = ar
-        vy_cg = x[0] - self._hr * x[3] * _cos(x[2])   # CG lateral velocity (module docstring)
+        vy_cg = x[0] - self._hr * x[3] * _cos(x[2])   # CG lateral velocity (docs/runtime/car_plant.md)
         y["vy_cg"] = vy_cg
         y["beta_cg"] = _atan(vy_cg / vs)
         if ar > self.ALPHA_SPIN or ar < -self.ALPHA_SPIN:

@@ -1,71 +1,65 @@
-"""Runtime of the baseline linear bicycle-model Kalman filter (the MBDS dataset authors' estimator).
+"""Runtime of the Kalman peer of paper 002: the linear bicycle-model Kalman filter of the MBDS
+dataset's authors, x = [vy, r], measuring y = [ay, r].
 
-Standard library only; no FMI here. The same filter as ``synthesis/kalman_baseline.py``
-(``run_kalman(..., estimate="predicted")``), with 2x2 matrices written out by hand. States
-x = [vy, r] (lateral velocity at the CG, m/s; yaw rate, rad/s); inputs delta (rad), vx (m/s),
-yaw_rate (rad/s), ay (m/s^2); outputs beta_hat (rad), vy_hat (m/s), yaw_rate_hat (rad/s).
-
-Model at the speed v (linear tires Fyf = Cf (delta - (vy + lf r)/v), Fyr = Cr (-(vy - lr r)/v)):
-    vy' = -(Cf + Cr)/(m v) vy - ((lf Cf - lr Cr)/(m v) + v) r + Cf/m delta
-    r'  = -(lf Cf - lr Cr)/(Iz v) vy - (lf^2 Cf + lr^2 Cr)/(Iz v) r + lf Cf/Iz delta
-    y = [ay, r],  ay = (Fyf + Fyr)/m = -(Cf + Cr)/(m v) vy - (lf Cf - lr Cr)/(m v) r + Cf/m delta.
-
-One call ``step(h, u)`` (inputs of the step held, v = vx clamped):
-    1. update with y = [ay, yaw_rate]: S = C P C' + R, K = P C' S^-1, x += K (y - C x - D delta),
-       P = (I - K C) P, symmetrised;
-    2. predict over h with delta held, exact zero-order hold (Van Loan):
-       [[Phi, Gam], [0, 1]] = expm(h [[A, B], [0, 0]]) (scaling and squaring, Taylor series),
-       x = Phi x + Gam delta, P = Phi P Phi' + Q h.
-Outputs at the end of the step: x_{k+1|k}, beta_hat = atan(vy_hat / v) with the step's v.
-
-Data file (``kalman_baseline.to_data_dict``, or the design file of ``kalman_baseline.design``)::
-
-    {"vehicle": {"m", "lf", "lr", "Iz", "Cf", "Cr"},            all finite > 0 (kg, m, m, kg m^2,
-                                                                 N/rad, N/rad), or a vehicle set as
-                                                                 in design files: {"name", "parameters":
-                                                                 {"m": {"value": ..., "unit": ...}, ...}}
-     "noise": {"q": 2x2 (PSD; process-noise intensity on [vy', r'], per s),
-               "r": 2x2 (positive definite; measurement covariance on [ay, r])},
-     "initial": {"P0": 2x2 positive definite},                   (optional, default diag(1, 0.01))
-     "runtime": {"vx_min": 1.0, "vx_max": 200.0}}                (optional, m/s)
-
-Documented clamps (never an exception for finite inputs):
-  * ``initialize(u)`` (or else the first step): x = [0, yaw_rate], P = P0; outputs beta 0;
-  * vx outside [vx_min, vx_max] (the model has 1/vx; reversing is not modelled): the model is
-    evaluated at the nearest bound, one warning per excursion;
-  * h <= 0 or a non-finite input or h: no step, outputs held, with a warning (the FMI framework
-    already refuses non-finite inputs); a step whose discretised model or result is not finite
-    (an absurd h): refused, state held, with a warning.
-
-``model(v)`` gives the (A, B, C, D) that ``step`` uses at the (clamped) speed v (m/s); the design
-certificate compares it with an independent derivation.
+Standard library only; the model's speed-free coefficients come from the design file's ``tables``
+(``synthesis/tables/sideslip_kalman_filter.py``). Behaviour: docs/runtime/sideslip_kalman_filter.md.
 """
 from __future__ import annotations
 
 import math
+from functools import reduce
+from operator import add, mul
+
+from .spec import tables_of
 
 OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat")
-_VEHICLE = ("m", "lf", "lr", "Iz", "Cf", "Cr")
 
 
-def _expm3(M):
-    """exp of a 3x3 matrix (list of rows): scaling and squaring, Taylor series summed until a
-    term is below 1e-18 relative: ``linalg.expm`` unrolled for 3x3, since the speed changes the
-    model at every step (this is the per-step hot path)."""
-    norm = max(sum(abs(a) for a in row) for row in M)
+# Small dense algebra on lists of rows. Every dot product is summed left to right from its first
+# term (not math.fsum, not from 0.0), so the results are those of the C model (kalman_observer.c).
+def _dot(a, b) -> float:
+    return reduce(add, map(mul, a, b))
+
+
+def _matmul(A, B):
+    cols = list(zip(*B))
+    return [[reduce(add, map(mul, row, col)) for col in cols] for row in A]
+
+
+def _transpose(A):
+    return [list(col) for col in zip(*A)]
+
+
+def _norm_inf(M) -> float:
+    """Induced infinity norm: the largest row sum of |m| (each summed from 0, left to right)."""
+    return max([sum(map(abs, row)) for row in M])
+
+
+def _expm(M):
+    """exp(M) by scaling and squaring: s the least integer >= 0 with ||M||_inf 2^-s <= 1/2, the
+    Taylor series of exp(M 2^-s) summed until a term is below 1e-18 relative, squared s times."""
+    n = len(M)
+    norm = _norm_inf(M)
     s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
     sc = 2.0 ** -s
     X = [[a * sc for a in row] for row in M]
-    E = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    E = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
     T = [row[:] for row in E]
+    X_cols = list(zip(*X))
     for k in range(1, 40):
-        T = [[(T[i][0] * X[0][j] + T[i][1] * X[1][j] + T[i][2] * X[2][j]) / k for j in range(3)] for i in range(3)]
+        T = [[reduce(add, map(mul, row, col)) / k for col in X_cols] for row in T]      # T X / k
         E = [[e + t for e, t in zip(re, rt)] for re, rt in zip(E, T)]
-        if max(sum(abs(a) for a in row) for row in T) <= 1e-18 * max(sum(abs(a) for a in row) for row in E):
+        if _norm_inf(T) <= 1e-18 * _norm_inf(E):
             break
     for _ in range(s):
-        E = [[E[i][0] * E[0][j] + E[i][1] * E[1][j] + E[i][2] * E[2][j] for j in range(3)] for i in range(3)]
+        E = _matmul(E, E)
     return E
+
+
+def _symmetric(N):
+    """N with its off-diagonal pair replaced by their mean (P stays symmetric under rounding)."""
+    off = 0.5 * (N[0][1] + N[1][0])
+    return [[N[0][0], off], [off, N[1][1]]]
 
 
 def _mat2(x, what):
@@ -90,48 +84,29 @@ def _definite(M, what, strict):
 
 
 class KalmanObserver:
-    """Linear bicycle-model Kalman filter measuring ay and the yaw rate (module docstring)."""
+    """Linear bicycle-model Kalman filter measuring ay and the yaw rate: per step an update with
+    the measurement, then an exact zero-order-hold prediction over h."""
 
     PARAMETERS: dict = {}
 
     def __init__(self, data: dict, params: dict | None = None):
+        t = tables_of(data, "Kalman filter")
         try:
-            veh = data["vehicle"]
-            where = "vehicle"
-            if isinstance(veh.get("parameters"), dict):      # a vehicle set as in design files
-                veh, where = veh["parameters"], "vehicle.parameters"
-            vals = {}
-            for k in _VEHICLE:
-                if k not in veh:
-                    raise ValueError(f"data file: {where}.{k} is missing")
-                entry = veh[k]
-                if isinstance(entry, dict):
-                    entry = entry.get("value")
-                try:
-                    vals[k] = float(entry)
-                except (TypeError, ValueError):
-                    raise ValueError(f"data file: {where}.{k} must be a number, got {veh[k]!r}") from None
-                if not (math.isfinite(vals[k]) and vals[k] > 0):
-                    raise ValueError(f"data file: vehicle.{k} must be finite and > 0, got {vals[k]!r}")
-            self.Q = _mat2(data["noise"]["q"], "noise.q")
-            self.R = _mat2(data["noise"]["r"], "noise.r")
-            self.P0 = _mat2(data.get("initial", {}).get("P0", [[1.0, 0.0], [0.0, 0.01]]), "initial.P0")
-            rt = data.get("runtime", {}) or {}
-            self.vx_min = float(rt.get("vx_min", 1.0))
-            self.vx_max = float(rt.get("vx_max", 200.0))
+            self._a = tuple(float(x) for x in t["a"])
+            self._b = tuple(float(x) for x in t["b"])
+            self.Q = _mat2(t["Q"], "noise.q")
+            self.R = _mat2(t["R"], "noise.r")
+            self.P0 = _mat2(t["P0"], "initial.P0")
+            self.vx_min = float(t["vx_min"])
+            self.vx_max = float(t["vx_max"])
         except (KeyError, TypeError, AttributeError) as exc:
-            raise ValueError(f"data file lacks {exc} needed by the Kalman observer runtime") from exc
+            raise ValueError(f"data file: tables lack {exc} needed by the Kalman observer runtime") from exc
         _definite(self.Q, "noise.q", strict=False)
         _definite(self.R, "noise.r", strict=True)
         _definite(self.P0, "initial.P0", strict=True)
         if not (math.isfinite(self.vx_min) and math.isfinite(self.vx_max) and 0 < self.vx_min < self.vx_max):
             raise ValueError(f"data file: runtime.vx_min/vx_max must be finite with 0 < vx_min < vx_max, "
                              f"got {self.vx_min}, {self.vx_max}")
-        m, lf, lr, Iz, Cf, Cr = (vals[k] for k in _VEHICLE)
-        self.vehicle = vals
-        # A = [[a00 / v, a01 / v - v], [a10 / v, a11 / v]], B = [b0, b1], ay row = A row 0 + [0, v]
-        self._a = (-(Cf + Cr) / m, -(lf * Cf - lr * Cr) / m, -(lf * Cf - lr * Cr) / Iz, -(lf**2 * Cf + lr**2 * Cr) / Iz)
-        self._b = (Cf / m, lf * Cf / Iz)
         self.x = [0.0, 0.0]
         self.P = [row[:] for row in self.P0]
         self._started = False
@@ -144,6 +119,7 @@ class KalmanObserver:
         return {}
 
     def _speed(self, vx: float) -> float:
+        """vx clamped to [vx_min, vx_max] (the model has 1/vx), one warning per excursion."""
         if self.vx_min <= vx <= self.vx_max:
             self._outside = False
             return vx
@@ -182,7 +158,8 @@ class KalmanObserver:
         self._publish(self._speed(vx))
 
     def step(self, h: float, u: dict) -> None:
-        """Update with y = [ay, yaw_rate], then predict over h (s) with the inputs u held."""
+        """Update with y = [ay, yaw_rate], then predict over h (s) with the inputs u held; the
+        outputs are the prediction x_{k+1|k}."""
         delta, vx, ay, yr = u["delta"], u["vx"], u["ay"], u["yaw_rate"]
         if not (math.isfinite(delta) and math.isfinite(vx) and math.isfinite(ay) and math.isfinite(yr)):
             self.events.append(("warning", f"non-finite input (delta, vx, ay, yaw_rate) = {(delta, vx, ay, yr)!r}: "
@@ -193,61 +170,36 @@ class KalmanObserver:
         if not h > 0 or not math.isfinite(h):
             self.events.append(("warning", f"step size h = {h!r} s is not finite and > 0: no step, outputs held"))
             return
-        v = self._speed(vx)
+        v = self._speed(vx)        # the model has 1/vx: evaluated inside [vx_min, vx_max]
         A, B, C, D = self.model(v)
-        (a00, a01), (a10, a11) = A
-        b0, b1 = B
-        (c00, c01), (c10, c11) = C
-        d0, d1 = D
-        x0, x1 = self.x
-        (p00, p01), (p10, p11) = self.P
-        (r00, r01), (r10, r11) = self.R
-        # 1. update with y = [ay, yaw_rate]: S = C P C' + R, K = P C' S^-1 (P symmetric: P C' = (C P)')
-        cp00, cp01 = c00 * p00 + c01 * p10, c00 * p01 + c01 * p11
-        cp10, cp11 = c10 * p00 + c11 * p10, c10 * p01 + c11 * p11
-        s00 = cp00 * c00 + cp01 * c01 + r00
-        s01 = cp00 * c10 + cp01 * c11 + r01
-        s10 = cp10 * c00 + cp11 * c01 + r10
-        s11 = cp10 * c10 + cp11 * c11 + r11
-        det = s00 * s11 - s01 * s10
-        i00, i01, i10, i11 = s11 / det, -s01 / det, -s10 / det, s00 / det
-        k00 = cp00 * i00 + cp10 * i10
-        k01 = cp00 * i01 + cp10 * i11
-        k10 = cp01 * i00 + cp11 * i10
-        k11 = cp01 * i01 + cp11 * i11
-        e0 = ay - (c00 * x0 + c01 * x1) - d0 * delta
-        e1 = yr - (c10 * x0 + c11 * x1) - d1 * delta
-        x0 += k00 * e0 + k01 * e1
-        x1 += k10 * e0 + k11 * e1
-        q00, q01 = 1.0 - (k00 * c00 + k01 * c10), -(k00 * c01 + k01 * c11)       # I - K C
-        q10, q11 = -(k10 * c00 + k11 * c10), 1.0 - (k10 * c01 + k11 * c11)
-        n00, n01 = q00 * p00 + q01 * p10, q00 * p01 + q01 * p11
-        n10, n11 = q10 * p00 + q11 * p10, q10 * p01 + q11 * p11
-        p00, p11 = n00, n11
-        p01 = p10 = 0.5 * (n01 + n10)
-        # 2. predict over h (exact ZOH of the model at v)
+        x, P = self.x, self.P
+        # 1. update: S = C P C' + R, K = P C' S^-1 (P symmetric: P C' = (C P)'), x += K (y - C x - D delta)
+        CP = _matmul(C, P)
+        S = [[s + r for s, r in zip(srow, rrow)] for srow, rrow in zip(_matmul(CP, _transpose(C)), self.R)]
+        det = S[0][0] * S[1][1] - S[0][1] * S[1][0]
+        Sinv = [[S[1][1] / det, -S[0][1] / det], [-S[1][0] / det, S[0][0] / det]]
+        K = _matmul(_transpose(CP), Sinv)
+        e = [y - _dot(c, x) - d * delta for y, c, d in zip((ay, yr), C, D)]
+        x = [xi + _dot(k, e) for xi, k in zip(x, K)]
+        KC = _matmul(K, C)
+        IKC = [[(1.0 - kc) if i == j else -kc for j, kc in enumerate(row)] for i, row in enumerate(KC)]
+        P = _symmetric(_matmul(IKC, P))                    # P = (I - K C) P
+        # 2. predict over h: [[Phi, Gam], [0, 1]] = expm(h [[A, B], [0, 0]]) (Van Loan, exact ZOH)
         try:
-            E = _expm3([[a00 * h, a01 * h, b0 * h],
-                        [a10 * h, a11 * h, b1 * h],
-                        [0.0, 0.0, 0.0]])
+            E = _expm([[*(a * h for a in A[0]), B[0] * h], [*(a * h for a in A[1]), B[1] * h], [0.0, 0.0, 0.0]])
         except (OverflowError, ValueError, ZeroDivisionError):
             E = None
         if E is None or not all(math.isfinite(a) for row in E for a in row):
             self.events.append(("warning", f"the model discretised over h = {h!r} s is not finite: step refused, "
                                            "state held"))
             return
-        f00, f01, g0 = E[0]
-        f10, f11, g1 = E[1]
-        x0, x1 = f00 * x0 + f01 * x1 + g0 * delta, f10 * x0 + f11 * x1 + g1 * delta
-        m00, m01 = f00 * p00 + f01 * p10, f00 * p01 + f01 * p11
-        m10, m11 = f10 * p00 + f11 * p10, f10 * p01 + f11 * p11
-        (w00, w01), (w10, w11) = self.Q
-        p00 = m00 * f00 + m01 * f01 + w00 * h
-        p11 = m10 * f10 + m11 * f11 + w11 * h
-        p01 = 0.5 * ((m00 * f10 + m01 * f11 + w01 * h) + (m10 * f00 + m11 * f01 + w10 * h))
-        if not all(math.isfinite(a) for a in (x0, x1, p00, p01, p11)):
+        Phi, Gam = [row[:2] for row in E[:2]], [row[2] for row in E[:2]]
+        x = [_dot(f, x) + g * delta for f, g in zip(Phi, Gam)]
+        PhiP = _matmul(Phi, P)
+        P = _symmetric([[_dot(m, f) + q * h for f, q in zip(Phi, qrow)] for m, qrow in zip(PhiP, self.Q)])
+        if not all(math.isfinite(a) for a in (x[0], x[1], P[0][0], P[0][1], P[1][1])):
             self.events.append(("warning", "the filter's state became non-finite: step refused, state held"))
             return
-        self.x = [x0, x1]
-        self.P = [[p00, p01], [p01, p11]]
+        self.x = x
+        self.P = P
         self._publish(v)

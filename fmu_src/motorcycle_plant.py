@@ -1,89 +1,13 @@
 """Nonlinear motorcycle plant: Sharp's (1971) lateral model with Magic Formula tyres (paper 003).
 
-Pure Python (``math`` only): this module runs inside an FMU. No FMI code here (``framework.py``
-drives :class:`MotorcyclePlantModel` through the runtime protocol of ``spec.py``), and no
-symbolic maths: the equations were derived with sympy at build time
-(``latobs.synthesis.motorcycle_model``) and arrive as numbers in the plant data file
-(``data["structure"]``, from ``motorcycle_model.plant_structure``).
-
-Axes and signs: Sharp's (SAE): x forward, y RIGHT, z DOWN. roll_angle > 0 leans right,
-steer_angle > 0 steers right, yaw_rate > 0 turns right, vy > 0 moves right, Ff/Fr > 0 push right,
-rider_torque > 0 turns the handlebar to the right. ``vy`` is the lateral velocity of the ground
-point P of the rear frame below its mass centre (b ahead of the rear contact; on the roll axis).
-
-States (SI): roll_angle phi, steer_angle delta, vy, yaw_rate r, roll_rate, steer_rate, Ff, Fr
-(the order of ``motorcycle_model.STATE_FULL``).
-
-Equations
----------
-(E1) mechanics (paper 003's eqs. (1)-(2) with the DERIVED coefficients), u = [vy, r, roll_rate,
-     steer_rate]:
-        M du/dt = -(C0 + vx C1) u - K_sin [sin(phi), sin(delta)] + B_F [Ff, Fr] + B_tau tau
-     d(phi)/dt = roll_rate, d(delta)/dt = steer_rate.
-(E2) slip and camber (paper 003's eqs. (7)-(8), geometry derived with the mechanics):
-        alpha_f = -(vy + lf r - an steer_rate)/vs + cos(eps) delta,   gamma_f = phi + sin(eps) delta
-        alpha_r = -(vy - lr r)/vs,                                    gamma_r = phi
-     vs = max(vx, V_SLIP_MIN).
-(E3) tyre: Pacejka's Magic Formula with camber as a horizontal shift of the slip (an equivalent
-     slip x = alpha + (C2/C1) gamma, the camber thrust of Pacejka's 1989 formula):
-        Fs = D sin(C atan(B x - E (B x - atan(B x)))),   D = mu Fz,   B = C1 / (C D)
-     per tyre, Fz the STATIC load (front -Zf, rear (mf + mr) g + Zf: no load transfer in this
-     model). Its slope at zero is B C D = C1 in alpha and C1 (C2/C1) = C2 in gamma: the linear
-     part is exactly paper 003's C1 alpha + C2 gamma (eqs. (5)-(6)), and
-        Gamma = Fs - (C1 alpha + C2 gamma)
-     is the paper's nonlinear part: O(x^3) at small slip, -> D - C1 x in the sliding zone,
-     |Fs| <= mu Fz always. C = mf_C (0 < C < 2: the force never changes sign), E = mf_E (<= 1).
-     linear_tires = 1: Fs = C1 alpha + C2 gamma (Gamma = 0), the paper's linear model.
-(E4) relaxation (paper 003's eqs. (3)-(4)), sigma > 0:
-        dF/dt = (vr / sigma) (Fs - F),   vr = max(vx, V_RELAX_MIN);
-     sigma = 0: algebraic tyres F = Fs (paper 003's reduced model, section II.D, with the
-     nonlinear tyre); the force states then report Fs.
-
-At straight running with linear tyres the right-hand side linearises exactly to
-``motorcycle_model.full_model`` (sigma > 0) and, with phi' = roll_rate appended, to the
-``reduced_model`` (sigma = 0); tests/test_motorcycle_plant.py checks both, and the FMU's
-small-input response against scipy's solve_ivp of the linear model.
-
-Outputs (beyond CONTRACT.md's steer_angle, steer_rate, yaw_rate, roll_angle, roll_rate, vy, Ff,
-Fr): Gamma_f, Gamma_r (N; Fs - its linear part, at the current state and inputs: what paper 003's
-observer estimates) and alpha_f, alpha_r (rad, E2).
-
-Modelling assumptions
----------------------
-Sharp's: two rigid frames (the rider rigid with the rear frame), thin-disc wheels rolling on a
-flat road about the ground line, constant wheel loads, no pitch/heave, no aerodynamics; forward
-speed prescribed (input vx, held per step, no dvx/dt terms: paper 003's switched/LPV reading);
-linearised kinematics of slip and camber (paper 003: saturation is reached at small angles).
-The nonlinearities are those of paper 003: sin() of the angles in the gravity/load terms and the
-saturating tyre. Large lean angles (|phi| > ROLL_WARN = 1 rad) are outside any validity: the
-motorcycle has fallen; a warning is issued once, the integration goes on (finite).
-
-Numerics and clamps (documented departures; the step never raises)
-------------------------------------------------------------------
-* Classical RK4, inputs held over a ``step`` call, n >= ceil(h / H_MAX) equal substeps with
-  H_MAX = 1 ms, more if lam_est * (h/n) > LAM_DT = 1, where lam_est bounds the spectral radius of
-  the linearisation: vr/sigma + sqrt(kt/sigma) + LAM_MECH with relaxation, kt/vs + LAM_MECH with
-  algebraic tyres; kt = max row sum of |diag(C1) S M^-1 B_F| (S the contact-velocity rows of
-  E2: the tyre "spring" through the mechanics, >= its spectral radius), LAM_MECH = 80 1/s (wobble
-  ~58 rad/s at 50 m/s). For the default data (sigma = 0.2438 m) the fastest modes are the wobble
-  (|lambda| ~ 54-61 rad/s, lightly damped) and the relaxation (vx/sigma ~ 123 1/s at 30 m/s, 246
-  at 60 m/s): at 1 ms, |lambda| dt <= 0.25, where RK4's amplification matches exp(lambda dt) to
-  ~(lambda dt)^5/120 ~ 1e-5 per step: the wobble's damping (-1 ... -6 1/s) is resolved to << 1 %.
-  (tests: lam_est >= the true spectral radius over vx 0-60 m/s, sigma 0.01-5 m and sigma = 0.)
-* vx < 0 -> 0, vx > VX_MAX -> VX_MAX; below V_SLIP_MIN = 1 m/s the slip denominator and the
-  relaxation rate are floored at 1 m/s (the model has 1/vx): finite and damped, but meant for
-  vx >= 5 m/s (a warning is issued when vx < V_WARN = 1 m/s). |rider_torque| is clamped to
-  TAU_MAX. Each clamp warns once on entering it.
-* A non-finite input never reaches ``step`` through the FMU (the framework refuses the step with
-  fmi2Discard and keeps the state); called directly, a non-finite input holds its last valid value
-  (0 before any) with a warning.
-* If the state became non-finite the step is undone and an "error" event issued.
+Standard library only; runs inside the FMU (``framework.py`` drives it). Equations, states,
+clamps and numerics: docs/runtime/motorcycle_plant.md.
 """
 from __future__ import annotations
 
 import math
 
-from .spec import runtime_parameters
+from .spec import runtime_parameters, tables_of
 
 _atan = math.atan
 _sin = math.sin
@@ -106,26 +30,8 @@ def _vec(obj, n, name):
     return _mat([obj], 1, n, name)[0]
 
 
-def _inv(a):
-    """Inverse of a small square matrix (Gauss-Jordan with partial pivoting), lists of floats."""
-    n = len(a)
-    m = [list(row) + [1.0 if i == j else 0.0 for j in range(n)] for i, row in enumerate(a)]
-    for c in range(n):
-        p = max(range(c, n), key=lambda i: abs(m[i][c]))
-        if abs(m[p][c]) < 1e-12:
-            raise ValueError("MotorcyclePlant: structure 'M' (mass matrix) is singular")
-        m[c], m[p] = m[p], m[c]
-        piv = m[c][c]
-        m[c] = [x / piv for x in m[c]]
-        for i in range(n):
-            if i != c and m[i][c] != 0.0:
-                f = m[i][c]
-                m[i] = [x - f * y for x, y in zip(m[i], m[c])]
-    return [row[n:] for row in m]
-
-
 class MotorcyclePlantModel:
-    """Sharp's motorcycle with Magic Formula tyres and relaxation (module docstring).
+    """Sharp's motorcycle with Magic Formula tyres and relaxation (docs/runtime/motorcycle_plant.md).
 
     ``MotorcyclePlantModel(data, params)`` with ``data`` the plant data file
     (``latobs.packaging.plant_data`` of a motorcycle: ``{"vehicle": ..., "structure": ...}``) and
@@ -224,17 +130,16 @@ class MotorcyclePlantModel:
         self._relax = p["sigma"] > 0.0
         self._sigma = p["sigma"]
         self._linear = p["linear_tires"] == 1.0
-        self._Minv = _inv(self.M)
-        Mi = self._Minv
+        t = tables_of(data, "MotorcyclePlant")
+        self._Minv = _mat(t.get("Minv"), 4, 4, "tables Minv")   # (E1) solved for du/dt
+        self._kt = float(t.get("kt", math.nan))                  # the substep rule's tyre-spring bound
+        if not (math.isfinite(self._kt) and self._kt >= 0):
+            raise ValueError(f"MotorcyclePlant: tables kt must be finite and >= 0, got {self._kt}")
         # tyre constants: (slip velocity row, heading, camber row, C1, C2/C1, D, B, C, E)
         self._tc = []
         for sl, hd, cb, c1, c2, fz, _ in tyres:
             D = p["mu"] * fz
             self._tc.append((sl, hd, cb, c1, c2 / c1, D, c1 / (p["mf_C"] * D)))
-        # kt = max row sum |diag(C1) S M^-1 B_F| (S: the slip-velocity rows), for lam_est
-        MiBF = [[sum(Mi[i][k] * self.BF[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
-        self._kt = max(sum(abs(sum(c[3] * c[0][k] * MiBF[k][j] for k in range(4))) for j in range(2))
-                       for c in self._tc)
 
         self.x = [0.0] * 8
         self.events: list = []

@@ -216,3 +216,13 @@ def runtime_parameters(model: str, known, defaults: dict, params: dict | None) -
             raise ValueError(f"{model}: parameter {k!r} must be a finite number, got {val!r}")
         out[k] = float(val)
     return out
+
+
+def tables_of(data: dict, runtime: str) -> dict:
+    """``data["tables"]``: what the runtime evaluates, computed when the design (or plant) file was
+    built; a ValueError naming ``runtime`` when they are missing."""
+    t = data.get("tables") if isinstance(data, dict) else None
+    if not isinstance(t, dict) or not t:
+        raise ValueError(f"data file lacks the 'tables' of the {runtime} runtime (computed when the design "
+                         "or plant file is built)")
+    return t

@@ -106,9 +106,14 @@ def plant_data(vehicle: str | Vehicle) -> dict:
     data = {"schema": "latobs.plant/1", "vehicle": veh.as_dict()}
     if veh.kind == "motorcycle":
         data.update(motorcycle_data(veh))
-    from .synthesis import tables
+    from .synthesis import table_checks, tables
 
-    return tables.attach(data)
+    tables.attach(data)
+    failed = [f"{c.name} ({c.value:.3g} {c.sense} {c.limit:.3g}{'; ' + c.detail if c.detail else ''})"
+              for c in table_checks.checks(data) if not c.passed]
+    if failed:       # the plant's tables are checked as a design's are by its certificate
+        raise PackagingError(f"plant data of vehicle {veh.name!r}: tables fail their checks: {'; '.join(failed)}")
+    return data
 
 
 def motorcycle_data(veh) -> dict:

@@ -672,7 +672,8 @@ def _certify_kalman(d: dict) -> list[Check]:
     import scipy.linalg
     import scipy.signal
 
-    from ..fmu_src.kalman_observer import KalmanObserver, _expm3
+    from ..fmu_src.kalman_observer import KalmanObserver
+    from ..fmu_src.kalman_observer import _expm as _expm3
     from . import kalman_baseline as kb
 
     checks: list[Check] = []

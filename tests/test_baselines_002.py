@@ -12,10 +12,22 @@ from latobs.fmu_src import tf_estimator as te
 from latobs.fmu_src.kalman_observer import KalmanObserver
 from latobs.fmu_src.tf_estimator import TfEstimator
 from latobs.synthesis import kalman_baseline as kb
+from latobs.synthesis.tables import sideslip_fixed_order_estimator as tft
+from latobs.synthesis.tables import sideslip_kalman_filter as kft
 from latobs.synthesis.params import load_vehicle
 from latobs.validation.replay import MBDS_CSV, load_csv
 
 RNG_SEED = 2014
+
+
+def _tf(data: dict) -> TfEstimator:
+    """The runtime of an estimator data dict with its build-time tables."""
+    return TfEstimator({**data, "tables": tft.compute(data)}, {})
+
+
+def _kf(data: dict) -> KalmanObserver:
+    """The Kalman runtime of a data dict with its build-time tables."""
+    return KalmanObserver({**data, "tables": kft.compute(data)}, {})
 
 
 def _random_estimator(rng, n):
@@ -31,7 +43,7 @@ def test_tf_realisation_and_zoh_match_scipy(n):
     rng = np.random.default_rng(RNG_SEED + n)
     for _ in range(4):
         num, den = _random_estimator(rng, n)
-        est = TfEstimator({"estimator": {"num": num, "den": den}}, {})
+        est = _tf({"estimator": {"num": num, "den": den}})
         A, B, C, D, _ = est.systems[0]
         if n == 0:
             assert D == pytest.approx(num[0] / den[0], rel=1e-15)
@@ -55,19 +67,19 @@ def test_tf_runtime_matches_lsim(n):
     h, N = 0.01, 600
     t = np.arange(N) * h
     r = 0.3 * np.sin(2.0 * t) + 0.1 * np.sign(np.sin(7.0 * t)) + 0.05 * rng.normal(size=N)
-    est = TfEstimator({"estimator": {"num": num, "den": den}}, {})
+    est = _tf({"estimator": {"num": num, "den": den}})
     est.initialize({"yaw_rate": float(r[0])})
     out = [est.y["beta_hat"]]
     for k in range(N - 1):
         est.step(h, {"yaw_rate": float(r[k])})
         out.append(est.y["beta_hat"])
     # runtime: beta^ at t_{k+1} = C z_{k+1} + D r_k (input of the step held)
-    A, B, C, D, a = est.systems[0]
+    A, B, C, D, a0 = est.systems[0]
     if n == 0:
         expect = np.r_[r[0], r[:-1]] * D
     else:
         sys_ = (np.array(A), np.array(B)[:, None], np.array([C]), np.array([[D]]))
-        x0 = np.r_[r[0] / a[0], np.zeros(n - 1)]
+        x0 = np.r_[r[0] / a0, np.zeros(n - 1)]
         _, _, xout = scipy.signal.lsim(sys_, r, t, X0=x0, interp=False)
         expect = np.reshape(xout, (N, n)) @ np.array(C) + D * np.r_[r[0], r[:-1]]
     scale = max(1.0, np.abs(expect).max())
@@ -82,7 +94,7 @@ def test_tf_schedule_bumpless_and_warnings():
     for i, band in enumerate(([10.0, 20.0], [20.0, 30.0], [30.0, 40.0])):
         num, den = _random_estimator(rng, 2)
         ests.append({"num": num, "den": den, "vx_band": band})
-    est = TfEstimator({"estimators": ests, "runtime": {"cache_size": 4}}, {})
+    est = _tf({"estimators": ests, "runtime": {"cache_size": 4}})
     est.initialize({"yaw_rate": 0.1, "vx": 15.0})
     assert est.y["mode"] == 1
     z_before = None
@@ -122,13 +134,13 @@ def test_tf_schedule_bumpless_and_warnings():
 ])
 def test_tf_data_validation_names_the_field(data, field):
     with pytest.raises(ValueError, match=field.replace("[", r"\[").replace("]", r"\]")):
-        TfEstimator(data, {})
+        _tf(data)
 
 
 def test_hurwitz():
     for roots, ok in (([-1.0], True), ([-1, -2, -3], True), ([-0.1 + 5j, -0.1 - 5j, -2], True),
                       ([0.1 + 5j, 0.1 - 5j, -2], False), ([1.0, -2.0], False), ([-1, -1, -1, -1], True)):
-        assert te.hurwitz(np.real(np.poly(roots))[::-1].tolist()) is ok
+        assert tft.hurwitz(np.real(np.poly(roots))[::-1].tolist()) is ok
 
 
 # -- Kalman baseline -------------------------------------------------------------------------
@@ -143,7 +155,7 @@ def test_kalman_runtime_equals_run_kalman(mbds):
     sel = cols["t"] < cols["t"][0] + 20.0
     part = {k: v[sel] for k, v in cols.items()}
     beta, states = kb.run_kalman(part, vals, q, rm, estimate="predicted", return_states=True)
-    obs = KalmanObserver(kb.to_data_dict(vals, q, rm), {})
+    obs = _kf(kb.to_data_dict(vals, q, rm))
     t = part["t"]
     u = {k: float(part[k][0]) for k in ("delta", "vx", "yaw_rate", "ay")}
     obs.initialize(u)
@@ -161,7 +173,7 @@ def test_kalman_runtime_equals_run_kalman(mbds):
 def test_kalman_runtime_clamps_and_validation(mbds):
     _, vals = mbds
     data = kb.to_data_dict(vals, (0.1, 1e-4), (10.0, 1e-4))
-    obs = KalmanObserver(data, {})
+    obs = _kf(data)
     obs.initialize({"delta": 0.0, "vx": 20.0, "yaw_rate": 0.1, "ay": 2.0})
     for vx in (20.0, 0.0, -5.0, 20.0, 1e9, 20.0):
         obs.step(0.01, {"delta": 0.01, "vx": vx, "yaw_rate": 0.1, "ay": 2.0})
@@ -173,11 +185,11 @@ def test_kalman_runtime_clamps_and_validation(mbds):
     bad = kb.to_data_dict(vals, (0.1, 1e-4), (10.0, 1e-4))
     bad["noise"]["r"] = [[1.0, 0.0], [0.0, 0.0]]
     with pytest.raises(ValueError, match="noise.r"):
-        KalmanObserver(bad, {})
+        _kf(bad)
     bad = kb.to_data_dict(vals, (0.1, 1e-4), (10.0, 1e-4))
     del bad["vehicle"]["Cf"]
     with pytest.raises(ValueError, match="vehicle.Cf"):
-        KalmanObserver(bad, {})
+        _kf(bad)
 
 
 def test_kalman_mbds_rms(mbds):

@@ -179,7 +179,7 @@ def test_a_parameter_the_runtime_refuses_fails_the_initialisation(plants):
 
 @pytest.mark.parametrize("name, value", [("Kr", float("nan")), ("mf_C", 2.5), ("roll_share_f", 1.5), ("h_rc", None),
                                          ("Kr", 1000.0)])
-def test_the_emitter_refuses_what_the_runtime_refuses_naming_it(name, value):
+def test_the_emitter_refuses_what_the_runtime_refuses_naming_it(name, value, tmp_path):
     from latobs.cbackend import car_plant as emitter
 
     data = packaging.plant_data("sedan")
@@ -190,8 +190,10 @@ def test_the_emitter_refuses_what_the_runtime_refuses_naming_it(name, value):
         params[name]["value"] = value
     with pytest.raises(ValueError, match=repr(name)):
         CarPlantModel(data)
-    with pytest.raises(ValueError, match=repr(name)):
-        emitter.emit(data)
+    from latobs.cbackend import build_c_fmu
+
+    with pytest.raises(packaging.PackagingError, match=repr(name)):       # refused before any C is written
+        build_c_fmu(packaging.PLANTS["CarPlant"], "CarPlant", data, tmp_path)
     assert len(emitter.emit(packaging.plant_data("delibasi")).states) == 9
 
 

@@ -33,7 +33,8 @@ from latobs.fmu_src.framework import DEFAULT_STEP
 from latobs.fmu_src.tf_estimator import TfEstimator
 from latobs.native_guard import find_compiler
 from latobs.pipeline import PLANT_NOISE
-from latobs.synthesis import design_file, designs
+from latobs.synthesis import design_file, designs, tables
+from latobs.synthesis.tables import sideslip_fixed_order_estimator as tft
 from latobs.validation import harness
 from latobs.validation import replay as rp
 from latobs.validation.scenarios import get_scenario
@@ -220,7 +221,7 @@ def _check_me(fmu, data: dict, t: np.ndarray, inputs: dict, cs: dict) -> list[st
     """
     names = ["time", *inputs]
     sig = np.rec.fromarrays([t, *inputs.values()], names=names)
-    systems = TfEstimator(data).systems
+    systems = TfEstimator(data if "tables" in data else {**data, "tables": tft.compute(data)}).systems
     n = len(systems[0][0])
     warnings = []
 
@@ -302,6 +303,7 @@ def synthetic(tmp_path_factory):
     def build(model: str, name: str, data: dict):
         if name not in made:
             kind = packaging.OBSERVERS[model]
+            data = {**data, "tables": tft.compute(data)}       # what designs.run attaches
             made[name] = (packaging.build_fmu(kind, name, data, out / "py"), build_c_fmu(kind, name, data, out / "c"))
         return made[name]
     return build
@@ -392,13 +394,15 @@ def test_a_step_whose_map_is_not_finite_is_refused_like_python(pairs, artefact, 
                      {"num": [1.0], "den": [1.0, 1.0], "vx_band": [2.0, 3.0]}]}, r"estimators\[1\].vx_band")])
 def test_tf_emitter_refuses_what_the_runtime_refuses(data, culprit):
     with pytest.raises(ValueError, match=culprit):
-        tf_emitter.emit(data)
+        tf_emitter.emit({**data, "tables": tft.compute(data)})      # the tables' checks, then the C limit
 
 
-def test_kalman_emitter_is_co_simulation_only_and_refuses_what_the_runtime_refuses(built_fmus):
+def test_kalman_emitter_is_co_simulation_only_and_refuses_what_the_runtime_refuses(built_fmus, tmp_path):
     design = built_fmus.design("SideslipKalmanFilter")
     assert kalman_emitter.emit(design).states == ()
     bad = copy.deepcopy(design)
     bad["noise"]["r"] = [[1.0, 0.0], [0.0, -1.0]]
-    with pytest.raises(ValueError, match="noise.r must be positive definite"):
-        kalman_emitter.emit(bad)
+    bad["tables"] = tables.compute(bad)
+    kind = packaging.OBSERVERS["SideslipKalmanFilter"]
+    with pytest.raises(packaging.PackagingError, match="noise.r must be positive definite"):
+        build_c_fmu(kind, "Bad", bad, tmp_path)           # refused before any C is written

@@ -20,8 +20,9 @@ from fmpy import read_model_description
 
 from latobs import packaging
 from latobs.fmu_src.kalman_observer import KalmanObserver
-from latobs.synthesis import certificate, design_file
+from latobs.synthesis import certificate, design_file, tables
 from latobs.synthesis import kalman_baseline as kb
+from latobs.synthesis.tables import sideslip_kalman_filter as kft
 from latobs.synthesis.params import VehicleParameterError, load_vehicle
 from latobs.validation import replay as rp
 from latobs.validation.harness import FmuInstance
@@ -90,8 +91,8 @@ def test_design_file_is_certified_and_complete(design, tmp_path):
     # written and read back, it certifies again; the runtime reads it like to_data_dict's dict
     back = design_file.read(design_file.write(d, tmp_path))
     assert certificate.certify(back)[0]
-    flat = KalmanObserver(kb.to_data_dict(kb.vehicle_dict(load_vehicle("mbds_250lm")), kb.TUNED["q"],
-                                          kb.TUNED["r_meas"]), {})
+    flat_data = kb.to_data_dict(kb.vehicle_dict(load_vehicle("mbds_250lm")), kb.TUNED["q"], kb.TUNED["r_meas"])
+    flat = KalmanObserver({**flat_data, "tables": kft.compute(flat_data)}, {})
     assert KalmanObserver(back, {}).model(20.0) == flat.model(20.0)
 
 
@@ -106,7 +107,8 @@ def test_design_names_the_missing_vehicle_parameter():
     bare = dataclasses.replace(veh, ranges={})
     d = kb.design(bare, kb.DesignOptions(name="X"))
     assert d["modes"][0]["scheduling"]["range"] == list(kb.DEFAULT_SPEED_RANGE)
-    assert certificate.certify(d)[0]
+    assert not certificate.certify(d)[0]          # its runtime's tables are attached when it is built
+    assert certificate.certify(tables.attach(d))[0]
 
 
 def _failed(d):
@@ -118,10 +120,10 @@ def _failed(d):
 @pytest.mark.parametrize("corrupt, failing", [
     # a negative measurement variance: no stabilising Riccati solution either
     (lambda d: d["noise"].__setitem__("r", [[-1.0, 0.0], [0.0, 1e-4]]),
-     ("R positive definite", "Schur stable", "Riccati equation", "runtime accepts")),
+     ("R positive definite", "Schur stable", "Riccati equation", "Kalman filter tables: Q, R, P0")),
     (lambda d: d["noise"].__setitem__("q", [[0.1, 0.0], [0.0, -1e-4]]), ("Q positive semidefinite",)),
     (lambda d: d["initial"].__setitem__("P0", [[1.0, 2.0], [2.0, 0.01]]), ("P0 positive definite",)),
-    (lambda d: d["noise"].__setitem__("r", [[10.0, 1e-3], [0.0, 1e-4]]), ("symmetric", "runtime accepts")),
+    (lambda d: d["noise"].__setitem__("r", [[10.0, 1e-3], [0.0, 1e-4]]), ("symmetric", "Kalman filter tables: Q, R, P0")),
     (lambda d: d.__setitem__("gamma", 0.5), ("stored gamma",)),
     # the vehicle edited after the design: the stored model no longer matches its derivation
     (lambda d: d["vehicle"]["parameters"]["Cf"].__setitem__("value", 0.8 * d["vehicle"]["parameters"]["Cf"]["value"]),

@@ -9,6 +9,7 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from latobs.fmu_src.motorcycle_observer import MotorcycleFaultObserver, step_map
+from latobs.synthesis.tables import motorcycle_fault_observer as mft
 from latobs.synthesis import pi_switched_003 as ps
 from latobs.synthesis.params import load_vehicle
 from latobs.validation.scenarios import SCENARIOS
@@ -198,10 +199,13 @@ def test_bad_design_file_is_rejected(d003):
     bad = copy.deepcopy(d003)
     bad["modes"][0]["gains"]["L_P"][0][0] = float("nan")
     with pytest.raises(ValueError, match="non-finite"):
-        MotorcycleFaultObserver(bad)
+        mft.compute(bad)
     bad = copy.deepcopy(d003)
     del bad["switching"]
     with pytest.raises(ValueError, match="switching"):
+        mft.compute(bad)
+    del bad["tables"]
+    with pytest.raises(ValueError, match="tables"):
         MotorcycleFaultObserver(bad)
 
 

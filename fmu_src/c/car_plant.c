@@ -3,7 +3,7 @@
  * the truth model of every car observer: the C twin of fmu_src/car_plant.py (CarPlantModel).
  *
  * The physics (equations E1-E7), the axes and signs, the assumptions, the clamps and the numerics
- * are documented once, in that module's docstring; the comments here cite it. Every expression is
+ * are documented once, in docs/runtime/car_plant.md; the comments here cite it. Every expression is
  * written in the order of operations of the Python runtime, so that (same IEEE doubles, the same
  * libm) both backends give the same numbers.
  *
@@ -146,7 +146,7 @@ static int enters(Model *m, unsigned flag, int active)
 }
 
 /* ------------------------------------------------------------------ inputs */
-/* the inputs clamped (module docstring, "Numerics and input clamping"; stiffness inputs to
+/* the inputs clamped (docs/runtime/car_plant.md, "Numerics and input clamping"; stiffness inputs to
  * [SCALE_IN_MIN, SCALE_IN_MAX]), ax not yet known */
 static Held clamp_inputs(const double *u)
 {
@@ -386,7 +386,7 @@ static TireOut tire_outputs(const Model *m, const Rhs *c, const double *s, doubl
     return t;
 }
 
-/* the outputs at the CG (module docstring, "Outputs at the centre of gravity") at the state s and
+/* the outputs at the CG (docs/runtime/car_plant.md, "Outputs at the centre of gravity") at the state s and
  * the (clamped) speed vx */
 static void write_outputs(const double *s, const TireOut *t, double vx, double *y)
 {

@@ -1,16 +1,12 @@
 """Emitter of the native CarPlant (``fmu_src/c/car_plant.c``): the vehicle as static const data.
 
-The plant data file (``latobs.packaging.plant_data``: ``{"vehicle": Vehicle.as_dict()}``) becomes
-``model_data.h``: the vehicle's parameters (SI), validated exactly as the Python runtime validates
-them (``CarPlantModel._vehicle_values``: a ValueError names the culprit), the gravity constant and
-the runtime's limits (clamps, substep bound), all read from ``fmu_src/car_plant.py`` so that both
-backends share one definition. The FMU parameters (mu, scale_f, scale_r, sigma, linear_tires) are
-run-time values: ``car_plant.c`` derives its constants from them in ``model_setup`` as
-``CarPlantModel.__init__`` does.
-
-ModelExchange: the Python runtime's eight states, then ``x_vx_lag``, the lag state through which
-the model-exchange FMU differentiates its vx input (FMI 2.0 gives it no input derivative; see
-``car_plant.c``), and one event indicator per warning condition of the runtime.
+The plant data file's vehicle parameters (SI; the Python runtime has validated them before the
+emitter runs), the gravity constant and the runtime's declared limits (its public class constants:
+clamps, substep bound) become ``model_data.h``. CarPlant needs no precomputed tables: every derived
+constant depends on the FMU parameters (mu, scale_f, scale_r, sigma, linear_tires), so
+``car_plant.c`` derives them in ``model_setup`` as ``CarPlantModel.__init__`` does.
+ModelExchange adds ``x_vx_lag`` (the lag state through which vx is differentiated) and one event
+indicator per warning condition.
 """
 from __future__ import annotations
 
@@ -53,9 +49,10 @@ N_EVENT_INDICATORS = 9
 
 
 def emit(data: dict) -> CModel:
-    """``model_data.h`` of the CarPlant FMU for the plant data file ``data``; a ValueError names
-    the vehicle parameter that the Python runtime would refuse."""
-    values = CarPlantModel._vehicle_values(data)
+    """``model_data.h`` of the CarPlant FMU for the plant data file ``data`` (validated by the
+    runtime first: ``cbackend.build_c_fmu``)."""
+    params = data["vehicle"]["parameters"]
+    values = {k: float(params[k]["value"] if isinstance(params[k], dict) else params[k]) for k in VEHICLE_FIELDS}
     name = str(data["vehicle"].get("name", "?"))
     label = repr(name).replace("*/", "* /")   # inside a C comment
     lines = [f"/* CarPlant of vehicle {label}: its parameters (SI) and the runtime's constants, "

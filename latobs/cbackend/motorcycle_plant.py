@@ -1,19 +1,9 @@
 """Emitter of the native C model of the nonlinear motorcycle plant (``fmu_src/c/motorcycle_plant.c``).
 
-Mirrors ``fmu_src/motorcycle_plant.py`` (Sharp 1971 with Magic Formula tyres, paper 003). The plant
-data file (``latobs.packaging.plant_data``: the equations derived by sympy as numbers,
-``data["structure"]``) is checked by that runtime itself (a file it refuses raises its ValueError
-here), and its preprocessing is reused so that the C file gets bit-for-bit the Python runtime's
-numbers: the inverse mass matrix (its Gauss-Jordan ``_inv``) and the tyre-spring bound ``kt`` of the
-substep rule. The runtime's numerical constants (substeps, clamps, floors) are emitted from its class
-too: one source of truth.
-
-    PL_MINV, PL_C0, PL_C1, PL_K_SIN, PL_B_F, PL_B_TAU   (E1)  M^-1, C0, C1 (4x4), K_sin, B_F (4x2), B_tau (4)
-    PL_SLIP, PL_HEADING, PL_CAMBER                     (E2)  per tyre (front, rear): slip-velocity row,
-                                                              cos(eps) of the steer angle, camber row
-    PL_TYRE_C1, PL_TYRE_C2, PL_TYRE_FZ                 (E3)  stiffnesses (N/rad), static loads (N)
-    PL_KT                                                     max row sum |diag(C1) S M^-1 B_F| (m/s^2: kt / vx and
-                                                              sqrt(kt / sigma) are the rates of lam_est, 1/s)
+Writes the plant file's derived equations (``data["structure"]``: PL_C0, PL_C1, PL_K_SIN, PL_B_F,
+PL_B_TAU; per tyre PL_SLIP, PL_HEADING, PL_CAMBER, PL_TYRE_C1, PL_TYRE_C2, PL_TYRE_FZ), its tables
+(``synthesis/tables/motorcycle_plant.py``: PL_MINV, PL_KT) and the runtime's declared numerical
+constants (substeps, clamps, floors: its public class constants) as C data.
 """
 from __future__ import annotations
 
@@ -42,27 +32,25 @@ CONSTANTS = ("H_MAX", "LAM_DT", "LAM_MECH", "VX_MAX", "V_SLIP_MIN", "V_RELAX_MIN
              "SIGMA_MIN", "ROLL_WARN")
 
 
+def _floats(x):
+    return [_floats(v) for v in x] if isinstance(x, list) else float(x)
+
+
 def emit(data: dict) -> CModel:
-    rt = MotorcyclePlantModel(data)        # the runtime's checks: ValueError naming the culprit
-    if tuple(rt.STATE_NAMES) != tuple(s.name[2:] for s in STATES):
-        raise ValueError(f"MotorcyclePlant: states {rt.STATE_NAMES} are not the C model's")
-    tyres = rt._tyres                       # (slip velocity, heading, camber, C1, C2, Fz, sigma) front, rear
+    if tuple(MotorcyclePlantModel.STATE_NAMES) != tuple(s.name[2:] for s in STATES):
+        raise ValueError(f"MotorcyclePlant: states {MotorcyclePlantModel.STATE_NAMES} are not the C model's")
+    st, t = data["structure"], data["tables"]
+    tyres = [st["tyres"][key] for key in ("front", "rear")]
     header = "".join([
         "/* Sharp (1971) motorcycle, Magic Formula tyres (paper 003): equations (E1)-(E4) of motorcycle_plant.py */\n",
         *(c_define(f"PL_{name}", float(getattr(MotorcyclePlantModel, name))) for name in CONSTANTS),
-        c_array("PL_MINV", rt._Minv),
-        c_array("PL_C0", rt.C0),
-        c_array("PL_C1", rt.C1),
-        c_array("PL_K_SIN", rt.K),
-        c_array("PL_B_F", rt.BF),
-        c_array("PL_B_TAU", rt.Btau),
-        c_array("PL_SLIP", [t[0] for t in tyres]),
-        c_array("PL_HEADING", [t[1] for t in tyres]),
-        c_array("PL_CAMBER", [t[2] for t in tyres]),
-        c_array("PL_TYRE_C1", [t[3] for t in tyres]),
-        c_array("PL_TYRE_C2", [t[4] for t in tyres]),
-        c_array("PL_TYRE_FZ", [t[5] for t in tyres]),
-        c_define("PL_KT", float(rt._kt)),
+        c_array("PL_MINV", _floats(t["Minv"])),
+        *(c_array(f"PL_{macro}", _floats(st[key])) for macro, key in
+          (("C0", "C0"), ("C1", "C1"), ("K_SIN", "K_sin"), ("B_F", "B_F"), ("B_TAU", "B_tau"))),
+        *(c_array(f"PL_{macro}", [_floats(ty[key]) for ty in tyres]) for macro, key in
+          (("SLIP", "slip_velocity"), ("HEADING", "heading"), ("CAMBER", "camber"), ("TYRE_C1", "C1"),
+           ("TYRE_C2", "C2"), ("TYRE_FZ", "Fz"))),
+        c_define("PL_KT", float(t["kt"])),
     ])
     return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS,
                   dependencies=DEPENDENCIES)

@@ -1,32 +1,16 @@
-"""Emitter of the native C model of paper 002's transfer-function sideslip estimator
+"""Emitter of the native C model of paper 002's fixed-order sideslip estimator
 (``fmu_src/c/tf_estimator.c``), one estimator or one per speed band.
 
-Mirrors ``fmu_src/tf_estimator.py``: the data file is checked and realised by that runtime itself
-(a file it refuses raises its ValueError here), so the C file gets bit-for-bit the Python
-runtime's controllable canonical form of beta^ = (y(s)/x(s)) r per band i:
-
-    TF_A[i], TF_B[i]      z' = A z + B r (companion A, B = e_n)
-    TF_C[i], TF_D[i]      beta^ = C z + D r
-    TF_A0[i]              a_0 of the monic x(s): the steady state z = [r / a_0, 0, .., 0]
-    TF_PHI_H0[i], TF_GAM_H0[i]
-                          the exact zero-order-hold map over the FMU's default step TF_H0 =
-                          0.005 s (``framework.DEFAULT_STEP``), computed by the runtime's own
-                          ``zoh`` (Van Loan, ``linalg.expm``): at the default step the C model
-                          steps with exactly the Python FMU's maps
-    TF_NOMINAL            the states' nominal magnitudes (ModelExchange; :func:`nominals`)
-    TF_EDGES              the band edges (m/s), increasing; an unscheduled estimator is one band
-                          (-inf, inf), which selects it at every finite speed and never warns
-
-The order n may be 0 (a static gain beta^ = D r): the arrays then keep one padding entry
-(TF_DIM = max(n, 1)) that the C model never reads, and the FMU is co-simulation only.
+Writes the design file's tables (``synthesis/tables/sideslip_fixed_order_estimator.py``: per band
+the controllable canonical form and its exact ZOH map at the default step) as C data: TF_A, TF_B,
+TF_C, TF_D, TF_A0, TF_PHI_H0, TF_GAM_H0, TF_EDGES (an unscheduled estimator: one band
+(-inf, inf)), TF_NOMINAL (ModelExchange). n = 0 (a static gain) keeps one padding entry per array.
 """
 from __future__ import annotations
 
 import math
 
-from ..fmu_src.framework import DEFAULT_STEP
 from ..fmu_src.spec import Var
-from ..fmu_src.tf_estimator import TfEstimator, zoh
 from .emit import CModel, nonzero, structure, c_array, c_define
 
 SOURCE = "tf_estimator.c"
@@ -51,12 +35,12 @@ def states(n: int) -> tuple[Var, ...]:
                  for k in range(1, n + 1))
 
 
-def nominals(systems, n: int) -> list[float]:
+def nominals(bands, n: int) -> list[float]:
     """Nominal magnitude of z_k per rad/s of yaw rate: with w = a_0^(1/n) (the geometric mean of
     the poles' magnitudes), z_1 ~ r / a_0 (its steady state) and z_k = d^(k-1) z_1 / dt^(k-1) ~
     w^(k-1) / a_0;
     the largest over the bands."""
-    return [max(a[0] ** ((k - 1 - n) / n) for *_, a in systems) for k in range(1, n + 1)]
+    return [max(b["a0"] ** ((k - 1 - n) / n) for b in bands) for k in range(1, n + 1)]
 
 
 def _pad(v, n: int, dim: int) -> list[float]:
@@ -70,43 +54,37 @@ def _pad2(M, n: int, dim: int) -> list[list[float]]:
 
 
 def emit(data: dict) -> CModel:
-    rt = TfEstimator(data)                  # the runtime's checks: ValueError naming the culprit
-    n, n_modes = rt.n, len(rt.systems)
+    t = data["tables"]
+    n, bands = t["n"], t["bands"]
     if n > MAX_ORDER:
         raise ValueError(f"data file: estimator order {n} exceeds the native C backend's limit {MAX_ORDER} "
                          "(fmu_src/c/linalg.h LA_MAX)")
     dim = max(n, 1)
-    A, B, C, D, A0, PHI, GAM = [], [], [], [], [], [], []
-    for Ai, Bi, Ci, Di, ai in rt.systems:
-        A.append(_pad2(Ai, n, dim))
-        B.append(_pad(Bi, n, dim))
-        C.append(_pad(Ci, n, dim))
-        D.append(Di)
-        A0.append(ai[0] if n else 1.0)
-        Phi, Gam = zoh(Ai, Bi, DEFAULT_STEP) if n else ([], [])
-        PHI.append(_pad2(Phi, n, dim))
-        GAM.append(_pad(Gam, n, dim))
-    nominal = nominals(rt.systems, n)
-    edges = rt.edges if rt.edges is not None else [-math.inf, math.inf]
+    edges = t["edges"] if t["edges"] is not None else [-math.inf, math.inf]
     header = "".join([
         "/* paper 002: beta^ = (y(s)/x(s)) r per speed band, z' = A z + B r, beta^ = C z + D r */\n",
-        c_define("TF_N", n), c_define("TF_DIM", dim), c_define("TF_N_MODES", n_modes),
-        c_define("TF_H0", float(DEFAULT_STEP)),
+        c_define("TF_N", n), c_define("TF_DIM", dim), c_define("TF_N_MODES", len(bands)),
+        c_define("TF_H0", float(t["h0"])),
         c_array("TF_EDGES", edges),
-        c_array("TF_A", A), c_array("TF_B", B), c_array("TF_C", C), c_array("TF_D", D), c_array("TF_A0", A0),
-        c_array("TF_PHI_H0", PHI), c_array("TF_GAM_H0", GAM),
-        c_array("TF_NOMINAL", nominal) if n else "",       # ModelExchange only (n >= 1)
+        c_array("TF_A", [_pad2(b["A"], n, dim) for b in bands]),
+        c_array("TF_B", [_pad(b["B"], n, dim) for b in bands]),
+        c_array("TF_C", [_pad(b["C"], n, dim) for b in bands]),
+        c_array("TF_D", [b["D"] for b in bands]),
+        c_array("TF_A0", [b["a0"] for b in bands]),
+        c_array("TF_PHI_H0", [_pad2(b["Phi_h0"], n, dim) for b in bands]),
+        c_array("TF_GAM_H0", [_pad(b["Gam_h0"], n, dim) for b in bands]),
+        c_array("TF_NOMINAL", nominals(bands, n)) if n else "",       # ModelExchange only (n >= 1)
     ])
     return CModel(header=header, states=states(n),
-                  n_event_indicators=N_EVENT_INDICATORS_SCHEDULED if rt.edges is not None and n else 0,
-                  dependencies=_dependencies(rt.systems, n) if n else None)
+                  n_event_indicators=N_EVENT_INDICATORS_SCHEDULED if t["edges"] is not None and n else 0,
+                  dependencies=_dependencies(bands, n) if n else None)
 
 
-def _dependencies(systems, n: int) -> dict:
+def _dependencies(bands, n: int) -> dict:
     """ModelExchange: z' = A z + B r, beta^ = C z + D r in every band (model_me_derivatives,
     outputs_of); the speed selects the band at events only."""
     z = [s.name for s in states(n)]
-    deps = {f"der({z[i]})": nonzero(z, *(A[i] for A, *_ in systems))
-            | nonzero(["yaw_rate"], *([B[i]] for _, B, *_ in systems)) for i in range(n)}
-    deps["beta_hat"] = nonzero(z, *(C for _, _, C, *_ in systems)) | nonzero(["yaw_rate"], *([D] for *_, D, _ in systems))
+    deps = {f"der({z[i]})": nonzero(z, *(b["A"][i] for b in bands))
+            | nonzero(["yaw_rate"], *([b["B"][i]] for b in bands)) for i in range(n)}
+    deps["beta_hat"] = nonzero(z, *(b["C"] for b in bands)) | nonzero(["yaw_rate"], *([b["D"]] for b in bands))
     return structure(deps)
