@@ -154,7 +154,7 @@ typedef struct {
 
 /* ---- pythonfmu 0.7.0's reference leaks ------------------------------------- */
 
-/* pythonfmu 0.7.0's library never releases some Python objects it owns (about 3 KB per
+/* pythonfmu 0.7.0's library never releases some Python objects it owns (about 1.2 KB per
  * fmi2Instantiate/fmi2FreeInstance cycle, and one string per logged message, for the life of
  * the process):
  *   - fmi2Instantiate: the resources path it inserts into sys.path (PyList_Insert does not
