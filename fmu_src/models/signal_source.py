@@ -60,7 +60,8 @@ def _checked(data: dict) -> tuple[list[str], list[list[float]]]:
 
 def spec_of(data: dict) -> ModelSpec:
     """The interface of the signal source made from ``data``: one Real output per signal, its
-    start value the first sample (the outputs in initialisation mode)."""
+    start value the first sample (the outputs in initialisation mode, before the model knows the
+    start time)."""
     names, rows = _checked(data)
     units = [s.get("unit") or "1" for s in data["signals"]]
     return ModelSpec(
@@ -71,5 +72,6 @@ def spec_of(data: dict) -> ModelSpec:
         outputs=tuple(Var(n, u, f"scenario signal {n}", start=x) for n, u, x in zip(names, units, rows[0])),
         max_step=MAX_STEP,
         stop_time=float(data["stop_time"]),
-        initialization="the outputs hold the sample at or before the start time",
+        initialization="in initialisation mode the outputs hold the first sample; from "
+                       "fmi2ExitInitializationMode on, the sample at or before the start time",
     )
