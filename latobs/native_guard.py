@@ -1,19 +1,12 @@
-"""Build the native FMI 2.0 guard library of a pythonfmu FMU (packaging time; never in an FMU).
+"""Build the native FMI 2.0 guard of a pythonfmu FMU (packaging time; never in an FMU).
 
-pythonfmu 0.7.0's native library ignores the GUID given to ``fmi2Instantiate``, an unknown value
-reference in ``fmi2GetReal``/``fmi2SetReal``/... raises in Python, which after two or three calls
-segfaults the host (pythonfmu's clearLogBuffer after a Python exception), it answers
-``fmi2GetFMUstate``/``fmi2SetFMUstate`` with fmi2OK without getting or restoring anything, and it
-leaks Python objects at every instantiation and for every logged message (about 3 KB per
-instantiate/free cycle). The guard (``latobs/native/fmi2_guard.c``) becomes
-``binaries/linux64/<modelIdentifier>.so``: it checks the GUID and every value reference against
-tables compiled into it, refuses the six FMU state functions (not declared by the model
-description) with a logged fmi2Error, forwards all other valid calls to the real pythonfmu
-library shipped beside it under another file name, and releases the references that library
-leaks (it binds the leaking C-API calls, in that library's global offset table, to wrappers).
-
-The build is reproducible: identical inputs give a byte-identical library (no debug info, no
-build id, symbol table stripped, sources compiled under relative names in a scratch folder).
+The guard (``latobs/native/fmi2_guard.c``) becomes ``binaries/linux64/<modelIdentifier>.so`` in
+front of pythonfmu 0.7.0's own library, shipped beside it as ``<modelIdentifier>_pythonfmu.so``:
+it refuses another FMU's GUID, unknown value references and the FMU state functions with a
+logged fmi2Error, forwards every other call, and releases what pythonfmu's library leaks. Why it
+is still needed, measured: the documentation's backends page ("Why pythonfmu FMUs carry a native
+guard"). The build is reproducible: identical inputs give a byte-identical library (no debug
+info, no build id, symbol table stripped, sources compiled under relative names).
 """
 from __future__ import annotations
 

@@ -313,6 +313,39 @@ def fmpy_host(fmu: Path, work: Path) -> int:
     return 0 if failures == 0 else 1
 
 
+@pytest.mark.slow
+def test_pythonfmu_alone_still_needs_the_guard(design_speed, tmp_path, monkeypatch):
+    """Why the guard stays (the documentation's backends page): pythonfmu 0.7's library alone, here
+    the same FMU packaged without the guard, takes a wrong guid and answers unknown value
+    references with fmi2OK. Should a pythonfmu release fix both, this fails: measure again."""
+    from latobs import native_guard, packaging
+    from latobs.synthesis import design_file
+
+    monkeypatch.setattr(native_guard, "find_compiler", lambda: None)
+    with pytest.warns(UserWarning, match="no native guard"):
+        fmu = packaging.package_design(design_file.write(design_speed, tmp_path), tmp_path)
+    proc = subprocess.run([sys.executable, __file__, "fmpy-unguarded", str(fmu), str(tmp_path / "x")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.split()[-2:] == ["wrong-guid:instantiated", "unknown-vr:ok,ok"], proc.stdout
+
+
+def unguarded_host(fmu: Path, folder: Path) -> None:
+    """fmpy on an FMU without the guard: a wrong guid, then getReal/setReal of an unknown reference."""
+    from fmpy.fmi2 import FMU2Slave
+
+    info = fmu_info(fmu)
+    slave = FMU2Slave(guid="{wrong-guid}", unzipDirectory=str(extract_to(fmu, folder)), modelIdentifier=info["id"],
+                      instanceName="fmpy")
+    slave.instantiate()
+    print("wrong-guid:" + ("instantiated" if slave.component else "refused"), flush=True)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    print(f"unknown-vr:{_raw_status(slave.getReal, [9999])},{_raw_status(lambda vr: slave.setReal(vr, [1.0]), [9999])}",
+          flush=True)
+
+
 def _raw_status(call, vrs) -> str:
     """'ok' or the status name fmpy's exception reports ("... failed with status 3 (error).")."""
     try:
@@ -326,4 +359,6 @@ def _raw_status(call, vrs) -> str:
 if __name__ == "__main__":
     if len(sys.argv) == 4 and sys.argv[1] == "fmpy-host":
         sys.exit(fmpy_host(Path(sys.argv[2]), Path(sys.argv[3])))
-    sys.exit(f"usage: {sys.argv[0]} fmpy-host FMU WORKDIR")
+    if len(sys.argv) == 4 and sys.argv[1] == "fmpy-unguarded":
+        sys.exit(unguarded_host(Path(sys.argv[2]), Path(sys.argv[3])))
+    sys.exit(f"usage: {sys.argv[0]} fmpy-host|fmpy-unguarded FMU WORKDIR")

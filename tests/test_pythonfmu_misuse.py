@@ -6,7 +6,7 @@
   logged fmi2Error and leaves the instance running; without the guard (no C compiler at build
   time) the framework logs the error and a "restored" instance refuses every later step.
 * pythonfmu 0.7.0 leaks Python objects at every instantiation and for every logged message
-  (about 3 KB per cycle); the guard releases them (fmi2_guard.c). RSS stays flat over 2000
+  (about 1.2 KB per cycle); the guard releases them (fmi2_guard.c). RSS stays flat over 2000
   instantiate/free cycles, with the library unloaded between cycles (fmpy's freeInstance) and
   with it kept loaded.
 

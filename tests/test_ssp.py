@@ -1,4 +1,4 @@
-"""`latobs export-ssp` (issue 10, item 2): the SSP 1.0 package of a validation scenario.
+"""`latobs export-ssp`: the SSP 1.0 package of a validation scenario.
 
 One package is exported per module, of bank-braking cut to 3 s with the four default observers and
 two plant parameters (so that the parameter sets matter), then checked against the SSP 1.0
@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from latobs import ssp as S
+from latobs.ssp import export
 from latobs.validation import get_scenario, harness
 
 pytestmark = pytest.mark.slow
@@ -78,13 +79,13 @@ def test_the_package_is_valid_ssp_1_0(package, tmp_path):
 def test_an_invalid_package_is_never_written(fmu_dir, scenario, tmp_path, monkeypatch):
     out = tmp_path / "bad.ssp"
     bad = S.Connection("SideslipBankObserver", "mode", S.PLANT_LABEL, "delta")   # Integer -> Real,
-    monkeypatch.setattr(S, "wiring", lambda *a: [bad])                           # inputs left unconnected
+    monkeypatch.setattr(export, "wiring", lambda *a: [bad])                      # inputs left unconnected
     with pytest.raises(S.SspError, match=r"not be valid SSP 1.0.*mode -> plant.delta: not an output -> input "
                                          r"connection of one type.*SideslipBankObserver.vx is connected 0 times"):
         S.export_ssp(scenario, ["SideslipBankObserver"], out, fmu_dir, quiet=True)
     monkeypatch.undo()
     real = S.ssd_bytes
-    monkeypatch.setattr(S, "ssd_bytes", lambda *a: real(*a).replace(b' version="1.0"', b""))   # schema: required
+    monkeypatch.setattr(export, "ssd_bytes", lambda *a: real(*a).replace(b' version="1.0"', b""))   # schema: required
     with pytest.raises(S.SspError, match="version"):
         S.export_ssp(scenario, ["SideslipBankObserver"], out, fmu_dir, quiet=True)
     assert list(tmp_path.iterdir()) == []

@@ -68,7 +68,8 @@ typedef enum {
 
 struct Log {
     struct Instance *inst;
-    int worst; /* highest level logged during the current call */
+    int worst;   /* highest level logged during the current call */
+    double time; /* s, the time of the model call in progress (layer_time) */
 };
 
 /* Everything fmi2GetFMUstate copies; the model's bytes follow it in the state blob. */
@@ -111,6 +112,11 @@ static void emit(Instance *inst, int level, const char *text)
     inst->cb.logger(inst->cb.componentEnvironment, inst->name,
                     level == LOG_ERROR ? fmi2Error : level == LOG_WARNING ? fmi2Warning : fmi2OK,
                     category[level == LOG_ERROR ? 3 : level == LOG_WARNING ? 1 : 0], escaped);
+}
+
+double layer_time(const Log *log)
+{
+    return log->time;
 }
 
 void log_event(const Log *log, int level, const char *fmt, ...)
@@ -379,6 +385,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
             return fmi2Error;
         }
     }
+    inst->log.time = inst->v.time;
     if (model_setup(inst->model, inst->v.p, &inst->log) != 0) {
         say(inst, LOG_ERROR, "initialisation failed: the model refused its parameters");
         inst->v.phase = PHASE_FAILED;
@@ -730,6 +737,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         return fmi2Error;
     }
     if (!inputs_ok(inst, "step")) return fmi2Error;
+    inst->log.time = currentCommunicationPoint;
     if (model_do_step(inst->model, communicationStepSize, inst->v.u, &inst->log) == 0) {
         inst->v.time = currentCommunicationPoint + communicationStepSize;
         model_outputs(inst->model, inst->v.y, inst->v.yi);

@@ -47,6 +47,12 @@ void log_event(const Log *log, int level, const char *fmt, ...)
 #endif
     ;
 
+/* The time (s) of the model call in progress: in model_setup and model_initialize the start
+ * time (fmi2SetupExperiment's, else 0), in model_do_step the communication point the step starts
+ * from (fmi2DoStep's currentCommunicationPoint). For models whose maths depends on absolute time
+ * (the SSP signal source's tables); implemented by the layer. */
+double layer_time(const Log *log);
+
 typedef struct Model Model;   /* defined by the model file; the layer allocates model_size() bytes, zeroed */
 
 size_t model_size(void);

@@ -55,6 +55,7 @@ EMITTERS = {
     "motorcycle_fault_observer": "motorcycle_observer",
     "car_plant": "car_plant",
     "motorcycle_plant": "motorcycle_plant",
+    "signal_source": "signal_source",
 }
 
 
@@ -177,7 +178,8 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     why = unavailable_reason(kind.model_module, platforms)
     if why:
         raise NativeBuildError(f"{class_name}: {why}")
-    spec = import_module(f"{_framework.__package__}.models.{kind.model_module}").SPEC
+    model = import_module(f"{_framework.__package__}.models.{kind.model_module}")
+    spec = model.spec_of(data) if hasattr(model, "spec_of") else model.SPEC   # spec_of: data-dependent variables
     try:
         spec.runtime(data, {})
         em = emitter(kind.model_module)
