@@ -14,6 +14,8 @@ REL_TOL = 1e-6
 
 @dataclass(frozen=True)
 class Check:
+    """One named check of a certificate: ``value`` against ``limit`` in the ``sense`` given."""
+
     name: str
     value: float
     limit: float
@@ -23,10 +25,12 @@ class Check:
 
 
 def _le(name, value, limit, detail=""):
+    """The check value <= limit."""
     return Check(name, float(value), float(limit), bool(value <= limit), "<=", detail)
 
 
 def _ge(name, value, limit, detail=""):
+    """The check value >= limit (a lower bound)."""
     return Check(name, float(value), float(limit), bool(value >= limit), ">=", detail)
 
 
@@ -138,5 +142,6 @@ def _growth_factor(Ah: np.ndarray) -> tuple[float, float]:
 
 
 def _rel_err(a, b) -> float:
+    """max |a - b| relative to max(1, max |b|)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.max(np.abs(a - b)) / max(1.0, float(np.max(np.abs(b)))))

@@ -93,7 +93,7 @@ def _mode_ranges_000(mode: dict):
 
 
 def _analysis_000(d: dict) -> tuple[list[Check], dict]:
-    """Checks and headline figures of a paper-000 design file (see the module docstring)."""
+    """Checks and headline figures of a paper-000 design file (``docs/certificates.md``)."""
     checks: list[Check] = []
     T, N, C = (np.asarray(d["structure"][k], float) for k in ("T", "N", "C"))
     n = T.shape[0]

@@ -54,17 +54,8 @@ def _peak_002(b1, b2, a, y, x, W1, W2, wmin=1e-5, wmax=1e3, n=4000):
 
 
 def certify(d: dict) -> list[Check]:
-    """Paper 002 (fixed-order estimator y/x, per speed band), independent of Lemma 5 and of the
-    design module: the plant coefficients are re-derived from the state-space model
-    (``_bicycle_coefficients_002``), the coefficient polytope from its box corners, and every
-    worst case by a plain frequency sweep.
-
-    Per mode: x Hurwitz; every vertex plant and every grid plant stable; the polytope contains a
-    5^3 grid of true plants (the multi-affine over-bound holds); the worst weighted error over the
-    64 vertices <= the file's ``gamma_vertex`` and over the (k_Cf, k_Cr, k_v) grid of true plants
-    <= ``gamma_grid`` (each also within 1 % of the claim, so that a claim is not vacuous); the
-    file's overall ``gamma`` / ``gamma_grid`` are the modes' maxima. Scheduled: the bands are
-    contiguous, cover the vehicle's speed range and match the runtime's ``estimators``."""
+    """The checks of a paper-002 design file, independent of Lemma 5 and of the design module
+    (``docs/certificates.md``)."""
     checks: list[Check] = []
     vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
     par = vehicle.require(("m", "Iz", "lf", "lr"), f"certificate of {d['name']} (bicycle model, eq. 2)")
