@@ -204,7 +204,7 @@ def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     Raises ``pi_hinf_000.DesignError`` when the LMIs are infeasible and ``CertificateError``
     (carrying the failed checks) when the certificate fails.
     """
-    from ..identity import of_design
+    from .identity import of_design
     from . import certificate, tables
 
     entry = get(name)

@@ -1080,7 +1080,7 @@ def _main(argv=None) -> int:
     p.add_argument("command", choices=["identify"])
     p.add_argument("--split", type=float, default=425.0, help="tuning half is t < SPLIT (s)")
     a = p.parse_args(argv)
-    from ..validation.replay import MBDS_CSV, load_csv    # the record only; no FMU involved
+    from ..data.records import MBDS_CSV, load_csv
     veh = load_vehicle("mbds_250lm")
     res = identify_rear_stiffness(load_csv(MBDS_CSV), veh, split=a.split)
     for s, e in res["scan"]:

@@ -18,7 +18,7 @@ and with it the optimum tends to N_i ~ -eta I: eta is the bandwidth knob; eps th
 Numerics (not in the paper): (34) is normalised to alpha = 1 (Q >= I; the LMIs are homogeneous
 in (Q, W, X, 1/gamma), so only gamma/alpha matters, which is what eq. (37) uses); the LMIs are
 solved in the time scale tau = eta (A_i/tau, eps/tau, eta/tau, gamma_s = tau gamma), so that the
-solver sees entries of order 1..40; Clarabel. The certificate (``certificate._certify_001``)
+solver sees entries of order 1..40; Clarabel. The certificate (``certificate.lateral_interval_observer``)
 re-evaluates everything from the design file with numpy/scipy, including the width-dynamics
 small-gain check that Theorem 1 omits (ERRATA 001).
 """

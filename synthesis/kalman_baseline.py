@@ -31,7 +31,7 @@ the MBDS record only (its held-out part t >= 425 s is only evaluated). See ``TUN
 ``report`` for the figures.
 
 Design file (``design(vehicle, DesignOptions(name))``, catalogue entry ``SideslipKalmanFilter``,
-certified by ``certificate._certify_kalman``): nothing is solved; the file holds the vehicle (its
+certified by ``certificate.sideslip_kalman_filter``): nothing is solved; the file holds the vehicle (its
 name and m, lf, lr, Iz, Cf, Cr), the covariances (the "gains" of its one mode, the speed range
 its scheduling range), the model coefficients and everything ``to_data_dict`` gives the runtime.
 Its ``gamma`` is the worst spectral radius of the steady-state (frozen-speed, DARE) error
@@ -385,7 +385,7 @@ def design(vehicle, opts: DesignOptions) -> dict:
 
 def report(estimate: str = "filtered") -> dict:
     """Tune on the MBDS record's t < 425 s and score on both parts (prints and returns figures)."""
-    from latobs.validation.replay import MBDS_CSV, load_csv
+    from ..data.records import MBDS_CSV, load_csv
     from .params import load_vehicle
 
     cols = load_csv(MBDS_CSV)

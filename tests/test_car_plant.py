@@ -417,12 +417,6 @@ def test_invalid_vehicle_data_raise_naming_the_parameter():
         CarPlantModel({}, {})
 
 
-def test_no_numpy_in_runtime_module():
-    import latobs.fmu_src.car_plant as mod
-    src = open(mod.__file__).read()
-    assert "import numpy" not in src and "from numpy" not in src
-
-
 def test_speed_of_one_step():
     """Informational: CPU time of one 5 ms step (5 Heun substeps); not asserted."""
     p = plant()

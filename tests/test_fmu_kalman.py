@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.linalg
 from fmpy import read_model_description
 
 from latobs import packaging
@@ -23,6 +24,7 @@ from latobs.fmu_src.kalman_observer import KalmanObserver
 from latobs.synthesis import certificate, design_file, tables
 from latobs.synthesis import kalman_baseline as kb
 from latobs.synthesis.tables import sideslip_kalman_filter as kft
+from latobs.synthesis.certificate.sideslip_kalman_filter import _kalman_force_model
 from latobs.synthesis.params import VehicleParameterError, load_vehicle
 from latobs.validation import replay as rp
 from latobs.validation.harness import FmuInstance
@@ -69,8 +71,8 @@ def test_design_file_is_certified_and_complete(design, tmp_path):
     assert d["name"] == d["design"] == "SideslipKalmanFilter"
     names = [c["name"] for c in d["checks"]]
     for part in ("Q positive semidefinite", "R positive definite", "P0 positive definite",
-                 "observable from [ay, r]", "Schur stable", "kalman_baseline.model equals the force-balance model",
-                 "FMU runtime's model(v) equals", "zero-order hold", "stored gamma"):
+                 "observable from [ay, r]", "Schur stable", "stored model coefficients equal the force-balance model",
+                 "stored gamma"):
         assert sum(part in n for n in names) == 1, part
     assert all(c["passed"] for c in d["checks"])
     # the certified grid: the vehicle's speed range (15..63 m/s), 50 speeds, at the MBDS rate
@@ -138,17 +140,48 @@ def test_corrupted_design_fails_the_certificate_naming_the_check(design, corrupt
         assert any(part in n for n in names), (part, names)
 
 
-def test_certificate_catches_a_filter_model_that_is_not_the_force_balance(design, monkeypatch):
-    right = kb.model
+def test_filter_and_runtime_models_are_the_force_balance_model(design):
+    """kalman_baseline.model (the numpy filter's) and the runtime's model(v) equal the certificate's
+    force-balance derivation over the certified speeds and beyond."""
+    vals = kb.vehicle_dict(load_vehicle("mbds_250lm"))
+    rt = KalmanObserver(design, {})
+    for v in np.linspace(1.0, 80.0, 41):
+        want = _kalman_force_model(vals, float(v))
+        for got in ([M[0] for M in kb.model(vals, v)], rt.model(float(v))):
+            for g, w in zip(got, want):
+                assert np.max(np.abs(np.asarray(g, float) - w)) <= 1e-12 * max(1.0, np.max(np.abs(w)))
 
-    def wrong(vals, vx):          # a sign slip in the ay row, as a filter bug would have it
-        A, B, C, D = right(vals, vx)
-        C = C.copy()
-        C[:, 0, 1] *= -1.0
-        return A, B, C, D
 
-    monkeypatch.setattr(kb, "model", wrong)
-    assert any("kalman_baseline.model equals the force-balance model" in n for n in _failed(copy.deepcopy(design)))
+@pytest.mark.parametrize("h", [0.001, 0.01, 0.2, 5.0])
+def test_runtime_step_is_the_kalman_update_and_scipys_zero_order_hold(design, h):
+    """One runtime step from P0 = the update with y = [ay, r], then the prediction over h with the
+    exact zero-order hold of the force-balance model (scipy's expm of the Van Loan block)."""
+    vals = kb.vehicle_dict(load_vehicle("mbds_250lm"))
+    rt = KalmanObserver(design, {})
+    u = {"delta": 0.03, "vx": 23.0, "yaw_rate": 0.12, "ay": 2.5}
+    rt.initialize(u)
+    A, B, C, D = _kalman_force_model(vals, 23.0)
+    Q, R, P = (np.asarray(x, float) for x in (design["noise"]["q"], design["noise"]["r"], design["initial"]["P0"]))
+    x = np.array([0.0, u["yaw_rate"]])
+    K = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+    x = x + K @ (np.array([u["ay"], u["yaw_rate"]]) - C @ x - D * u["delta"])
+    P = (np.eye(2) - K @ C) @ P
+    E = scipy.linalg.expm(np.block([[A, B[:, None]], [np.zeros((1, 3))]]) * h)
+    Phi, Gam = E[:2, :2], E[:2, 2]
+    x = Phi @ x + Gam * u["delta"]
+    P = Phi @ P @ Phi.T + Q * h
+    rt.step(h, u)
+    assert np.max(np.abs(np.array(rt.x) - x)) <= 1e-12 * max(1.0, np.max(np.abs(x)))
+    assert np.max(np.abs(np.array(rt.P) - P)) <= 1e-12 * max(1.0, np.max(np.abs(P)))
+
+
+def test_runtime_refuses_what_the_certificate_refuses(design):
+    """A negative or asymmetric measurement covariance fails the certificate and the runtime."""
+    for r in ([[-1.0, 0.0], [0.0, 1e-4]], [[10.0, 1e-3], [0.0, 1e-4]]):
+        d = copy.deepcopy(design)
+        d["noise"]["r"] = r
+        with pytest.raises(ValueError, match="noise.r"):
+            KalmanObserver(d, {})
 
 
 def test_uncertified_design_is_not_packaged(design, tmp_path):

@@ -240,16 +240,6 @@ def test_refuses_data_without_structure():
         MotorcyclePlantModel(packaging.plant_data("sedan"), {})
 
 
-def test_no_numpy_or_sympy_in_runtime_module():
-    src = (Path(packaging.FMU_SRC) / "motorcycle_plant.py").read_text()
-    imports = [ln.strip() for ln in src.splitlines() if ln.strip().startswith(("import ", "from "))]
-    # the standard library's math and the runtime package's own standard-library helpers only
-    assert imports == ["from __future__ import annotations", "import math",
-                       "from .spec import runtime_parameters, tables_of"], imports
-    spec = (Path(packaging.FMU_SRC) / "spec.py").read_text()
-    assert not any(m in spec for m in ("import numpy", "import sympy", "synthesis"))
-
-
 # ------------------------------------------------------------------------------------------
 # the FMU
 # ------------------------------------------------------------------------------------------

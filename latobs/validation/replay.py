@@ -39,23 +39,21 @@ by the record's delta and vx) is drawn there as a thin dashed line.
 """
 from __future__ import annotations
 
-import csv
-import gzip
 import hashlib
 import math
 import os
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
+from ..data import records as _records
 from . import baselines as _baselines
 from . import metrics as _metrics
 
 #: The bundled real-vehicle record (MIT, see the README and LICENSE beside it).
-MBDS_CSV = Path(os.fspath(resources.files("latobs").joinpath("data", "mbds-250lm", "mbds_250lm_100hz.csv.gz")))
+MBDS_CSV = _records.MBDS_CSV
 #: The word that stands for :data:`MBDS_CSV` on the command line.
 MBDS_ALIAS = "mbds"
 #: The vehicle parameter set of the MBDS record.
@@ -107,67 +105,12 @@ def default_split(path: str | os.PathLike) -> float | None:
 
 
 def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read a ``.csv`` or ``.csv.gz`` file with a header row into {column: float array}.
-
-    Checks: readable, a header of distinct non-empty names, a column ``t``, every row with as
-    many fields as the header, every value a finite number, ``t`` strictly increasing. Errors
-    are :class:`ReplayError` naming the file, the column and the line (the header is line 1).
-    Blank lines are skipped.
-    """
-    path = Path(path)
-    opener = gzip.open if path.name.lower().endswith(".gz") else open
+    """:func:`latobs.data.records.load_csv` (a ``.csv`` or ``.csv.gz`` file with a header row into
+    {column: float array}), its errors as :class:`ReplayError`."""
     try:
-        with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            rows: list[list[str]] = []
-            lines: list[int] = []
-            for row in reader:
-                if not row or all(not c.strip() for c in row):
-                    continue
-                rows.append(row)
-                lines.append(reader.line_num)
-    except FileNotFoundError:
-        raise ReplayError(f"{path}: no such file") from None
-    except (OSError, EOFError, UnicodeDecodeError, csv.Error) as exc:
-        raise ReplayError(f"{path}: cannot read it as a {'gzip-compressed ' if opener is gzip.open else ''}"
-                          f"CSV file: {exc}") from None
-    if header is None:
-        raise ReplayError(f"{path}: empty file (a header row of column names is needed)")
-    names = [h.strip() for h in header]
-    if any(not n for n in names):
-        raise ReplayError(f"{path}: the header (line 1) has an empty column name: {header}")
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise ReplayError(f"{path}: column(s) {', '.join(dup)} appear more than once in the header")
-    if "t" not in names:
-        raise ReplayError(f"{path}: no time column 't' (columns: {', '.join(names)})")
-    if len(rows) < 2:
-        raise ReplayError(f"{path}: {len(rows)} data row(s); at least 2 are needed")
-    for row, line in zip(rows, lines):
-        if len(row) != len(names):
-            raise ReplayError(f"{path}: line {line} has {len(row)} field(s), the header {len(names)}")
-    try:
-        data = np.array(rows, dtype=float)
-    except ValueError:
-        for row, line in zip(rows, lines):
-            for name, cell in zip(names, row):
-                try:
-                    float(cell)
-                except ValueError:
-                    raise ReplayError(f"{path}: column {name!r}, line {line}: {cell!r} is not a number") from None
-        raise  # pragma: no cover - numpy rejected something float() accepts
-    bad = ~np.isfinite(data)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise ReplayError(f"{path}: column {names[j]!r}, line {lines[i]}: value {rows[i][j].strip()!r} is not finite")
-    cols = {n: data[:, j].copy() for j, n in enumerate(names)}
-    dt = np.diff(cols["t"])
-    if np.any(dt <= 0):
-        i = int(np.argmax(dt <= 0))
-        raise ReplayError(f"{path}: column 't' is not strictly increasing at line {lines[i + 1]} "
-                          f"(t = {rows[i + 1][names.index('t')].strip()} after {rows[i][names.index('t')].strip()})")
-    return cols
+        return _records.load_csv(path)
+    except _records.RecordError as exc:
+        raise ReplayError(str(exc)) from None
 
 
 def uniform_step(t: np.ndarray, source: Any = "the record") -> float:

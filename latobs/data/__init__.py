@@ -1,0 +1,1 @@
+"""Data shipped with latobs: the real-vehicle record ``mbds-250lm/`` and its reader (:mod:`.records`)."""
