@@ -1,5 +1,5 @@
 """The validation master calling the libraries fmpy loaded directly (the default) gives the results of
-the same loop calling them through fmpy.s checked wrappers (``fast=False``), bit for bit: the same calls in the
+the same loop calling them through fmpy's checked wrappers (``fast=False``), bit for bit: the same calls in the
 same order and the same arithmetic, on pythonfmu and native C FMUs, with and without noise."""
 from __future__ import annotations
 
