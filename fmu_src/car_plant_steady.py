@@ -31,9 +31,9 @@ def steady_turn(data: dict, vx: float, ay: float, params: dict | None = None) ->
     algebraic tires (sigma <= 0) is solved with sigma = 1 m (its own one-pass load-transfer loop
     shifts ay slightly from this state).
 
-    Returns {delta, vy, beta, yaw_rate, roll_angle, ay, alpha_f, alpha_r, Fyf, Fyr, iterations}
+    Returns {delta, vy, beta, yaw_rate, roll_angle, ay, alpha_f, alpha_r, Fyf, Fyr, F, iterations}
     (SI units, beta = atan(vy/vx) at the roll axis, alpha_* the axle means as the plant reports
-    them). Raises ValueError when no steady turn exists (ay beyond the tires' grip) or for a
+    them, F the wheel forces fl, fr, rl, rr). Raises ValueError when no steady turn exists (ay beyond the tires' grip) or for a
     speed <= the plant's V_SLIP_MIN or a non-finite ay.
     """
     vmin = CarPlantModel.V_SLIP_MIN
@@ -102,7 +102,7 @@ def steady_turn(data: dict, vx: float, ay: float, params: dict | None = None) ->
                          f"{res[1] * m * G * L:.3g} N m): beyond the tires' grip?")
     return {"delta": z[1], "vy": z[0], "beta": math.atan(z[0] / vx), "yaw_rate": r, "roll_angle": z[2],
             "ay": ts["S"] / m, "alpha_f": ts["alpha_f"], "alpha_r": ts["alpha_r"], "Fyf": ts["Fyf"],
-            "Fyr": ts["Fyr"], "iterations": iterations}
+            "Fyr": ts["Fyr"], "F": tuple(z[3:]), "iterations": iterations}
 
 
 def _solve(A, b):
