@@ -49,7 +49,7 @@ def _list_entry(name: str, text: str, width: int = LIST_WIDTH) -> str:
 def _cmd_list(args) -> int:
     import tomllib
 
-    from .campaign import shipped
+    from .campaign_runner import shipped
     from .packaging import PLANTS
     from .synthesis import designs
     from .synthesis.params import load_vehicle, vehicle_names
@@ -167,7 +167,7 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_campaign(args) -> int:
-    from .campaign import rerun, run_campaign
+    from .campaign_runner import rerun, run_campaign
 
     if args.rerun is not None:
         rerun(args.campaign, args.rerun, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
