@@ -369,11 +369,17 @@ def _check_bench_args(argv: list[str]) -> None:
             raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text!r}")
         return value
 
+    def existing_file(text: str) -> str:
+        if not Path(text).is_file():
+            raise argparse.ArgumentTypeError(f"{text!r}: no such file")
+        return text
+
     p = _Parser(prog="latobs bench", add_help=False)
     p.add_argument("--fmu-dir", type=_fmu_dir)
     p.add_argument("--steps", type=_positive_int)
     p.add_argument("--repeats", type=_positive_int)
     p.add_argument("--json", type=_out_file)
+    p.add_argument("--from-json", type=existing_file)
     p.add_argument("--backends", type=names(BACKENDS, "backend(s)"))
     p.add_argument("--designs", type=names(list(designs.DESIGNS), "design(s)"))
     p.add_argument("--scs-max-iters", type=_positive_int)
