@@ -1,30 +1,6 @@
-"""Validation manoeuvres: the input signals that drive a plant FMU.
-
-A :class:`Scenario` gives, on any time grid ``t`` (s), the plant's input signals keyed by the
-FMU variable name. For the car plant (``CarPlant``) these are
-
-* ``delta``      road-wheel steering angle, rad, > 0 steers left,
-* ``vx``         longitudinal speed, m/s,
-* ``bank_angle`` road bank angle, rad (sign convention of ERRATA.md: it enters the sideslip
-  equation as -g/Vx * bank_angle).
-
-and, from :meth:`Scenario.parameter_signals`, time-varying plant parameters that the plant takes
-as OPTIONAL inputs (:attr:`Scenario.optional_plant_inputs`; a scenario that does not provide one
-leaves it at the FMU's start value):
-
-* ``stiffness_scale_f``, ``stiffness_scale_r`` (1): CarPlant's front / rear cornering stiffness
-  multipliers (start 1.0), used by the ``*-varying-stiffness`` scenarios of paper 002.
-
-Angles are in rad and speeds in m/s everywhere; degrees and km/h appear only in names that say
-so (``*_deg``, ``*_kmh``). Amplitudes that depend on the vehicle use the linear bicycle model of
-the vehicle's parameters (m, lf, lr, Cf, Cr) as the standards do with a slowly increasing steer:
-
-    steady-state lateral acceleration per rad of road-wheel steer
-        G_ss(vx) = vx^2 / (L + K_us * vx^2)   [(m/s^2)/rad]
-    with L = lf + lr (m) and the understeer gradient K_us = m/L * (lr/Cf - lf/Cr)  [rad/(m/s^2)].
-
-All steering inputs are OPEN LOOP (no driver model, no path following): the manoeuvres
-approximate the standards' steering traces, they do not track a course.
+"""The base class of the validation manoeuvres (:class:`Scenario`: input signals of a plant FMU on
+any time grid, SI units) and the linear bicycle's steady-state gain that scales the car
+manoeuvres' steering amplitudes. docs/validation.md lists the signals and the conventions.
 """
 from __future__ import annotations
 
