@@ -161,8 +161,8 @@ def _store(port: _Port, typ: str, j: int, rows, values, name: str, t: np.ndarray
     bad = ~np.isfinite(v) | (np.abs(v) > 2**31 - 1)
     if bad.any():
         k = np.atleast_1d(np.arange(len(t))[rows])[int(np.argmax(bad))]
-        raise CoSimulationError(f"{port.f.describe()}: {typ} input {name!r} gets {v[bad][0]!r} at "
-                                f"t = {t[k]:.6g} s, not an integer")
+        raise CoSimulationError(f"{port.f.describe()}: {typ} input {name!r} gets {float(v[bad][0])!r} at "
+                                f"t = {t[k]:.6g} s, not an fmi2Integer (32 bits)")
     m[rows, j] = np.rint(v) if np.ndim(values) else np.rint(v[0])
 
 
