@@ -1,20 +1,22 @@
 """``latobs bench``: what latobs costs, measured side by side in one run (build, LMI solves, one
 FMU step per backend, coupled runs, scaling), each figure beside a reference measured in the same
-process. :mod:`.measure` measures, :mod:`.tables` renders the figures as Markdown;
+process. :mod:`.measure` and :mod:`.lmi` measure, :mod:`.tables` renders the figures as Markdown;
 ``latobs bench --markdown`` prints the documentation's speed page.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 
 from ..synthesis import designs  # the catalogue only (no solver stack)
-from .measure import (BACKEND_LABEL, BACKENDS, DT, LENGTHS, LMI_TIMEOUT, SCALING_OBSERVERS_DURATION,
-                      SCALING_SCENARIO, SOLVER_LABEL, SOLVERS, Pairing, _fmu_pairing, _jsonable, _kind, bench, bus,
+from .lmi import LMI_TIMEOUT, lmi_row, lmi_row_isolated, lmi_section
+from .measure import (BACKEND_LABEL, BACKENDS, DT, LENGTHS, SCALING_OBSERVERS_DURATION, SCALING_SCENARIO,
+                      SOLVER_LABEL, SOLVERS, Pairing, _fmu_pairing, _jsonable, _kind, _numpy_reference, _progress, bus,
                       build_time, coupled, coupled_in_fresh_process, coupled_section, ensure_fmus, fmu_data, fmu_names,
-                      fmu_section, lmi_row, lmi_row_isolated, lmi_section, machine, paper_000_observers, pairings,
-                      plant_artefact, runtime_step_time, scaling_section)
+                      fmu_section, machine, paper_000_observers, pairings, plant_artefact, runtime_step_time,
+                      scaling_section)
 from .tables import (_lmi_cell, build_table, coupled_table, fmu_table, lmi_table, machine_statement, markdown,
                      scaling_table, table)
 
@@ -25,6 +27,51 @@ __all__ = ["BACKENDS", "BACKEND_LABEL", "DT", "LENGTHS", "LMI_TIMEOUT", "SCALING
            "machine", "machine_statement", "main", "markdown", "paper_000_observers", "pairings", "parser",
            "plant_artefact", "runtime_step_time", "scaling_section", "scaling_table", "table",
            "_fmu_pairing", "_jsonable", "_kind", "_lmi_cell"]
+
+
+def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3, *, backends=BACKENDS, lmi: bool = True,
+          build: bool = True, fmus: bool = True, coupled_runs: bool = True, scaling: bool = True,
+          lmi_designs: list[str] | None = None, solvers=SOLVERS, scs_max_iters: int | None = None,
+          lmi_timeout: float | None = LMI_TIMEOUT) -> dict:
+    """Every section (the module docstring); returns the figures (``--json`` writes them)."""
+    from ..synthesis import lmi as lmi_mod
+
+    fmu_dir = Path(fmu_dir)
+    names = fmu_names()
+    out: dict = {"date": time.strftime("%Y-%m-%d"), "machine": machine(), "n_steps": n, "repeats": repeats, "dt": DT,
+                 "backends": list(backends), "pairings": [dict(p.__dict__, plant_fmu=p.plant_fmu) for p in pairings()],
+                 "build": None, "lmi": None, "fmus": None, "coupled": None, "scaling": None,
+                 "unavailable": {}}
+    folders = {b: fmu_dir / b for b in backends}
+    if build:
+        out["build"] = []
+        for b in backends:
+            _progress(f"latobs build --backend {b} in a fresh process")
+            out["build"].append(build_time(b, fill=folders[b]))
+    if lmi:
+        out["lmi"] = {"solvers": list(solvers), "timeout_seconds": lmi_timeout,
+                      "settings": {s: {**lmi_mod.SOLVERS[s], **({"max_iters": scs_max_iters}
+                                                                if s == "SCS" and scs_max_iters else {})}
+                                   for s in solvers},
+                      "rows": lmi_section(lmi_designs or list(designs.DESIGNS), solvers, scs_max_iters,
+                                          lmi_timeout)}
+    if fmus or coupled_runs or scaling:
+        for b in backends:
+            out["unavailable"][b] = ensure_fmus(folders[b], b, names)
+    if fmus:
+        out["fmus"] = fmu_section(folders, names, n, repeats, out["unavailable"])
+        out["numpy_reference"] = _numpy_reference(n)
+    if coupled_runs:
+        out["coupled"] = coupled_section(folders, max(1, repeats - 1))
+    if scaling:
+        need = ["CarPlant", *paper_000_observers()]
+        backend = next((b for b in ("c", "python") if b in folders
+                        and all((folders[b] / f"{x}.fmu").is_file() for x in need)), None)
+        if backend is None:
+            out["scaling"] = {"error": f"no backend folder holds {', '.join(need)}"}
+        else:
+            out["scaling"] = scaling_section(folders[backend], backend, repeats)
+    return out
 
 
 def parser() -> argparse.ArgumentParser:
