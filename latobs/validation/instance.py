@@ -189,12 +189,7 @@ class FmuInstance:
                 names, vr, buf = self._subset(typ, names, vr, values)
                 if not names:
                     continue
-            if typ == "Real":
-                s.fmi2SetReal(s.component, vr, len(names), buf)
-            elif typ == "Boolean":
-                s.fmi2SetBoolean(s.component, vr, len(names), buf)
-            else:
-                s.fmi2SetInteger(s.component, vr, len(names), buf)
+            getattr(s, "fmi2Set" + typ)(s.component, vr, len(names), buf)
 
     @staticmethod
     def _subset(typ, names, vr, values):
@@ -209,12 +204,7 @@ class FmuInstance:
         s = self.slave
         out = {}
         for typ, (names, vr, buf) in self.out_groups.items():
-            if typ == "Real":
-                s.fmi2GetReal(s.component, vr, len(names), buf)
-            elif typ == "Boolean":
-                s.fmi2GetBoolean(s.component, vr, len(names), buf)
-            else:
-                s.fmi2GetInteger(s.component, vr, len(names), buf)
+            getattr(s, "fmi2Get" + typ)(s.component, vr, len(names), buf)
             out.update(zip(names, buf))
         return out
 
