@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -114,9 +115,12 @@ def main(argv: list[str] | None = None) -> int:
         try:
             r = json.loads(Path(a.from_json).read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
-            parser().error(f"--from-json: cannot read {a.from_json}: {exc}")
-        if not isinstance(r, dict):
-            parser().error(f"--from-json: {a.from_json} is not the JSON of `latobs bench --json`")
+            r = exc
+        if not isinstance(r, dict):        # a user error: one line, exit 2
+            why = f": {r}" if isinstance(r, Exception) else ""
+            print(f"latobs bench: error: --from-json: {a.from_json} is not the JSON of `latobs bench --json`{why}",
+                  file=sys.stderr)
+            return 2
         print(markdown(r) if a.markdown else table(r))
         return 0
     backends = [b.strip() for b in a.backends.split(",") if b.strip()]

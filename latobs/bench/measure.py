@@ -346,7 +346,7 @@ def fmu_section(folders: dict[str, Path], names: list[str], n: int, repeats: int
 # ------------------------------------------------------------------------------------------------
 def _time_runs(scenario, plant: Path, observers: dict[str, Path], vehicle: str, repeats: int,
                unzipped: dict | None = None) -> dict:
-    """Best and first wall time of ``repeats`` coupled runs (``harness.run``, fast master)."""
+    """Best and first wall time of ``repeats`` coupled runs (``harness.run``, direct FMI calls)."""
     from ..validation.harness import run
 
     times = []

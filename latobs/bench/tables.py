@@ -169,7 +169,7 @@ def fmu_table(r: dict) -> str:
 
 
 def coupled_table(rows: list[dict]) -> str:
-    lines = ["Coupled runs through the validation harness (`harness.run`, fast master), best of the repeats "
+    lines = ["Coupled runs through the validation harness (`harness.run`, direct FMI calls), best of the repeats "
              "(first run in parentheses):", "",
              "| pairing | scenario (s simulated) | plant + observers | backend | wall time (s) | µs per step | "
              "real time |", "|---|---|---|---|---|---|---|"]

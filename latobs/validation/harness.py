@@ -20,4 +20,4 @@ from .instance import (
 from .master import PLANT_LABEL, CoSimulation, NoiseSpec, SimResult, run
 
 __all__ = ["MAX_LOG_MESSAGES", "PLANT_LABEL", "CoSimulation", "CoSimulationError", "FmuInstance", "NoiseSpec",
-           "SimResult", "WiringError", "design_summary", "observer_design", "read_fmu_design", "run"]
+           "SimResult", "WiringError", "_unit_of", "design_summary", "observer_design", "read_fmu_design", "run"]

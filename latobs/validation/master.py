@@ -152,7 +152,8 @@ def _matrices(f: FmuInstance, variables, n: int) -> dict[str, tuple[list[str], n
 
 def _store(port: _Port, typ: str, j: int, rows, values, name: str, t: np.ndarray):
     """Write float ``values`` into input column j of ``port`` at ``rows``; an Integer or Boolean input
-    takes the nearest integer, and a non-finite value there is a CoSimulationError."""
+    takes the nearest integer, and a value that is not finite or beyond 32 bits there is a
+    CoSimulationError (never a silently wrapped value)."""
     m = port.inputs[typ][2]
     if typ == "Real":
         m[rows, j] = values
@@ -162,7 +163,7 @@ def _store(port: _Port, typ: str, j: int, rows, values, name: str, t: np.ndarray
     if bad.any():
         k = np.atleast_1d(np.arange(len(t))[rows])[int(np.argmax(bad))]
         raise CoSimulationError(f"{port.f.describe()}: {typ} input {name!r} gets {float(v[bad][0])!r} at "
-                                f"t = {t[k]:.6g} s, not an fmi2Integer (32 bits)")
+                                f"t = {t[k]:.6g} s, not representable as fmi2{typ} (a 32-bit int)")
     m[rows, j] = np.rint(v) if np.ndim(values) else np.rint(v[0])
 
 
