@@ -49,7 +49,7 @@ def _list_entry(name: str, text: str, width: int = LIST_WIDTH) -> str:
 def _cmd_list(args) -> int:
     import tomllib
 
-    from .campaign import shipped
+    from .campaign_runner import shipped
     from .packaging import PLANTS
     from .synthesis import designs
     from .synthesis.params import load_vehicle, vehicle_names
@@ -167,7 +167,7 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_campaign(args) -> int:
-    from .campaign import rerun, run_campaign
+    from .campaign_runner import rerun, run_campaign
 
     if args.rerun is not None:
         rerun(args.campaign, args.rerun, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
@@ -369,11 +369,17 @@ def _check_bench_args(argv: list[str]) -> None:
             raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text!r}")
         return value
 
+    def existing_file(text: str) -> str:
+        if not Path(text).is_file():
+            raise argparse.ArgumentTypeError(f"{text!r}: no such file")
+        return text
+
     p = _Parser(prog="latobs bench", add_help=False)
     p.add_argument("--fmu-dir", type=_fmu_dir)
     p.add_argument("--steps", type=_positive_int)
     p.add_argument("--repeats", type=_positive_int)
     p.add_argument("--json", type=_out_file)
+    p.add_argument("--from-json", type=existing_file)
     p.add_argument("--backends", type=names(BACKENDS, "backend(s)"))
     p.add_argument("--designs", type=names(list(designs.DESIGNS), "design(s)"))
     p.add_argument("--scs-max-iters", type=_positive_int)

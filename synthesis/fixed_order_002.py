@@ -51,7 +51,7 @@ import numpy.polynomial.polynomial as P
 from scipy.optimize import minimize_scalar
 
 from . import lmi
-from .params import Vehicle, VehicleParameterError, load_vehicle
+from .params import Vehicle, VehicleParameterError, axle_stiffness_ranges, load_vehicle
 
 # Weights of eqs. (5), (6), ascending coefficients
 NF1 = np.array([39.4784])
@@ -143,9 +143,8 @@ def boxes(vehicle: Vehicle | None = None) -> dict[str, Box]:
     rf, rr, rv = veh.ranges["cf_tyre"], veh.ranges["cr_tyre"], veh.ranges["speed"]
     assert rf.unit == rr.unit == "N/deg" and rv.unit == "km/h", "delibasi.toml units changed"
     vbox = (rv.min / 3.6, rv.max / 3.6)
-    k = 2.0 * 180.0 / math.pi
     return {
-        "physical": Box("physical", m, Iz, lf, lr, (k * rf.min, k * rf.max), (k * rr.min, k * rr.max), vbox),
+        "physical": Box("physical", m, Iz, lf, lr, *axle_stiffness_ranges(veh), vbox),
         "paper": Box("paper", m, Iz, lf, lr, (rf.min, rf.max), (rr.min, rr.max), vbox),
     }
 

@@ -173,3 +173,24 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
     except tomllib.TOMLDecodeError as exc:
         raise VehicleParameterError(f"{origin}: not valid TOML: {exc}") from exc
     return parse_vehicle(data, origin)
+
+
+def axle_stiffness_ranges(vehicle: Vehicle) -> tuple[tuple[float, float], tuple[float, float]]:
+    """((Cf min, max), (Cr min, max)), N/rad per axle, of a vehicle: its per-tyre ranges
+    ``cf_tyre``, ``cr_tyre`` (N/deg, two tyres per axle; paper 002's delibasi) or else its
+    ``[ranges]`` ``Cf``, ``Cr`` (N/rad). VehicleParameterError when it has neither."""
+    if "cf_tyre" in vehicle.ranges and "cr_tyre" in vehicle.ranges:
+        rf, rr = vehicle.ranges["cf_tyre"], vehicle.ranges["cr_tyre"]
+        if not rf.unit == rr.unit == "N/deg":
+            raise VehicleParameterError(f"vehicle {vehicle.name!r}: ranges 'cf_tyre', 'cr_tyre' must be in N/deg, "
+                                        f"got {rf.unit!r}, {rr.unit!r}")
+        k = 2.0 * 180.0 / math.pi
+        return (k * rf.min, k * rf.max), (k * rr.min, k * rr.max)
+    out = []
+    for key in ("Cf", "Cr"):
+        rg = vehicle.ranges.get(key)
+        if rg is None or rg.unit != "N/rad":
+            raise VehicleParameterError(f"vehicle {vehicle.name!r} has no range {key!r} in N/rad (nor the "
+                                        f"per-tyre ranges cf_tyre, cr_tyre in N/deg)")
+        out.append((rg.min, rg.max))
+    return out[0], out[1]

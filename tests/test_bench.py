@@ -221,3 +221,27 @@ def test_a_bad_bench_option_is_one_line_and_exit_2(argv, culprit, capsys):
         rc = exc.code
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and err[0].startswith("latobs bench: error:") and culprit in err[0]
+
+
+def test_markdown_is_the_speed_page_without_a_date(tmp_path, capsys):
+    """`latobs bench --markdown` (here on the figures of an earlier `--json`, measuring nothing):
+    the machine and its load, then a heading and the table of every measured section; no date."""
+    from latobs.cli import main
+
+    r = _synthetic_result()
+    r["date"] = "2031-07-04"
+    r["machine"] = {"cpu": "Test CPU 9000", "logical_cores": 2, "system": "Linux 6", "python": "3.11.7",
+                    "numpy": "2.0", "load_average": [1.5, 1.25, 1.0]}
+    f = tmp_path / "bench.json"
+    f.write_text(json.dumps(bench._jsonable(r)), encoding="utf-8")
+    assert main(["bench", "--from-json", str(f), "--markdown"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("Measured on Test CPU 9000 (2 logical cores)") and "1.50 / 1.25 / 1.00" in out
+    headings = [line for line in out.splitlines() if line.startswith("## ")]
+    assert headings == ["## Whole build", "## LMI designs: Clarabel and SCS", "## One FMU step", "## Coupled runs",
+                        "## Scaling with length and observers"]
+    for part in bench.table(r).split("\n\n"):                     # the same tables as the plain output
+        assert part in out
+    assert "2031" not in out and "ERRATA" not in out
+    assert main(["bench", "--from-json", str(f)]) == 0             # without --markdown: the tables alone
+    assert capsys.readouterr().out.strip() == bench.table(r).strip()

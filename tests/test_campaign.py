@@ -1,4 +1,4 @@
-"""Monte Carlo campaigns (latobs.validation.campaign, latobs.campaign): definitions, draws,
+"""Monte Carlo campaigns (latobs.validation.campaign*, latobs.campaign_runner): definitions, draws,
 journal, summary; a campaign on a local Dask cluster that resumes and re-runs a run alone; and a
 campaign on a running dask-scheduler that loses a worker mid-way."""
 from __future__ import annotations
@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 from latobs.validation import campaign as cp
+from latobs.validation import campaign_run as cr
+from latobs.validation import campaign_stats as cs
 from latobs.validation.campaign import CampaignError
 from latobs.validation.scenarios import get_scenario
 
@@ -36,7 +38,7 @@ BASE = 'name = "t"\nkind = "cosim"\nscenario = "bank-braking"\nobservers = ["Sid
 # --------------------------------------------------------------------------------------------
 def test_the_shipped_campaigns_load_and_cover_every_paper_and_the_real_data():
     assert {"robustness-000", "robustness-001", "robustness-002", "robustness-003", "mbds-bootstrap"} <= set(SHIPPED)
-    from latobs.campaign import resolve, shipped
+    from latobs.campaign_runner import resolve, shipped
 
     for name, path in shipped().items():
         c = cp.load(path)
@@ -74,7 +76,7 @@ def test_bad_top_level_values_are_refused(tmp_path):
 
 
 def test_a_scenario_alone_takes_the_robustness_distributions_of_its_observers_paper():
-    from latobs.campaign import resolve
+    from latobs.campaign_runner import resolve
 
     c = resolve("double-lane-change", runs=7)
     t = resolve("robustness-000")
@@ -147,7 +149,7 @@ def test_a_draw_outside_the_plant_fmus_declared_ranges_is_refused_before_any_run
     ref = _model_description_fmu(tmp_path / "p.fmu", _PLANT_VARS)
     c = cp.load(_write(tmp_path, BASE + extra))
     with pytest.raises(CampaignError, match=culprit) as e:
-        cp.check_supports(c, [ref])
+        cr.check_supports(c, [ref])
     assert "c.toml" in str(e.value)
 
 
@@ -155,7 +157,7 @@ def test_draws_inside_the_declared_ranges_pass_the_check(tmp_path):
     ref = _model_description_fmu(tmp_path / "p.fmu", _PLANT_VARS)
     c = cp.load(_write(tmp_path, BASE + "[plant]\nmu = { uniform = [0.01, 2.0] }\nscale_f = { normal = [1.0, 0.1], "
                                         "clip = [0.5, 1.5] }\n[signals]\nspeed_scale = { uniform = [0.9, 1.2] }\n"))
-    cp.check_supports(c, [ref])                        # 25 m/s * 1.2 = 30 m/s: the declared maximum
+    cr.check_supports(c, [ref])                        # 25 m/s * 1.2 = 30 m/s: the declared maximum
 
 
 # --------------------------------------------------------------------------------------------
@@ -195,7 +197,7 @@ bias = { normal = [0.003, 0.001] }
 
 
 def test_random_manoeuvre_runs_get_the_run_seed_as_the_scenario_seed():
-    from latobs.campaign import resolve
+    from latobs.campaign_runner import resolve
 
     c = resolve("robustness-001")
     p = cp.draw(c, 12345)
@@ -204,7 +206,7 @@ def test_random_manoeuvre_runs_get_the_run_seed_as_the_scenario_seed():
 
 def test_replay_segments_lie_wholly_in_one_part_of_the_record():
     """On the record's own time axis (the MBDS record runs from t = 150 s to 700 s, split 425 s)."""
-    from latobs.campaign import resolve
+    from latobs.campaign_runner import resolve
 
     c = resolve("mbds-bootstrap")
     counts = {"train": 0, "test": 0}
@@ -216,7 +218,7 @@ def test_replay_segments_lie_wholly_in_one_part_of_the_record():
     # each part in proportion to its room for a segment: 245 s and 245 s
     assert abs(counts["train"] / 2000 - 0.5) < 0.05
     record = {"t": np.arange(15000, 70000) / 100.0, "yaw_rate": np.zeros(55000)}
-    seg = cp.replay_segment(c, {"segment.t_start_s": 430.0}, record, 1)
+    seg = cr.replay_segment(c, {"segment.t_start_s": 430.0}, record, 1)
     assert seg["t"][0] == 430.0 and seg["t"].size == 3000
 
 
@@ -245,23 +247,23 @@ def _row(k, value, status="ok"):
 
 
 def test_the_journal_keeps_whole_rows_once_and_drops_a_torn_last_line(tmp_path):
-    j = cp.Journal(tmp_path / "runs.jsonl")
+    j = cs.Journal(tmp_path / "runs.jsonl")
     for k in range(3):
         j.append(_row(k, float(k)))
     j.append(_row(1, 99.0))                                  # a run delivered twice
     j.close()
     with open(j.path, "a") as f:
         f.write('{"run": 3, "seed": 1, "sta')               # killed mid-write
-    rows = cp.Journal(j.path).read()
+    rows = cs.Journal(j.path).read()
     assert sorted(rows) == [0, 1, 2] and rows[1]["metrics"]["O.beta.rms"] == 1.0
-    j2 = cp.Journal(j.path)
+    j2 = cs.Journal(j.path)
     j2.append(_row(3, 3.0))                                  # the torn line is ended, the row whole
     j2.close()
-    assert sorted(cp.Journal(j.path).read()) == [0, 1, 2, 3]
+    assert sorted(cs.Journal(j.path).read()) == [0, 1, 2, 3]
     lines = j.path.read_text().splitlines()
     j.path.write_text("\n".join(["garbage", *lines]) + "\n")
     with pytest.raises(CampaignError, match="line 1"):
-        cp.Journal(j.path).read()
+        cs.Journal(j.path).read()
 
 
 def test_the_summary_gives_numpy_percentiles_enclosure_and_the_worst_runs(tmp_path):
@@ -269,17 +271,17 @@ def test_the_summary_gives_numpy_percentiles_enclosure_and_the_worst_runs(tmp_pa
     rng = np.random.default_rng(3)
     values = rng.lognormal(size=200)
     rows = [_row(k, float(v)) for k, v in enumerate(values)] + [_row(200, 0.0, status="failed")]
-    s = cp.summarize(c, rows)
+    s = cs.summarize(c, rows)
     st = s["metrics"]["O.beta.rms"]
-    for p in cp.PERCENTILES:
+    for p in cs.PERCENTILES:
         assert st[f"p{p}"] == pytest.approx(np.percentile(values, p), rel=1e-12)
     assert st["max"] == values.max() and st["n"] == 200 and st["mean_ci95"][0] < values.mean() < st["mean_ci95"][1]
     assert (s["ok"], s["failed"], s["failures"][0]["run"]) == (200, 1, 200)
     assert s["enclosure"]["O.vy"]["runs_with_violations"] == len([k for k in range(200) if k % 3 == 0])
     worst = s["worst"]["O.beta.rms"]
-    assert [w["run"] for w in worst] == list(np.argsort(-values)[: cp.WORST_RUNS])
+    assert [w["run"] for w in worst] == list(np.argsort(-values)[: cs.WORST_RUNS])
     assert worst[0]["seed"] == cp.run_seed(0, worst[0]["run"])
-    t = cp.rows_table(rows)
+    t = cs.rows_table(rows)
     assert t.num_rows == 201 and t.column("O.beta.rms").to_pylist()[:3] == list(values[:3])
 
 
@@ -291,13 +293,13 @@ def test_an_interval_that_never_misses_is_plotted_and_ranked_by_its_width_in_deg
     from latobs.validation import campaign_report
 
     metrics = {"O.beta.violations": 0.0, "O.beta.mean_width": 0.0, "O.vy.violations": 0.0, "O.vy.mean_width": 0.0}
-    heads = cp.headline_columns(metrics, {"O": ["yaw_rate"]})
+    heads = cs.headline_columns(metrics, {"O": ["yaw_rate"]})
     assert heads == list(metrics)                          # widths are headline metrics beside the counts
     c = cp.load(_write(tmp_path, BASE))
     rows = [{"run": k, "seed": cp.run_seed(0, k), "status": "ok", "error": None, "params": {"plant.mu": 0.5 + k / 100},
              "metrics": {**metrics, "O.beta.mean_width": 0.01 + k / 1000, "O.vy.mean_width": 0.2 + k / 100},
              "headline": heads, "seconds": 0.1, "worker": "w"} for k in range(30)]
-    s = cp.summarize(c, rows)
+    s = cs.summarize(c, rows)
     assert [w["run"] for w in s["worst"]["O.beta.mean_width"]] == [29, 28, 27, 26, 25]    # the widest runs
     assert s["worst"]["O.beta.violations"] == []
     figs = campaign_report.figures(tmp_path, rows)
@@ -325,7 +327,7 @@ def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_al
     contains the truth in every run; an extended campaign runs only the new runs; a journal cut by
     a kill is completed with the same rows; a run re-run alone from its seed gives the same metrics."""
     from latobs import packaging
-    from latobs.campaign import run_campaign, rerun
+    from latobs.campaign_runner import run_campaign, rerun
 
     fmus = _fmu_folder(built_fmus, tmp_path, ["LateralIntervalObserver"])
     packaging.package_plant("CarPlant", "sedan_no_roll", fmus, backend="c")
@@ -333,7 +335,7 @@ def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_al
     kw = dict(out=out, fmu_dir=fmus, workers=2, progress=False, plots=False)
     s = run_campaign("robustness-001", runs=10, **kw)
     folder = Path(s["folder"])
-    journal = cp.Journal(folder / "runs.jsonl")
+    journal = cs.Journal(folder / "runs.jsonl")
     rows = journal.read()
     assert sorted(rows) == list(range(10)) and all(r["status"] == "ok" for r in rows.values())
     for base, e in s["enclosure"].items():                   # the design's guarantee
@@ -344,14 +346,14 @@ def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_al
 
     s = run_campaign("robustness-001", runs=12, **kw)        # extended: two new runs only
     assert s["timing"]["runs_this_invocation"] == 2
-    after = cp.Journal(folder / "runs.jsonl").read()
+    after = cs.Journal(folder / "runs.jsonl").read()
     assert all(after[k]["metrics"] == rows[k]["metrics"] for k in range(10))
 
     lines = (folder / "runs.jsonl").read_text().splitlines()   # killed: 3 rows lost, 1 torn
     (folder / "runs.jsonl").write_text("\n".join(lines[:-3]) + "\n" + lines[-3][:25])
     s = run_campaign("robustness-001", runs=12, **kw)
     assert s["timing"]["runs_this_invocation"] == 3 and s["runs"] == 12
-    again = cp.Journal(folder / "runs.jsonl").read()
+    again = cs.Journal(folder / "runs.jsonl").read()
     assert {k: r["metrics"] for k, r in again.items()} == {k: r["metrics"] for k, r in after.items()}
     assert (folder / "report.md").is_file() and (folder / "runs.parquet").is_file()
 
@@ -440,12 +442,12 @@ def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_
     assert len({r["worker"] for r in lines[:done_at_kill] if r["run"] != 0}) == 2
     assert len({r["worker"] for r in lines[done_at_kill + 5:]}) == 1     # the survivor finished it
 
-    from latobs.campaign import fmu_refs, resolve
+    from latobs.campaign_runner import fmu_refs, resolve
 
     c = resolve("robustness-000", runs=runs)
     refs = fmu_refs(c, fmus)
     for k in (0, lines[done_at_kill - 1]["run"], lines[-1]["run"]):
-        assert cp.run_case(c, k, cp.run_seed(c.seed, k), refs)["metrics"] == by_run[k]["metrics"], k
+        assert cr.run_case(c, k, cp.run_seed(c.seed, k), refs)["metrics"] == by_run[k]["metrics"], k
 
 
 def test_the_local_cluster_serves_no_dashboard_and_never_warns_about_port_8787(recwarn):
@@ -453,7 +455,7 @@ def test_the_local_cluster_serves_no_dashboard_and_never_warns_about_port_8787(r
     already in use" warning while another process holds Dask's default port."""
     import socket
 
-    from latobs.campaign import local_cluster
+    from latobs.campaign_runner import local_cluster
 
     holder = socket.socket()
     try:

@@ -399,7 +399,7 @@ def _list_entries(out: str) -> dict[str, str]:
 
 
 def test_list_fits_100_columns_and_names_every_shipped_campaign(capsys):
-    from latobs.campaign import shipped
+    from latobs.campaign_runner import shipped
     from latobs.synthesis import designs
     from latobs.validation.scenarios import SCENARIOS
 

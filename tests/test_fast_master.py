@@ -1,5 +1,5 @@
-"""The validation harness's fast master (preallocated buffers, raw calls into the libraries fmpy
-loaded; ``harness._fast_loop``) gives the plain loop's results bit for bit: the same calls in the
+"""The validation master calling the libraries fmpy loaded directly (the default) gives the results of
+the same loop calling them through fmpy's checked wrappers (``fast=False``), bit for bit: the same calls in the
 same order and the same arithmetic, on pythonfmu and native C FMUs, with and without noise."""
 from __future__ import annotations
 

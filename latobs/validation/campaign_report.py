@@ -17,7 +17,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..atomic import atomic_write_text
-from .campaign import Campaign, headlines
+from .campaign import Campaign
+from .campaign_stats import headlines
 
 
 SCATTER_COLUMNS = 6   # panels per row of a scatter figure

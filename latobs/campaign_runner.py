@@ -1,25 +1,10 @@
-"""``latobs campaign``: Monte Carlo campaigns of built FMUs on Dask (README, "Campaigns").
+"""``latobs campaign``: Monte Carlo campaigns of built FMUs run on Dask, written to their folder.
 
-The campaign's definition, draws, single run, journal and statistics are
-:mod:`latobs.validation.campaign`; this module puts them on Dask and writes the folder:
-
-* a local cluster by default (``--workers`` processes, one thread each), or the running
-  ``dask-scheduler`` at ``--scheduler ADDRESS``, whose workers need latobs installed and nothing
-  else: the FMUs (and a replay's record) are shipped to them once (``Client.scatter``), not read
-  from a shared disk;
-* one Dask task per chunk of consecutive runs (:func:`chunk_size`: at most 8), keyed by the
-  campaign's fingerprint and its run indices; a worker that dies mid-chunk has its chunks
-  rescheduled by Dask, and the client appends each run's row to the journal once, as its chunk's
-  result arrives (a progress bar counts them);
-* an interrupted campaign (Ctrl-C, a lost scheduler, a killed client) keeps the runs that
-  finished: the same command resumes with the missing run indices only. The folder records the
-  fingerprint of the definition and the FMUs: another definition or rebuilt FMUs in the same
-  folder is an error (``--tag``, another ``--out``, or ``--fresh``).
-
-Output ``OUT/campaign_NAME[_TAG]/``: ``campaign.json`` (definition, fingerprint, FMUs),
-``runs.jsonl`` (the journal), ``runs.parquet`` (one row per run: parameters and metrics),
-``summary.json``, ``report.md`` with its histograms and scatter plots; ``rerun_SEED/`` for
-``--rerun SEED`` (one run alone, with the full validation output and plots).
+The definition, draws, single run, journal and statistics are :mod:`latobs.validation.campaign`,
+:mod:`~latobs.validation.campaign_run` and :mod:`~latobs.validation.campaign_stats`; this module
+ships the FMUs to a local or remote Dask cluster, runs chunks of runs there, appends each finished
+run to the journal, resumes an interrupted campaign and re-runs one run alone. docs/validation.md
+describes the output folder.
 """
 from __future__ import annotations
 
@@ -36,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from .validation import campaign as cp
+from .validation import campaign_run as cr
+from .validation import campaign_stats as cs
 from .validation.campaign import Campaign, CampaignError
 
 CAMPAIGN_DIR = Path(os.fspath(resources.files("latobs").joinpath("campaigns")))
@@ -143,7 +130,7 @@ def campaign_dir(c: Campaign, out: Path, tag: str = "") -> Path:
     return Path(out) / (f"campaign_{c.name}_{tag}" if tag else f"campaign_{c.name}")
 
 
-def _open_folder(c: Campaign, folder: Path, fingerprint: str, refs, fresh: bool) -> cp.Journal:
+def _open_folder(c: Campaign, folder: Path, fingerprint: str, refs, fresh: bool) -> cs.Journal:
     from .atomic import atomic_write_text
 
     meta = folder / "campaign.json"
@@ -161,7 +148,7 @@ def _open_folder(c: Campaign, folder: Path, fingerprint: str, refs, fresh: bool)
     atomic_write_text(meta, json.dumps({"fingerprint": fingerprint, "definition": c.as_dict(),
                                         "fmus": [{"role": r.role, "file": r.filename, "sha256": r.sha256}
                                                  for r in refs]}, indent=1) + "\n")
-    return cp.Journal(folder / "runs.jsonl")
+    return cs.Journal(folder / "runs.jsonl")
 
 
 # --------------------------------------------------------------------------------------------
@@ -176,7 +163,7 @@ def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None
     default, serves none."""
     c = resolve(spec, observers, runs, seed)
     refs = fmu_refs(c, Path(fmu_dir))
-    cp.check_supports(c, refs)                  # a draw outside an FMU's declared range: refused now
+    cr.check_supports(c, refs)                  # a draw outside an FMU's declared range: refused now
     record, split, record_sha = load_record(c)
     hashes = {r.role: r.sha256 for r in refs}
     if record_sha:
@@ -192,7 +179,7 @@ def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None
     timing: dict[str, Any] = {"runs_this_invocation": len(todo)}   # run 0 here, the rest on Dask
     try:
         if todo and 0 in todo:                   # run 0 here first: a wiring mistake stops it now
-            row = cp.run_case(c, 0, cp.run_seed(c.seed, 0), refs, record=record, split=split)
+            row = cr.run_case(c, 0, cp.run_seed(c.seed, 0), refs, record=record, split=split)
             if row["status"] != "ok" and row["error"].startswith(_CONFIG_ERRORS):
                 raise CampaignError(f"campaign {c.name}: run 0 failed, every run would: {row['error']}")
             journal.append(row)
@@ -213,7 +200,7 @@ def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None
     if missing:
         raise CampaignError(f"campaign {c.name}: runs {missing[:10]}{'...' if len(missing) > 10 else ''} have no "
                             f"result in {journal.path}; run the same command again to complete them")
-    summary = cp.summarize(c, rows)
+    summary = cs.summarize(c, rows)
     summary["timing"] = timing
     summary["invocations"] = _invocations(folder, timing)
     summary["folder"] = str(folder)
@@ -278,7 +265,7 @@ def _distribute(c, todo, refs, record, split, fingerprint, journal, done, schedu
         rec = client.scatter([record], broadcast=True)[0] if record is not None else None
         size = chunk_size(len(todo), n_workers)
         chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
-        futures = [client.submit(cp.run_cases, c, ks, [cp.run_seed(c.seed, k) for k in ks], light, blobs, rec, split,
+        futures = [client.submit(cr.run_cases, c, ks, [cp.run_seed(c.seed, k) for k in ks], light, blobs, rec, split,
                                  key=f"latobs-runs-{fingerprint[:16]}-{ks[0]}-{ks[-1]}", retries=0) for ks in chunks]
         by_key = {f.key: ks for f, ks in zip(futures, chunks)}
         bar = tqdm(total=c.runs, initial=len(done), unit="run", desc=f"campaign {c.name}", mininterval=0.5,
@@ -349,7 +336,7 @@ def rerun(spec: str, run_seed: int, observers: list[str] | None = None, out: Pat
 
     c = resolve(spec, observers)
     refs = fmu_refs(c, Path(fmu_dir))
-    cp.check_supports(c, refs)
+    cr.check_supports(c, refs)
     record, split, _ = load_record(c)
     folder = campaign_dir(c, out, tag)
     target = folder / f"rerun_{run_seed}"
@@ -358,26 +345,26 @@ def rerun(spec: str, run_seed: int, observers: list[str] | None = None, out: Pat
         from .validation import validate
 
         params = cp.draw(c, run_seed)
-        sc, kwargs = cp.cosim_setup(c, params, run_seed)
+        sc, kwargs = cr.cosim_setup(c, params, run_seed)
         result, _, written = validate(sc, paths["plant"], {o: paths[o] for o in c.observers}, target, plots=plots,
                                       **kwargs)
-        metrics = cp.result_metrics(result, cp.settle_time(c, sc))
+        metrics = cr.result_metrics(result, cr.settle_time(c, sc))
     else:
         from .validation import replay as rp
 
         t = record["t"]
         params = cp.draw(c, run_seed, record_span=(float(t[0]), float(t[-1])), split=split)
-        data = cp.replay_segment(c, params, record, run_seed)
+        data = cr.replay_segment(c, params, record, run_seed)
         metrics, written = {}, []
         for o in c.observers:
-            metrics.update(cp.replay_metrics(rp.drive(paths[o], data, label=o), c))
+            metrics.update(cr.replay_metrics(rp.drive(paths[o], data, label=o), c))
             _, w = rp.run(rp.resolve_csv(c.replay["csv"]), paths[o], target / o, split=None, observer=o,
                           plots=plots, data=data)
             written += w
     row = {"seed": run_seed, "params": params,
            "metrics": {k: (None if v != v else v) for k, v in metrics.items()}}
     atomic_write_text(target / "row.json", json.dumps(row, indent=1) + "\n")
-    journal = {r["seed"]: r for r in cp.Journal(folder / "runs.jsonl").read().values()}
+    journal = {r["seed"]: r for r in cs.Journal(folder / "runs.jsonl").read().values()}
     same = journal.get(run_seed)
     if same is not None:
         equal = same["status"] == "ok" and same["metrics"] == row["metrics"]
@@ -409,7 +396,7 @@ def _write_outputs(c: Campaign, folder: Path, rows, summary, plots: bool) -> Non
     from .validation import campaign_report
 
     with atomic_path(folder / "runs.parquet", suffix=".parquet") as tmp:
-        pq.write_table(cp.rows_table(rows), tmp)
+        pq.write_table(cs.rows_table(rows), tmp)
     atomic_write_text(folder / "summary.json", json.dumps(summary, indent=1, allow_nan=False) + "\n")
     campaign_report.write(folder, c, summary, rows, plots=plots)
 

@@ -1,0 +1,4 @@
+"""``python -m latobs.bench``: the same as ``latobs bench``."""
+from . import main
+
+raise SystemExit(main())

@@ -1,0 +1,186 @@
+"""The journal of a Monte Carlo campaign (one JSON line per finished run, append-only) and its
+summary statistics."""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+
+from .campaign import Campaign, CampaignError
+
+#: percentiles of every metric in the summary
+PERCENTILES = (5, 50, 95, 99)
+#: resamples of the bootstrap confidence interval of each metric's mean
+BOOTSTRAP_RESAMPLES = 2000
+WORST_RUNS = 5
+
+
+# --------------------------------------------------------------------------------------------
+# the journal: one JSON line per finished run, append-only
+# --------------------------------------------------------------------------------------------
+class Journal:
+    """``runs.jsonl``: the rows of finished runs, appended one line per run and flushed at once
+    (fsync at most every second, and at close), so an interrupted campaign keeps every run that
+    finished. :meth:`read` skips a torn last line (a kill in the middle of a write; the next
+    :meth:`append` cuts it off) and keeps the first row of a run index seen twice."""
+
+    FSYNC_EVERY_S = 1.0
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._f = None
+        self._synced = 0.0
+        self.duplicates = 0
+
+    def read(self) -> dict[int, dict[str, Any]]:
+        rows: dict[int, dict[str, Any]] = {}
+        if not self.path.is_file():
+            return rows
+        lines = self.path.read_text(encoding="utf-8").split("\n")
+        for i, line in enumerate(lines):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+                k = int(row["run"])
+            except (ValueError, KeyError, TypeError):
+                if i == len(lines) - 1:          # the last line, cut short by a kill: dropped
+                    continue
+                raise CampaignError(f"{self.path}: line {i + 1} is not a run row; the journal is damaged "
+                                    "(remove the folder to start again)") from None
+            if k in rows:
+                self.duplicates += 1
+                continue
+            rows[k] = row
+        return rows
+
+    def append(self, row: Mapping[str, Any]) -> None:
+        if self._f is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            if self.path.is_file():              # a torn last line (a kill mid-write) is cut off
+                data = self.path.read_bytes()
+                if data and not data.endswith(b"\n"):
+                    with open(self.path, "r+b") as f:
+                        f.truncate(data.rfind(b"\n") + 1)
+            self._f = open(self.path, "a", encoding="utf-8")
+        self._f.write(json.dumps(row, allow_nan=False, separators=(",", ":")) + "\n")
+        self._f.flush()
+        now = time.monotonic()
+        if now - self._synced >= self.FSYNC_EVERY_S:
+            os.fsync(self._f.fileno())
+            self._synced = now
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.flush()
+            os.fsync(self._f.fileno())
+            self._f.close()
+            self._f = None
+
+
+# --------------------------------------------------------------------------------------------
+# summary
+# --------------------------------------------------------------------------------------------
+def metric_columns(rows: list[Mapping[str, Any]]) -> list[str]:
+    cols: dict[str, None] = {}
+    for r in rows:
+        for k in r.get("metrics", {}):
+            cols.setdefault(k, None)
+    return list(cols)
+
+
+def headline_columns(metrics: Mapping[str, Any], inputs: Mapping[str, list[str]]) -> list[str]:
+    """The metric columns ranked for the worst runs and plotted: the RMS error of each estimate of
+    a quantity the observer does not measure (``beta``, ``bank_angle``, ``Fyf``, not the filtered
+    ``yaw_rate`` it reads), and each interval's violation count and mean width (the widest runs:
+    an interval that never misses the truth is judged by how wide it is). ``inputs``: {label:
+    its inputs}."""
+    out = []
+    for col in metrics:
+        label, _, rest = col.partition(".")
+        q, _, what = rest.rpartition(".")
+        if what in ("violations", "mean_width") or (what == "rms" and q not in inputs.get(label, ())):
+            out.append(col)
+    return out
+
+
+def _stats(x: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return {"n": 0}
+    d: dict[str, Any] = {"n": int(x.size), "mean": float(np.mean(x)), "max": float(np.max(x)),
+                         "min": float(np.min(x))}
+    d.update({f"p{p}": float(np.percentile(x, p)) for p in PERCENTILES})
+    means = x[rng.integers(0, x.size, size=(BOOTSTRAP_RESAMPLES, x.size))].mean(axis=1)
+    d["mean_ci95"] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
+    return d
+
+
+def summarize(c: Campaign, rows: list[Mapping[str, Any]]) -> dict[str, Any]:
+    """Percentiles (5, 50, 95, 99), min, max, mean and its 95 % bootstrap interval of every metric
+    over the successful runs (and per part of the record for a replay campaign); the failed
+    runs with their errors; for every interval, the runs whose bounds missed the truth; and the
+    :data:`WORST_RUNS` worst runs of every headline metric with their seeds and parameters."""
+    ok = [r for r in rows if r["status"] == "ok"]
+    failed = [r for r in rows if r["status"] != "ok"]
+    cols = metric_columns(ok)
+    rng = np.random.default_rng(0)        # the bootstrap's resampling: fixed, the summary is reproducible
+
+    def table(sel):
+        return {col: _stats(np.array([np.nan if r["metrics"].get(col) is None else r["metrics"][col]
+                                      for r in sel], dtype=float), rng) for col in cols}
+
+    out: dict[str, Any] = {"campaign": c.name, "runs": len(rows), "ok": len(ok), "failed": len(failed),
+                           "failures": [{"run": r["run"], "seed": r["seed"], "error": r["error"]}
+                                        for r in sorted(failed, key=lambda r: r["run"])][:50],
+                           "metrics": table(ok)}
+    if c.kind == "replay":
+        out["by_part"] = {p: table([r for r in ok if r["params"].get("segment.part") == p])
+                          for p in ("train", "test") if any(r["params"].get("segment.part") == p for r in ok)}
+    enclosure = {}
+    for col in cols:
+        if col.endswith(".violations"):
+            v = [(r["metrics"].get(col) or 0.0, r) for r in ok]
+            bad = [r for x, r in v if x > 0]
+            enclosure[col[: -len(".violations")]] = {
+                "runs_with_violations": len(bad), "runs": len(v), "violating_samples": int(sum(x for x, _ in v)),
+                "runs_violating": [{"run": r["run"], "seed": r["seed"]} for r in sorted(bad, key=lambda r: r["run"])][:20]}
+    out["enclosure"] = enclosure
+    heads = headlines(ok)
+    worst = {}
+    for col in heads:
+        vals = [(r["metrics"].get(col), r) for r in ok if r["metrics"].get(col) is not None]
+        vals.sort(key=lambda p: (-p[0], p[1]["run"]))
+        worst[col] = [{"run": r["run"], "seed": r["seed"], "value": x, "params": r["params"]}
+                      for x, r in vals[:WORST_RUNS] if not (col.endswith(".violations") and x == 0)]
+    out["worst"] = worst
+    out["headline"] = heads
+    return out
+
+
+def headlines(rows: list[Mapping[str, Any]]) -> list[str]:
+    """The headline columns of the runs (:func:`headline_columns`, recorded in each row)."""
+    return list(dict.fromkeys(c for r in rows for c in r.get("headline", ())))
+
+
+def rows_table(rows: list[Mapping[str, Any]]):
+    """The runs as a pyarrow Table: run, seed, status, error, seconds, worker, one column per
+    drawn quantity (``param.NAME``) and per metric."""
+    import pyarrow as pa
+
+    rows = sorted(rows, key=lambda r: r["run"])
+    params: dict[str, None] = {}
+    for r in rows:
+        for k in r["params"]:
+            params.setdefault(k, None)
+    cols: dict[str, list] = {k: [r.get(k) for r in rows] for k in ("run", "seed", "status", "error", "seconds", "worker")}
+    for p in params:
+        cols[f"param.{p}"] = [r["params"].get(p) for r in rows]
+    for m in metric_columns(rows):
+        cols[m] = [r["metrics"].get(m) for r in rows]
+    return pa.table(cols)
