@@ -2,8 +2,8 @@
 
 The pages that are generated, never written by hand, are made here at every build from the code
 they describe: one page per FMU (``latobs.datasheet.markdown``, the generator of each FMU's own
-datasheet, from the FMU's declarations) and the command-line reference (``latobs.cli``'s argument
-parser). The navigation's "FMUs" and "Runtimes" sections list those pages and ``docs/runtime/*.md``.
+datasheet, from the FMU's declarations), the command-line reference (``latobs.cli``'s argument
+parser) and the changelog (``CHANGELOG.md``). The navigation's "FMUs" and "Runtimes" sections list those pages and ``docs/runtime/*.md``.
 """
 from __future__ import annotations
 
@@ -81,7 +81,9 @@ def on_config(config, **kwargs):
 def on_files(files, config, **kwargs):
     from latobs.cli import reference_markdown
 
-    pages = {"cli.md": reference_markdown(), "fmus/index.md": fmu_index()}
+    root = Path(config["config_file_path"]).parent
+    pages = {"cli.md": reference_markdown(), "fmus/index.md": fmu_index(),
+             "changelog.md": (root / "CHANGELOG.md").read_text(encoding="utf-8")}
     pages.update({f"fmus/{name}.md": fmu_page(name, kind) for name, kind in _fmus().items()})
     for path, text in pages.items():
         files.append(File.generated(config, path, content=text))
