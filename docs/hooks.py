@@ -33,7 +33,7 @@ def fmu_page(name: str, kind) -> str:
     summary, paper = "", None
     if kind.data_kind == "design":
         entry = designs.get(name)
-        summary = (f"Design {name}: {entry.description}. Default vehicle `{kind.default_vehicle}`; "
+        summary = (f"Design `{name}`: {datasheet._md(entry.description)}. Default vehicle `{kind.default_vehicle}`; "
                    f"`latobs build {name} --vehicle V` builds it for another (`{name}_V.fmu`).")
         paper = "kalman.md" if name == KALMAN else PAPER_PAGES.get(entry.paper)
     else:

@@ -445,8 +445,9 @@ def markdown(spec: ModelSpec, model_identifier: str, *, data_kind: str, summary:
     The same sections and tables as the HTML datasheet inside the FMU, from the same declarations,
     for the data file ``data`` (None: the spec alone, before any design: the values that depend on
     the design, such as data-dependent ranges and start values and the certificate, are left to
-    the built FMU's own datasheet). ``summary``: a line on what this FMU of the model file is;
-    ``paper_page``: a relative link to the documentation page of its paper."""
+    the built FMU's own datasheet). ``summary``: a line of Markdown on what this FMU of the model file is;
+    ``paper_page``: a relative link to the documentation page of its paper. Each variable table is one
+    causality's: its rows are the HTML datasheet's cells without the causality column."""
     data = data or {}
     role = "observer" if data_kind == "design" else "plant (truth model)"
     verb = "It estimates" if data_kind == "design" else "It simulates"
@@ -455,7 +456,7 @@ def markdown(spec: ModelSpec, model_identifier: str, *, data_kind: str, summary:
     text = _framework.model_text(spec, data) if data else spec.description
     out = [f"# {model_identifier}", "", f"*FMI 2.0 {role}, generated from the FMU's declarations.*", ""]
     if summary:
-        out += [_md(summary), ""]
+        out += [summary, ""]
     out += ["## What it is", "", _md(text), "", f"{verb}: {outs}, from {ins}.", ""]
     out += ["## Source paper", ""]
     if spec.paper is not None:
@@ -476,8 +477,8 @@ def markdown(spec: ModelSpec, model_identifier: str, *, data_kind: str, summary:
                 "its own.", ""]
     for caus, rows in _interface_cells(spec, data, ()).items():
         if rows:
-            cells = [[f"`{r[0]}`"] + [_md(x) for x in r[1:]] for r in rows]
-            out += [f"### {VAR_TITLES[caus]}", "", _md_table(VAR_HEADERS, cells), ""]
+            cells = [[f"`{r[0]}`"] + [_md(x) for x in r[2:]] for r in rows]
+            out += [f"### {VAR_TITLES[caus]}", "", _md_table(VAR_HEADERS[:1] + VAR_HEADERS[2:], cells), ""]
     out += ["## Communication step", ""]
     if data or not callable(spec.max_step):
         longest = max_step(spec, data)

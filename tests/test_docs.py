@@ -79,7 +79,7 @@ def test_fmu_page_is_the_datasheet(name):
     cells = datasheet._interface_cells(spec, {}, ())
     for rows in cells.values():
         for row in rows:
-            line = "| " + " | ".join([f"`{row[0]}`"] + [datasheet._md(x) for x in row[1:]]) + " |"
+            line = "| " + " | ".join([f"`{row[0]}`"] + [datasheet._md(x) for x in row[2:]]) + " |"
             assert line in page, line
     assert sorted(r[0] for rows in cells.values() for r in rows) == sorted(names)
     html_page = datasheet._interface(spec, {}, ())
