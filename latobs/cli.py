@@ -1,6 +1,6 @@
 """latobs: vehicle lateral-dynamics observers from published LMI designs, designed, certified,
 packaged as FMI 2.0 FMUs and validated. Commands: list, design, build, validate, replay, campaign,
-bench, demo, export-ssp (``latobs COMMAND --help``)."""
+bench, demo, export-ssp, check (``latobs COMMAND --help``)."""
 from __future__ import annotations
 
 import argparse
@@ -11,7 +11,7 @@ from pathlib import Path
 
 DEFAULT_OUT = Path("build")
 
-# Exit codes (README, "Exit codes and errors"): 0 done; 2 a user's mistake (bad argument, file,
+# Exit codes (the documentation's command-line reference): 0 done; 2 a user's mistake (bad argument, file,
 # vehicle, parameter, design that does not certify, FMU that fails in the co-simulation): one
 # line ``latobs CMD: error: ...`` naming the culprit on stderr, no traceback; 1 an internal error
 # (a bug): one line ``latobs CMD: internal error: ...``, the traceback with LATOBS_DEBUG=1;

@@ -1,15 +1,7 @@
-"""The datasheet inside every FMU: ``documentation/index.html`` and the icon ``model.png``.
-
-FMI 2.0 (section 2.1, as FMI 3.0) names ``documentation/index.html`` the entry point of an FMU's
-documentation and allows a ``model.png`` icon at the archive's root. Both are generated here, at
-packaging time, from what the model description is generated from: the model's ``ModelSpec``
-(``fmu_src/spec.py``, ``fmu_src/models/*.py``: variables with unit, range, start, description,
-sign convention and sensor; the source paper; the longest step; the initialisation) and the
-FMU's design or plant file (the certificate, the design's speed, stiffness and slip ranges, the
-vehicle). Nothing is written per FMU by hand. The page is self-contained (inline CSS, no script;
-its only links leave for the FMI standard and the papers' DOIs); every text is escaped. Both files
-are byte-reproducible: no date, no path, a PNG written with zlib by hand.
-"""
+"""The datasheet of every FMU: ``documentation/index.html`` and the icon ``model.png`` inside it,
+and the same page as Markdown for the documentation site (:func:`markdown`), generated from what
+the model description is generated from (the model's ``ModelSpec`` and the design or plant file).
+Byte-reproducible: no date, no path, a PNG written with zlib by hand."""
 from __future__ import annotations
 
 import html

@@ -1,13 +1,6 @@
-"""``latobs demo``: build every FMU, run the default scenarios, write build/report/index.md.
-
-Covers what exists and grows with the project: paper 000's two observers on CarPlant, nominal
-and with +-20 % cornering-stiffness mismatch in the plant, with and without sensor noise; paper
-001's interval observer on CarPlant inside its guarantee (linear tires) and outside it (Magic
-Formula tires at the handling limit), and replayed on the real MBDS record (default and wider
-stiffness box, tuning and held-out halves); paper 002's fixed-order estimator beside the Kalman
-baseline on CarPlant (W1-filtered steering, sine with dwell and fishhook with time-varying
-stiffness) and on the MBDS record (one estimator, speed-scheduled estimators, baseline).
-"""
+"""``latobs demo``: build every FMU, run the default scenarios and the real-data replay, write
+build/report/index.md (each paper's observers beside their plant, nominal and with model and
+sensor errors, and on the MBDS record)."""
 from __future__ import annotations
 
 import time
