@@ -3,14 +3,13 @@
 The pages that are generated, never written by hand, are made here at every build from the code
 they describe: one page per FMU (``latobs.datasheet.markdown``, the generator of each FMU's own
 datasheet, from the FMU's declarations), the command-line reference (``latobs.cli``'s argument
-parser) and the changelog (``CHANGELOG.md``). The navigation's "FMUs" and "Runtimes" sections list those pages and ``docs/runtime/*.md``.
+parser) and the changelog (``CHANGELOG.md``). The navigation's "FMUs" and "Runtimes" sections
+list the FMU pages and ``docs/runtime/*.md``.
 """
 from __future__ import annotations
 
 from importlib import import_module
 from pathlib import Path
-
-from mkdocs.structure.files import File
 
 #: the documentation page of each paper (FMUs link their paper's page)
 PAPER_PAGES = {"000": "000.md", "001": "001.md", "002": "002.md", "003": "003.md"}
@@ -79,6 +78,8 @@ def on_config(config, **kwargs):
 
 
 def on_files(files, config, **kwargs):
+    from mkdocs.structure.files import File
+
     from latobs.cli import reference_markdown
 
     root = Path(config["config_file_path"]).parent
