@@ -563,9 +563,10 @@ def reference_markdown() -> str:
         out = ["# Command-line reference", "",
                "Generated from `latobs`'s own argument parser: what `latobs COMMAND --help` prints, as tables.", "",
                _md_cell(p.description), "",
-               "Exit codes: 0 done; 2 a user error (one line `latobs CMD: error: ...` naming the culprit: argument, "
-               "value, file, vehicle parameter or FMU; no traceback); 1 an internal error (a bug: one line `latobs CMD: "
-               "internal error: ...`, the traceback with `LATOBS_DEBUG=1`); 130 interrupted (Ctrl-C).", ""]
+               "Exit codes: 0 done; 2 a user error (one line `latobs CMD: error: ...` naming the culprit: "
+               "argument, value, file, vehicle parameter or FMU; no traceback); 1 an internal error (a bug: one "
+               "line `latobs CMD: internal error: ...`, the traceback with `LATOBS_DEBUG=1`); 130 interrupted "
+               "(Ctrl-C).", ""]
         sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
         helps = {c.dest: c.help for c in sub._choices_actions}
         for name, cmd in sub.choices.items():
