@@ -6,7 +6,8 @@ code declares, and nothing user-facing points outside the repository.
 - the FMU pages come from ``latobs.datasheet.markdown``, the generator of each FMU's own datasheet:
   every variable of the model description is on the page, with the cells of the HTML datasheet;
 - the command-line reference comes from ``latobs.cli.parser``: every command and option;
-- README: under 10 KB, the two commands ``.ci/run`` and the CI workflow rely on, links that resolve;
+- README: under 10 KB, the two commands ``.ci/run`` and the CI workflow rely on, links that resolve,
+  and its worked example runs on the FMUs ``latobs build`` makes;
 - no user-facing text (README, CHANGELOG, the docs and their generated pages, every command's
   help, the vehicle and campaign files, the examples, the datasheet generator and the papers'
   citations) mentions files outside the repository or the project's issue numbers.
@@ -168,3 +169,17 @@ def test_the_scan_sees_a_pointer():
     assert FORBIDDEN.search("see ../shared/CONTRACT.md") and FORBIDDEN.search("as in issue 9")
     assert FORBIDDEN.search("(ERRATA 001)") and FORBIDDEN.search("fixed in #21")
     assert not FORBIDDEN.search("paper 002's eq. (28), 5 ms, 2 bands, the paper's misprint")
+
+
+@pytest.mark.slow
+def test_readme_example_runs(built_fmus, tmp_path, capsys):
+    """The README's worked example (plain fmpy, CarPlant feeding the paper-000 observer) runs on the
+    FMUs `latobs build` makes and finds the bank angle."""
+    code = re.search(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S).group(1)
+    for name in ("CarPlant", "SideslipBankObserver"):
+        assert f'"build/{name}.fmu"' in code
+        code = code.replace(f'"build/{name}.fmu"', repr(str(built_fmus.get(name, "c"))))
+    capsys.readouterr()                                  # the session build's progress lines
+    exec(compile(code, "README.md", "exec"), {})
+    bank = float(capsys.readouterr().out.splitlines()[-1].split()[0])
+    assert abs(bank - 4.0) < 0.2
