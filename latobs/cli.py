@@ -1,6 +1,6 @@
 """latobs: vehicle lateral-dynamics observers from published LMI designs, designed, certified,
 packaged as FMI 2.0 FMUs and validated. Commands: list, design, build, validate, replay, campaign,
-bench, demo, export-ssp (``latobs COMMAND --help``)."""
+bench, demo, export-ssp, check (``latobs COMMAND --help``)."""
 from __future__ import annotations
 
 import argparse
@@ -11,7 +11,7 @@ from pathlib import Path
 
 DEFAULT_OUT = Path("build")
 
-# Exit codes (README, "Exit codes and errors"): 0 done; 2 a user's mistake (bad argument, file,
+# Exit codes (the documentation's command-line reference): 0 done; 2 a user's mistake (bad argument, file,
 # vehicle, parameter, design that does not certify, FMU that fails in the co-simulation): one
 # line ``latobs CMD: error: ...`` naming the culprit on stderr, no traceback; 1 an internal error
 # (a bug): one line ``latobs CMD: internal error: ...``, the traceback with LATOBS_DEBUG=1;
@@ -526,6 +526,65 @@ def parser() -> argparse.ArgumentParser:
                         "win64, darwin64, aarch64-linux)")
     k.set_defaults(func=_cmd_check)
     return p
+
+
+def _md_cell(text) -> str:
+    """One line of Markdown showing ``text`` literally, its `code` spans kept."""
+    parts = " ".join(str(text).split()).replace("|", "\\|").replace("<", "&lt;").split("`")
+    return "`".join(x if k % 2 else x.replace("*", "\\*").replace("_", "\\_") for k, x in enumerate(parts))
+
+
+def _parser_markdown(sub: argparse.ArgumentParser, title: str, summary: str) -> list[str]:
+    """One command's section of the CLI reference: usage, description, its arguments."""
+    out = [f"## `{title}`", ""]
+    if summary:
+        out += [_md_cell(summary[0].upper() + summary[1:]) + ".", ""]
+    out += ["```", sub.format_usage().replace("usage: ", "").strip(), "```", ""]
+    if sub.description and sub.description.strip() != summary:
+        out += [_md_cell(sub.description), ""]
+    rows = []
+    for a in sub._actions:
+        if isinstance(a, argparse._HelpAction) or a.help == argparse.SUPPRESS:
+            continue
+        name = ", ".join(a.option_strings) or (a.metavar or a.dest)
+        if a.option_strings and a.nargs != 0:
+            name += f" {a.metavar or a.dest.upper()}"
+        default = "" if a.default in (None, False, [], "", argparse.SUPPRESS) or a.nargs == 0 else f"`{a.default}`"
+        choices = f" (one of: {', '.join(map(str, a.choices))})" if a.choices else ""
+        rows.append(f"| `{_md_cell(name)}` | {_md_cell((a.help or '') + choices)} | {default} |")
+    if rows:
+        out += ["| argument | meaning | default |", "|---|---|---|", *rows, ""]
+    return out
+
+
+def reference_markdown() -> str:
+    """The CLI reference page of the documentation, generated from :func:`parser` (and ``latobs
+    bench``'s own parser): every command with its usage and arguments."""
+    from .bench import parser as bench_parser
+
+    columns = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"          # argparse wraps the usage lines to the terminal's width
+    try:
+        p = parser()
+        out = ["# Command-line reference", "",
+               "Generated from `latobs`'s own argument parser: what `latobs COMMAND --help` prints, as tables.", "",
+               _md_cell(p.description), "",
+               "Exit codes: 0 done; 2 a user error (one line `latobs CMD: error: ...` naming the culprit: "
+               "argument, value, file, vehicle parameter or FMU; no traceback); 1 an internal error (a bug: one "
+               "line `latobs CMD: internal error: ...`, the traceback with `LATOBS_DEBUG=1`); 130 interrupted "
+               "(Ctrl-C).", ""]
+        sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
+        helps = {c.dest: c.help for c in sub._choices_actions}
+        for name, cmd in sub.choices.items():
+            if name == "bench":
+                cmd = bench_parser()
+            out += _parser_markdown(cmd, f"latobs {name}", helps.get(name, ""))
+    finally:
+        if columns is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = columns
+    return "\n".join(out)
 
 
 # The user-facing errors of each stage, as (module, class). A command imports only what it uses

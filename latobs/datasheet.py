@@ -1,15 +1,7 @@
-"""The datasheet inside every FMU: ``documentation/index.html`` and the icon ``model.png``.
-
-FMI 2.0 (section 2.1, as FMI 3.0) names ``documentation/index.html`` the entry point of an FMU's
-documentation and allows a ``model.png`` icon at the archive's root. Both are generated here, at
-packaging time, from what the model description is generated from: the model's ``ModelSpec``
-(``fmu_src/spec.py``, ``fmu_src/models/*.py``: variables with unit, range, start, description,
-sign convention and sensor; the source paper; the longest step; the initialisation) and the
-FMU's design or plant file (the certificate, the design's speed, stiffness and slip ranges, the
-vehicle). Nothing is written per FMU by hand. The page is self-contained (inline CSS, no script;
-its only links leave for the FMI standard and the papers' DOIs); every text is escaped. Both files
-are byte-reproducible: no date, no path, a PNG written with zlib by hand.
-"""
+"""The datasheet of every FMU: ``documentation/index.html`` and the icon ``model.png`` inside it,
+and the same page as Markdown for the documentation site (:func:`markdown`), generated from what
+the model description is generated from (the model's ``ModelSpec`` and the design or plant file).
+Byte-reproducible: no date, no path, a PNG written with zlib by hand."""
 from __future__ import annotations
 
 import html
@@ -124,29 +116,41 @@ def _variables(spec: ModelSpec, data: dict, states: tuple[Var, ...]) -> list[tup
     return out
 
 
-def _interface(spec: ModelSpec, data: dict, states: tuple[Var, ...]) -> str:
-    groups = {"input": [], "output": [], "parameter": [], "local (state)": [], "local (derivative)": []}
+#: the columns of the variable tables (both renderers)
+VAR_HEADERS = ["name", "causality", "type", "unit", "min", "max", "start", "description", "sign convention",
+               "source (sensor)"]
+VAR_TITLES = {"input": "Inputs", "output": "Outputs", "parameter": "Parameters (fixed: set before initialisation)",
+              "local (state)": "ModelExchange states", "local (derivative)": "Their derivatives"}
+VAR_NOTE = ("Every variable of modelDescription.xml, with the unit, range and start value it declares there; the "
+            "model description's description of a variable is its description, sign convention and source joined. "
+            "Angles are in rad (displayed in deg by the importers that read the display units), speeds in m/s. A "
+            "step with an input outside its [min, max], or non-finite, is refused (error logged, state kept); so is "
+            "a parameter outside its range at initialisation.")
+
+
+def _interface_cells(spec: ModelSpec, data: dict, states: tuple[Var, ...]) -> dict[str, list[list[str]]]:
+    """{causality: rows of plain-text cells in the order of :data:`VAR_HEADERS`}: the variable
+    tables of both renderers (the HTML datasheet and the Markdown page)."""
+    groups = {caus: [] for caus in VAR_TITLES}
     for name, caus, typ, v, d in _variables(spec, data, states):
         start = _n(d["start"]) if d["start"] is not None else ("calculated" if caus == "output" else "—")
-        groups[caus].append([f'<td id="var-{_e(name)}"><code class="name">{_e(name)}</code></td>',
-                             f'<td class="causality">{_e(caus)}</td>', f"<td>{_e(typ)}</td>",
-                             f'<td class="unit">{_e(d["unit"])}</td>', f'<td class="num">{_n(d["min"])}</td>',
-                             f'<td class="num">{_n(d["max"])}</td>', f'<td class="num">{_e(start)}</td>',
-                             f'<td class="description">{_e(v.description)}</td>',
-                             f'<td class="sign">{_e(v.sign or "—")}</td>',
-                             f'<td class="sensor">{_e(v.sensor or "—")}</td>'])
-    headers = ["name", "causality", "type", "unit", "min", "max", "start", "description", "sign convention",
-               "source (sensor)"]
-    titles = {"input": "Inputs", "output": "Outputs", "parameter": "Parameters (fixed: set before initialisation)",
-              "local (state)": "ModelExchange states", "local (derivative)": "Their derivatives"}
-    parts = ['<p class="note">Every variable of <code>modelDescription.xml</code>, with the unit, range and start '
-             "value it declares there; the model description's description of a variable is its description, sign "
-             "convention and source joined. Angles are in rad (displayed in deg by the importers that read the "
-             "display units), speeds in m/s. A step with an input outside its [min, max], or non-finite, is "
-             "refused (error logged, state kept); so is a parameter outside its range at initialisation.</p>"]
+        groups[caus].append([name, caus, typ, d["unit"], _n(d["min"]), _n(d["max"]), start, v.description,
+                             v.sign or "—", v.sensor or "—"])
+    return groups
+
+
+def _interface(spec: ModelSpec, data: dict, states: tuple[Var, ...]) -> str:
+    classes = ["", "causality", "", "unit", "num", "num", "num", "description", "sign", "sensor"]
+    groups = {}
+    for caus, rows in _interface_cells(spec, data, states).items():
+        groups[caus] = [[f'<td id="var-{_e(r[0])}"><code class="name">{_e(r[0])}</code></td>']
+                        + [f'<td class="{c}">{_e(x)}</td>' if c else f"<td>{_e(x)}</td>"
+                           for c, x in zip(classes[1:], r[1:])] for r in rows]
+    note = html.escape(VAR_NOTE, quote=False).replace("modelDescription.xml", "<code>modelDescription.xml</code>")
+    parts = [f'<p class="note">{note}</p>']
     for caus, rows in groups.items():
         if rows:
-            parts.append(f"<h3>{_e(titles[caus])}</h3>" + _table(headers, rows, f' class="variables {caus}"'))
+            parts.append(f"<h3>{_e(VAR_TITLES[caus])}</h3>" + _table(VAR_HEADERS, rows, f' class="variables {caus}"'))
     return "".join(parts)
 
 
@@ -406,6 +410,97 @@ def _page(spec: ModelSpec, data: dict, model_identifier: str, *, data_kind: str,
             f'<footer><p class="note">Generated by latobs {_e(__version__)} from the declarations the FMU\'s '
             f'modelDescription.xml is generated from. <a href="{FMI_STANDARD}">The FMI standard</a>.</p></footer>'
             "</body></html>\n")
+
+
+# ---------------------------------------------------------------------------------------------
+# the same datasheet as a Markdown page of the documentation site, from the spec alone
+# ---------------------------------------------------------------------------------------------
+def _md(x) -> str:
+    """Text as a Markdown table cell or paragraph shows it literally."""
+    text = html.escape(str(x), quote=False)
+    for ch in ("\\", "|", "*", "[", "]", "`"):
+        text = text.replace(ch, "\\" + ch)
+    return text.replace("\n", " ")
+
+
+def _md_table(headers: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table; ``rows`` hold Markdown cells (already escaped)."""
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def markdown(spec: ModelSpec, model_identifier: str, *, data_kind: str, summary: str = "",
+             paper_page: str = "", data: dict | None = None) -> str:
+    """The FMU's datasheet as a Markdown page (the documentation site's page of the FMU).
+
+    The same sections and tables as the HTML datasheet inside the FMU, from the same declarations,
+    for the data file ``data`` (None: the spec alone, before any design: the values that depend on
+    the design, such as data-dependent ranges and start values and the certificate, are left to
+    the built FMU's own datasheet). ``summary``: a line of Markdown on what this FMU of the model file is;
+    ``paper_page``: a relative link to the documentation page of its paper. Each variable table is one
+    causality's: its rows are the HTML datasheet's cells without the causality column."""
+    data = data or {}
+    role = "observer" if data_kind == "design" else "plant (truth model)"
+    verb = "It estimates" if data_kind == "design" else "It simulates"
+    outs = ", ".join(f"`{v.name}`" for v in (*spec.outputs, *spec.integer_outputs))
+    ins = ", ".join(f"`{v.name}`" for v in spec.inputs)
+    text = _framework.model_text(spec, data) if data else spec.description
+    out = [f"# {model_identifier}", "", f"*FMI 2.0 {role}, generated from the FMU's declarations.*", ""]
+    if summary:
+        out += [summary, ""]
+    out += ["## What it is", "", _md(text), "", f"{verb}: {outs}, from {ins}.", ""]
+    out += ["## Source paper", ""]
+    if spec.paper is not None:
+        p = spec.paper
+        doi = f" DOI: [{p.doi}](https://doi.org/{p.doi})." if p.doi else ""
+        out.append(f"{_md(', '.join(p.authors))}: *{_md(p.title)}*. {_md(p.venue)}, {p.year}.{doi}")
+        out.append("")
+        link = f" ([the paper's page]({paper_page}))" if paper_page else ""
+        out += [f"Every departure from the paper's printed equations is commented in the sources where it is "
+                f"implemented{link}.", ""]
+    else:
+        out += ["latobs's own model (no single source paper); its equations are documented in the runtime sources.",
+                ""]
+    out += ["## Inputs, outputs, parameters", "", _md(VAR_NOTE), ""]
+    if not data:
+        out += ["Ranges and start values are those the model declares; where they depend on the design (the "
+                "number of modes, a speed start value inside the design's grid) the built FMU's datasheet gives "
+                "its own.", ""]
+    for caus, rows in _interface_cells(spec, data, ()).items():
+        if rows:
+            cells = [[f"`{r[0]}`"] + [_md(x) for x in r[2:]] for r in rows]
+            out += [f"### {VAR_TITLES[caus]}", "", _md_table(VAR_HEADERS[:1] + VAR_HEADERS[2:], cells), ""]
+    out += ["## Communication step", ""]
+    if data or not callable(spec.max_step):
+        longest = max_step(spec, data)
+        out.append(f"Largest communication step: **{_n(longest)} s**. A longer step is refused by both FMI "
+                   f"interfaces (fmi2Error, the state kept). The default experiment suggests "
+                   f"{_n(min(_framework.DEFAULT_STEP, longest))} s; any shorter step, variable from step to step, "
+                   "is accepted.")
+    else:
+        out.append("The largest communication step is a property of the design: computed when the design is "
+                   "solved, stored in its design file and declared in the FMU's model description "
+                   "(`VendorAnnotations`, tool `latobs`). A longer step is refused by both FMI interfaces "
+                   "(fmi2Error, the state kept).")
+    out += ["", "## Initialisation", "",
+            f"At the start time {_md(spec.initialization or 'the model starts from its start values')}. The "
+            "parameters are fixed: set them between instantiation and the end of the initialisation mode. Outputs "
+            "are calculated at the end of initialisation; in co-simulation they change only in a step.", ""]
+    out += ["## Status outputs: valid, consistent, mode", ""]
+    if spec.integer_outputs:
+        bounds = var_bounds(spec, data, spec.integer_outputs)
+        rows = [[f"`{v.name}`", f"{_n(bounds[v.name][0])} … {_n(bounds[v.name][1])}", _md(v.description)]
+                for v in spec.integer_outputs]
+        out += [_md_table(["Integer output", "values", "meaning"], rows), ""]
+    else:
+        out += ["This FMU has no status output (no `valid`, `consistent` or `mode`).", ""]
+    out += ["## Certificate, ranges, vehicle data", "",
+            "Every built FMU carries this datasheet with its own design's figures: `documentation/index.html` "
+            "(open it from your FMI tool's documentation menu, or `unzip X.fmu documentation/index.html`) adds the "
+            "valid speed, stiffness and slip range, the certificate (every check with its value, limit and "
+            "margin), the vehicle parameters and the platforms of `binaries/`.", ""]
+    return "\n".join(out)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,13 +1,6 @@
-"""``latobs demo``: build every FMU, run the default scenarios, write build/report/index.md.
-
-Covers what exists and grows with the project: paper 000's two observers on CarPlant, nominal
-and with +-20 % cornering-stiffness mismatch in the plant, with and without sensor noise; paper
-001's interval observer on CarPlant inside its guarantee (linear tires) and outside it (Magic
-Formula tires at the handling limit), and replayed on the real MBDS record (default and wider
-stiffness box, tuning and held-out halves); paper 002's fixed-order estimator beside the Kalman
-baseline on CarPlant (W1-filtered steering, sine with dwell and fishhook with time-varying
-stiffness) and on the MBDS record (one estimator, speed-scheduled estimators, baseline).
-"""
+"""``latobs demo``: build every FMU, run the default scenarios and the real-data replay, write
+build/report/index.md (each paper's observers beside their plant, nominal and with model and
+sensor errors, and on the MBDS record)."""
 from __future__ import annotations
 
 import time
@@ -27,7 +20,7 @@ REPLAYS_002 = [
     ("fixed-order estimators scheduled on speed (bands of bounded beta/r)", "SideslipFixedOrderEstimatorScheduled", None),
     ("Kalman baseline (ay and yaw rate)", "SideslipKalmanFilter", None),
 ]
-#: beta RMS (deg) of the dataset authors' filter, reference port (issue 7): t < 425 s, t >= 425 s.
+#: beta RMS (deg) of the dataset authors' filter, reference port: t < 425 s, t >= 425 s.
 REFERENCE_PORT_DEG = (0.678, 1.015)
 # (scenario, tag, plant parameters, noise, observers, plant vehicle (None: the plant's default))
 RUNS = [
@@ -152,7 +145,8 @@ def _design_section_003(d: dict, s: dict) -> str:
     o = d["options"]
     lines = [f"**{d['name']}** (paper 003, vehicle `{d['vehicle']['name']}`): "
              f"{'certified' if ok else 'NOT CERTIFIED'}, {sum(c['passed'] for c in checks)}/{len(checks)} checks passed; "
-             f"LMIs (20)-(23) with ERRATA's corrections, beta = {o['beta']:g}, pole region Re < -{o['alpha']:g}, "
+             f"LMIs (20)-(23) with the printed equations' misprints corrected, beta = {o['beta']:g}, "
+             f"pole region Re < -{o['alpha']:g}, "
              f"|lambda| < {o['radius']:g} (normalised signals); {d['solver']['name']} {d['solver']['status']} in "
              f"{d['solver']['seconds']:.2f} s.", "",
              "| mode | grid speed (m/s) | band (m/s) | LMI gamma | certified H-inf d~ -> r (eq. 16) | slowest pole (1/s) | "

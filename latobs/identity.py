@@ -1,26 +1,8 @@
-"""The identity of a design and of an FMU: a hash of everything it is made from.
-
-An artefact is reused only when the identity it carries equals the identity of what would be
-built now; otherwise it is rebuilt, saying what changed. An identity is a small dict of named
-*parts* (each a plain value or the SHA-256 of some content) and the SHA-256 of that dict:
-
-* a **design** (``NAME[_V].design.json``, key ``identity``): the catalogue design and its
-  artefact name, the content of the vehicle parameter set (whatever file it came from), the
-  design options given beside the catalogue's (``designs.run``'s overrides), the design-time
-  code (``latobs.synthesis``) and the latobs version. It is known before anything is solved, so
-  a design is solved again only when one of these changes;
-* a **plant**'s data: the plant, its artefact name, the vehicle's content, the design-time code
-  (a motorcycle's equations are derived there) and the latobs version;
-* an **FMU** (``resources/latobs-identity.json`` inside it): the parts of its design or plant
-  data, the backend, the packaging code (runtime sources in Python and C, packaging, native
-  guard, this module), the toolchain (the C compilers' versions and flags, the FMI headers,
-  pythonfmu's binaries for the pythonfmu backend) and, for the native backend, the platforms it
-  holds binaries for.
-
-The design side (:class:`Identity`, :func:`of_design`, :func:`of_plant`, :func:`of_data`) is
-``latobs.synthesis.identity`` (design time), re-exported here. Every part is run-independent (no time, path or temporary name), so an identity can be stored
-inside a reproducible FMU, and a cache of designs and FMUs can be keyed on ``Identity.sha256``.
-"""
+"""The identity of a design, of a plant's data and of an FMU: a hash of everything it is made from
+(catalogue design, vehicle content, options, code, toolchain, version, platforms). An artefact is
+reused only when its identity equals that of what would be built now; otherwise it is rebuilt,
+saying what changed. Every part is run-independent, so an identity can live inside a
+reproducible FMU."""
 from __future__ import annotations
 
 import hashlib

@@ -1,40 +1,9 @@
-"""Package FMUs. pythonfmu backend (here): the runtime (``fmu_src``), one data file, pythonfmu's
-binaries; the native C backend is ``latobs.cbackend`` (``package_design``/``package_plant`` take
-the backend).
-
-An FMU is assembled here file by file, not by pythonfmu's ``FmuBuilder``, so that it is
-
-* **isolated**: pythonfmu's native library imports an FMU's entry module by name and Python
-  caches modules by name for the life of the process, while importers (fmpy, libcosim) delete an
-  FMU's extraction folder when they unload it. Every module an FMU brings therefore has a name
-  unique to its content: the runtime package is ``latobs_rt_<h>`` and the entry module
-  ``<Class>_<h>``, with ``h`` the hash of everything the FMU runs (runtime sources, model, class
-  name, data file, latobs version). Two different FMUs never share a module, so any sequence of
-  them can be loaded, unloaded and reloaded in one process; the same FMU loaded again reuses
-  identical code. The FMU carries no ``pythonfmu`` Python package (``framework.py`` speaks the
-  native protocol itself);
-* **identified by its content**: the ``guid`` is derived from the hash of every file of the FMU
-  and of its model description, so the same sources and design give the same guid and other
-  gains another. On linux64 a native guard (``latobs.native_guard``, built when a C compiler is
-  present) refuses an instantiation with another guid and unknown value references with
-  fmi2Error; pythonfmu's own library, which ignores the guid, is shipped beside it;
-* **reproducible**: the zip has sorted entries, fixed timestamps and permissions, and the model
-  description has no generation date: two builds from the same inputs are byte-identical.
-
-* **documented**: ``documentation/index.html``, the FMU's datasheet, and the icon ``model.png``,
-  generated from the model's declarations and its data (``latobs.datasheet``; both backends);
-
-* **identified by its inputs**: ``resources/latobs-identity.json`` holds the identity of what the
-  FMU is made from (``latobs.identity``: design or plant inputs, backend, code, toolchain), which
-  ``latobs build`` and every command that builds a missing FMU compare before reusing one; the
-  design copy inside has no wall-clock figures (``design_file.reproducible``).
-
-A design file is re-certified (``latobs.synthesis.certificate``) before packaging; an uncertified
-design is never packaged. The FMU is checked with ``fmpy validate`` and then moved into place
-atomically, under the output folder's lock, together with the design file beside it when one is
-written (:func:`install`). The gains live in the FMU's own resources folder, read per instance, and an instance
-refuses to run if that file's hash is not the one its entry script was built with.
-"""
+"""Package FMUs: the pythonfmu backend here (runtime, one data file, pythonfmu's binaries), the
+native C backend in ``latobs.cbackend``. An FMU is assembled file by file so that it is isolated
+(module names unique to its content), identified by its content (guid) and inputs (identity),
+reproducible (byte-identical rebuilds) and documented (its datasheet); a design is re-certified
+before packaging and the FMU installed atomically (:func:`install`). See the documentation's
+"Using an FMU in your tool" page."""
 from __future__ import annotations
 
 import hashlib

@@ -1,43 +1,8 @@
-"""Reference results inside an FMU, in the FMI layered standard FMI-LS-REF.
-
-An FMU carries, in ``extra/org.fmi-standard.fmi-ls-ref/``:
-
-* ``fmi-ls-manifest.xml``, the layered standard's manifest: root ``fmiReferences`` with the
-  ``fmi-ls`` name, version and description, one ``<Related>`` per file (the experiments file with
-  role ``experiment/validation``, each input CSV with role ``other``, each reference output CSV
-  with role ``result``);
-* ``experiments.exp``, the experiments in the MA-HS-Experiments format (MIME type
-  ``application/x-ma-hs-experiments``) that FMI-LS-REF refers to: per experiment a
-  ``<TransientSimulation startTime stopTime stepSize>``, ``<Stimuli>`` (the input CSV) and
-  ``<References>`` (the output CSV), and an ``<Annotation type="latobs">`` holding the comparison
-  tolerances (below);
-* ``NAME_in.csv`` and ``NAME_ref.csv``, as the Reference FMUs ship them: a header ``time,<variable
-  names>``, one row per communication point, each value as the shortest text that reads back as
-  the same double (integers as integers);
-
-and ``documentation/fmi-ls-ref.txt`` says, in words, what they are and how to re-run them.
-
-How an experiment runs (the experiments file's ``description`` says it too): fixed-step
-co-simulation with h = ``stepSize``: setupExperiment(startTime, stopTime), the inputs of row 0
-set in initialisation mode, then at each t_k = startTime + k h (the CSV's time column) the inputs
-of row k are set and doStep(t_k, h) is called; the outputs of row 0 are those after
-initialisation, those of row k+1 after step k. Inputs are held between rows (no interpolation):
-each row is applied at its own communication point.
-
-Tolerances (``<Annotation type="latobs">``): on the platform that produced the reference (the
-certifying platform, ``<Comparison platform=...>``) the outputs must be bit for bit; on any other
-platform |y - y_ref| <= relativeTolerance |y_ref| + absoluteTolerance(y), with
-absoluteTolerance(y) = relativeTolerance x max|y_ref| over the experiment, per variable: a libm
-function that differs in the last bit perturbs a signal by about one unit in the last place of its
-typical magnitude, also where the signal crosses zero, so the floor scales with the signal's own
-size (1e-12 of it: thousands of ulps), and an Integer output (a mode) must match exactly.
-
-The FMI-LS-REF and MA-HS-Experiments drafts differ between versions (``startTime``, ``stopTime``
-and ``stepSize`` as attributes of ``<Experiment>`` or of ``<TransientSimulation>``; the manifest
-version ``1.0.0-alpha.1`` the Reference FMUs write): this module writes the
-``TransientSimulation`` form with the manifest version of the Reference FMUs and reads both forms.
-Neither draft defines how reference results are compared: the tolerances live in the annotation.
-"""
+"""Reference results inside an FMU, in the FMI layered standard FMI-LS-REF
+(``extra/org.fmi-standard.fmi-ls-ref/``: manifest, MA-HS-Experiments file, input and reference
+CSVs as the Reference FMUs ship them; tolerances in a latobs annotation): written at build time,
+read by ``latobs check``. The documentation's "Using an FMU in your tool" page says how an
+experiment runs and what the tolerances are."""
 from __future__ import annotations
 
 import hashlib

@@ -1,24 +1,7 @@
-"""Linear design model of paper 000 (Menhour, Koenig, d'Andrea-Novel, ECC 2014), eq. (1)-(2).
-
-State x = [beta (rad), r yaw rate (rad/s), phi roll angle (rad), phidot roll rate (rad/s)],
-input u = delta (road-wheel angle, rad, > 0 steers left), unknown input w = phi_r (road bank
-angle, rad), measurement y = [r, phi, phidot].
-
-Derived from first principles (ERRATA.md section 000), linear tires (eq. 2):
-    lateral   m (Vx (beta' + r) - hr phi'') = Fyf + Fyr - m g phi_r
-    yaw       Iz r' = lf Fyf - lr Fyr
-    roll      Ix phi'' = hr (Fyf + Fyr) + (m g hr - Kr) phi - br phi'        (about the CG)
-    Fyf = Cf (delta - beta - lf r / Vx),   Fyr = -Cr (beta - lr r / Vx)
-Departures from the printed eq. (1), each re-derived here and checked by
-tests/test_design_model.py against the linearisation of the nonlinear CarPlant:
-  * A(1,4) = -hr br / (Ix Vx)        (printed: -hr Lr / (Ix Vx))
-  * A(2,2) = -C_a2 / (Iz Vx)         (printed: Ix instead of Iz)
-  * B(4)   = hr Cf / Ix              (printed H(4) = Cf / Ix: the roll moment of the front
-                                      force acts on the lever hr, like every other term of row 4;
-                                      ERRATA.md calls B right, the re-derivation does not)
-Every entry is a polynomial in 1/Vx; ``lpv_coefficients`` returns the coefficient matrices so
-that the runtime can evaluate the model at any speed without knowing the vehicle.
-"""
+"""Paper 000's linear design model, eq. (1)-(2): the bicycle model with roll, re-derived from first
+principles (three entries differ from the printed eq. (1), commented where they are computed),
+and its coefficients as polynomials in 1/Vx for the runtime (``lpv_coefficients``). The
+documentation's paper-000 page gives the model."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -1,15 +1,6 @@
 """The design file ``NAME.design.json``: the one thing that crosses from design time to the FMU.
-
-Keys: name, paper, vehicle (name and every parameter), modes (scheduling value or range, gain
-matrices), gamma, certified, checks [{name, value, limit, passed}], solver {name, status,
-seconds}; plus what the runtime needs (``runtime``), the certificate's inputs and ``identity``
-(what the design is made from, ``latobs.identity``). Writes are atomic (temporary file in the same
-folder, then ``os.replace``), under the folder's lock (``latobs.atomic.locked_folder``).
-
-Wall-clock figures are keys named ``seconds`` or ending in ``_seconds``: they vary run to run,
-so the copy of a design that enters an FMU is :func:`reproducible` (without them) and two builds
-from the same inputs give byte-identical FMUs; the file beside the FMU keeps them.
-"""
+Written atomically under the folder's lock; the copy inside an FMU is :func:`reproducible`
+(without wall-clock figures). Its keys are on the documentation's "public interface" page."""
 from __future__ import annotations
 
 import json

@@ -1,44 +1,7 @@
-"""Paper 002's design: Delibasi (2014), fixed-order robust H-infinity sideslip estimator.
-
-The estimator beta_hat = (y(s)/x(s)) r estimates the sideslip beta from the yaw rate r of the
-linear bicycle model (eq. 2). With p1 = b1/a = beta/delta, p2 = b2/a = r/delta and the weights
-W1 = nf1/df1 (on the steering, eq. 5) and W2 = nf2/df2 (on the error, eq. 6), the weighted
-estimation error is (eq. 7)
-
-    G(s) = n(s)/d(s),  n = nf1 nf2 (b1 x - b2 y),  d = df1 df2 a x,
-
-affine in the estimator's coefficients (x, y) for a fixed plant. The plant's coefficients are
-multi-affine in (Cf, Cr, 1/v) and are over-bounded by six coefficient intervals (monic a), a
-polytope of 2^6 = 64 vertices (section 5).
-
-Lemma 5 (eq. 28), with a fixed D-stable central polynomial c of degree deg d and eps_2 = 1:
-for every vertex i find a symmetric Q_i with
-
-    [[c'd_i + d_i'c - c'c - Pi'(Delta (x) Q_i)Pi,  n_i'],
-     [n_i,                                         g   ]]  >= 0,     gamma = sqrt(g)
-
-(ascending coefficient row vectors padded to deg d + 1). It makes d_i/c SPR on dD, hence d_i
-D-stable, and Re(d_i/c) >= |n_i/c|/gamma on dD, hence |n_i/d_i| <= gamma on dD. For the left
-half-plane (the paper's region) that is the H-infinity norm; for another region (e.g. the
-alpha-shifted half-plane) ``region`` bounds |n/d| on that region's boundary, not on the imaginary
-axis. To place the poles in a region AND bound the H-infinity norm, keep ``region = LHP`` and pass
-``stability_region`` (one more Lemma 2 LMI and Q'_i per vertex), see ``lemma5``.
-
-Note (found here, not in the paper): with the plant coefficients over-bounded independently, the
-DC gain of the vertex error, (b1_0 - b2_0 y_0/x_0)/a_0, cannot be made small at all vertices at
-once; ``dc_floor`` is the least worst-case DC gain over every estimator of every order. On the
-paper box it is 3.7807, which is the paper's gamma = 3.7817 (the LMI attains it); the true plants
-of the box reach only ~3.62.
-
-Numerics (ERRATA 002): the LMIs are congruence-scaled by diag(1/|c_k|, 1), otherwise Clarabel
-reports "optimal" points whose gamma is no bound. Every design is re-evaluated by ``evaluate``
-(numpy/scipy only: vertex stability and a frequency sweep refined at the peaks), never trusted
-by its LMI gamma.
-
-Parameter boxes (ERRATA 002): the *physical* box (two tyres per axle, N/deg x 180/pi, km/h / 3.6)
-and the *paper* box (per-tyre numbers used as N/rad for a whole axle, speed in m/s) on which the
-paper's estimators (32), (33) certify at gamma ~ 3.78.
-"""
+"""Paper 002's design: the fixed-order robust H-infinity sideslip estimator (Lemma 5 over the
+coefficient polytope, congruence-scaled), its certified polish and tie-break, the speed-scheduled
+variant, the paper and physical boxes, and the mbds_250lm stiffness identification. Method,
+boxes and results are on the documentation's paper-002 page."""
 from __future__ import annotations
 
 import itertools

@@ -1,43 +1,7 @@
-"""Independent verification primitives for LMI observer designs.
-
-Everything in this module is computed from the state-space matrices alone with dense linear
-algebra (numpy / scipy): no Lyapunov matrix, no LMI, no convex solver. Certificates use these
-functions to check, independently of the solver that produced a design, the claims the design
-makes (an H-infinity bound, a pole region, a convergence rate).
-
-All systems are continuous-time LTI systems
-
-    x' = A x + B u,    y = C x + D u,    G(s) = C (sI - A)^{-1} B + D,
-
-and all frequencies are angular frequencies in rad/s (``s = j w``).
-
-Functions
----------
-hinf_norm
-    H-infinity norm ``sup_w sigma_max(G(jw))`` by the quadratically convergent Hamiltonian
-    bisection of Boyd & Balakrishnan (1990) / Bruinsma & Steinbuch (1990), with the
-    imaginary-axis eigenvalue test of Boyd, Balakrishnan & Kabamba (1989).
-frequency_sweep_peak
-    Brute-force cross-check: dense logarithmic frequency sweep plus local refinement.
-pole_region
-    Eigenvalue location against the LMI regions of Chilali & Gahinet (1996) used by the designs:
-    the half plane ``Re(s) < -alpha`` and the disk ``|s| < radius`` centred at the origin.
-slowest_pole_seen_by
-    The slowest pole that actually appears in the transfer from ``B`` to ``C`` (modal residues),
-    i.e. the pole that sets how fast the output settles after an input step.
-
-References
-----------
-* S. Boyd, V. Balakrishnan, P. Kabamba, "A bisection method for computing the H-infinity norm
-  of a transfer matrix and related problems", Math. Control Signals Systems 2:207-219, 1989.
-* S. Boyd, V. Balakrishnan, "A regularity result for the singular values of a transfer matrix
-  and a quadratically convergent algorithm for computing its L-infinity norm",
-  Systems & Control Letters 15:1-7, 1990.
-* N. A. Bruinsma, M. Steinbuch, "A fast algorithm to compute the H-infinity norm of a transfer
-  function matrix", Systems & Control Letters 14:287-293, 1990.
-* M. Chilali, P. Gahinet, "H-infinity design with pole placement constraints: an LMI
-  approach", IEEE Trans. Automatic Control 41(3):358-367, 1996.
-"""
+"""Independent verification primitives for the certificates, from state-space matrices alone with
+dense numpy/scipy (no Lyapunov matrix, no solver): H-infinity norm by Hamiltonian bisection
+(Boyd-Balakrishnan, Bruinsma-Steinbuch), a frequency-sweep cross-check, pole regions (Chilali &
+Gahinet 1996) and the slowest pole a transfer sees."""
 from __future__ import annotations
 
 import math

@@ -1,27 +1,7 @@
-"""Paper 001's design: Theorem 1 of Ifqir, Ichalal, Ait-Oufroukh, Mammar (ACC 2020).
-
-Switched interval observer (eq. 23) of the relaxation model (``relaxation_model.py``, eq. 9)
-under a box of cornering stiffnesses (eq. 10), one mode per speed band (eq. 44). Theorem 1:
-find a positive DIAGONAL Q common to all modes, W_i, X_i and the least gamma such that, for
-every mode i,
-
-    (35)  [[He(Q A_i - X_i C A_i - W_i C) + eps Q, Q], [Q, -gamma I]] < 0
-    (36)  Q A_i - X_i C A_i - W_i C + eta Q >= 0            (elementwise, every entry)
-    (34)  alpha I <= Q <= beta I
-
-then E_i = Q^-1 X_i, K_i = Q^-1 W_i, P_i = I - E_i C, N_i = P_i A_i - K_i C (eq. 33, Metzler by
-(36): N_i + eta I >= 0), J_i = K_i + N_i E_i (eq. 30a), H_i = P_i B_i (eq. 30b), and the interval
-width e = x_up - x_lo is ISS w.r.t. Omega with lim ||e|| <= sqrt(gamma/(alpha eps)) max ||Omega||
-(eq. 37). ERRATA 001: the elementwise (36), diagonal included, is what keeps the problem bounded,
-and with it the optimum tends to N_i ~ -eta I: eta is the bandwidth knob; eps the ISS rate.
-
-Numerics (not in the paper): (34) is normalised to alpha = 1 (Q >= I; the LMIs are homogeneous
-in (Q, W, X, 1/gamma), so only gamma/alpha matters, which is what eq. (37) uses); the LMIs are
-solved in the time scale tau = eta (A_i/tau, eps/tau, eta/tau, gamma_s = tau gamma), so that the
-solver sees entries of order 1..40; Clarabel. The certificate (``certificate.lateral_interval_observer``)
-re-evaluates everything from the design file with numpy/scipy, including the width-dynamics
-small-gain check that Theorem 1 omits (ERRATA 001).
-"""
+"""Paper 001's design: Theorem 1's switched interval observer (LMIs 34-36, a common diagonal Q),
+solved in a normalised time scale, its Metzler structure projected and re-checked, and the
+observer matrices of eqs. (30), (33). The LMIs and the departures are on the documentation's
+paper-001 page."""
 from __future__ import annotations
 
 import math

@@ -1,43 +1,7 @@
-"""Baseline: the linear bicycle-model Kalman filter of the MBDS dataset's authors (design time).
-
-The sideslip estimator of Leanza, Reina, Blanco-Claraco (Sensors 2021), repository
-MBDS/sideslip-angle-vehicle-estimation, ``estimators/matlab_kf`` (a Kalman filter of the linear
-single-track model measuring ay and the yaw rate), re-derived here with states [vy, r] at the CG
-(the authors use [beta, r]; at a given speed vy = vx beta, the same model):
-
-    vy' = -(Cf + Cr)/(m vx) vy - ((lf Cf - lr Cr)/(m vx) + vx) r + Cf/m delta
-    r'  = -(lf Cf - lr Cr)/(Iz vx) vy - (lf^2 Cf + lr^2 Cr)/(Iz vx) r + lf Cf/Iz delta
-    ay  = (Fyf + Fyr)/m = -(Cf + Cr)/(m vx) vy - (lf Cf - lr Cr)/(m vx) r + Cf/m delta
-
-(linear tires Fyf = Cf (delta - (vy + lf r)/vx), Fyr = Cr (-(vy - lr r)/vx); ay = vy' + vx r),
-measurements y = [ay, r] = C(vx) x + D delta.
-
-Discrete filter, at each sample k with the measured speed vx_k (speed-varying model):
-    * model at v_k = max(vx_k, vx_min) (``vx_min`` = 1 m/s: a documented clamp, the model has 1/vx);
-    * update with y_k: S = C P C' + R, K = P C' S^-1, x += K (y_k - C x - D delta_k),
-      P = (I - K C) P, symmetrised (P + P')/2;
-    * predict to k+1, delta_k held over h_k = t_{k+1} - t_k (exact zero-order hold, Van Loan:
-      [[Phi, Gam], [0, 1]] = expm(h [[A, B], [0, 0]]); the authors use forward Euler):
-      x = Phi x + Gam delta_k, P = Phi P Phi' + Q h_k (Q the continuous-time process-noise
-      intensity on [vy', r'], discretised to first order).
-  ``estimate="filtered"`` returns x_{k|k} (uses y_k: the authors' convention, the figures below);
-  ``estimate="predicted"`` returns x_{k|k-1} (uses data up to k-1: what the FMU runtime
-  ``fmu_src/kalman_observer.py`` outputs at t_k, stepping from t_{k-1} with row k-1's inputs).
-  beta^ = atan(vy^ / v_k) (filtered) or atan(vy^ / v_{k-1}) (predicted). Start: x_{0|-1} = [0, r_0], P = P0.
-
-Tuning (``tune``): Q = diag(q_vy, q_r), R = diag(r_ay, r_r); the estimate depends only on the
-ratios Q/R, so r_r is fixed and (q_vy, q_r, r_ay) are searched on a log grid, on t < 425 s of
-the MBDS record only (its held-out part t >= 425 s is only evaluated). See ``TUNED`` and
-``report`` for the figures.
-
-Design file (``design(vehicle, DesignOptions(name))``, catalogue entry ``SideslipKalmanFilter``,
-certified by ``certificate.sideslip_kalman_filter``): nothing is solved; the file holds the vehicle (its
-name and m, lf, lr, Iz, Cf, Cr), the covariances (the "gains" of its one mode, the speed range
-its scheduling range), the model coefficients and everything ``to_data_dict`` gives the runtime.
-Its ``gamma`` is the worst spectral radius of the steady-state (frozen-speed, DARE) error
-dynamics Phi (I - K C) over a 50-speed grid of the certified range at h = 0.01 s: dimensionless,
-< 1, not an H-infinity level (0.913 for mbds_250lm on 15..63 m/s, time constant 0.11 s).
-"""
+"""Paper 002's baseline peer: the MBDS authors' linear bicycle-model Kalman filter (states
+[vy, r], measurements ay and yaw rate, exact zero-order hold), its tuning on the record's
+t < 425 s and its design file (nothing solved). Model, filter and tuning are on the
+documentation's Kalman page."""
 from __future__ import annotations
 
 import itertools

@@ -1,25 +1,7 @@
-"""cvxpy + an SDP solver, the way every design module solves its LMIs (design time only).
-
-The solver is Clarabel unless a caller chooses another for a block of code::
-
-    with lmi.using("SCS"):
-        data = designs.run("SideslipBankObserver")     # every LMI of this design solved by SCS
-
-Every design module solves through :func:`solve` and records the solver actually used
-(:func:`current`) in its design dict (``solver.name``). ``latobs bench`` uses this to time each
-design with Clarabel and with SCS side by side; packaged designs are Clarabel's.
-
-Solvers (:data:`SOLVERS`):
-
-* ``CLARABEL`` (default): interior point, its default settings; if it ends in a numerical failure
-  the problem is solved again with :data:`FALLBACK_SETTINGS` (ERRATA 002).
-* ``SCS``: first-order (ADMM), with :data:`SCS_SETTINGS`: eps_abs = eps_rel = 1e-9, so that its
-  answer is comparable with an interior-point one (SCS's default 1e-4 leaves LMI residuals that
-  the independent certificate's strict margins can refuse), and max_iters = 100 000 (SCS's own
-  default): a solve that has not converged by then stops there, reported as
-  ``optimal_inaccurate``/``user_limit`` by cvxpy (about a minute on this project's largest LMI
-  problems on one core). No fallback: SCS has no numerical-failure retry here.
-"""
+"""cvxpy + an SDP solver, the way every design module solves its LMIs (design time only): Clarabel
+(with a fallback of settings on a numerical failure) unless a caller chooses SCS for a block of
+code (``with lmi.using("SCS"):``, as ``latobs bench`` does); the solver used is recorded in the
+design dict."""
 from __future__ import annotations
 
 import contextlib

@@ -1,11 +1,6 @@
-"""Vehicle parameter sets: the first stage of the pipeline.
-
-Each set is a TOML file in ``vehicles/`` (SI units, a unit and a description per value, the
-source of the set and of any value not from ``shared/reference/vehicles.md``). Loading
-validates every value: finite, of the declared sign (positive unless the file says
-``sign = "any"`` or ``"negative"``), ranges with min <= max; errors name the vehicle and the
-parameter.
-"""
+"""Vehicle parameter sets: the first stage of the pipeline. Each set is a TOML file (SI units, a unit
+and a description per value, its source); loading validates every value (finite, of the declared
+sign, ranges with min <= max), and errors name the vehicle and the parameter."""
 from __future__ import annotations
 
 import math

@@ -1,50 +1,8 @@
-"""Paper 000, Theorem 2: switched H-infinity PI observer with a common Lyapunov matrix.
-
-Menhour, Koenig, d'Andrea-Novel, "Continuous-time switched H-infinity proportional-integral
-observer: sideslip and road bank angles estimation", ECC 2014.
-
-Per mode i, with [T N] = pinv([I; C]) (Theorem 1, eq. 6; here T = diag(1, 1/2, 1/2, 1/2),
-N = [0; I3/2]), the estimation error e_a = [z~; w^] obeys eq. (19):
-    e_a' = (A_a - K_a C_a) e_a + F_a w,   beta~ = L_a e_a
-    A_a = [[T A, T F], [0, 0]],  C_a = [C, 0],  F_a = [-T F; 0],  L_a = [-L, 0],  L = [1 0 0 0].
-LMI (20), variables P = P^T > 0 (common to all modes), Gamma_i = -P K_a,i, g = gamma^2:
-    [[A_a^T P + P A_a + C_a^T Gamma^T + Gamma C_a, P F_a, L_a^T],
-     [F_a^T P, -g I, 0], [L_a, 0, -I]]  < 0          minimise g.
-With Gamma = -P K_a the (1,1) block equals (A_a - K_a C_a)^T P + P (A_a - K_a C_a) (ERRATA 000).
-
-Departures from the printed paper (ERRATA.md, section 000):
-  * LMI (20) alone is degenerate (gamma -> 0 with unbounded gains and a bank pole near 0).
-    This design adds regional pole placement on the same common P (Chilali & Gahinet 1996):
-      alpha-stability  A_cl^T P + P A_cl + 2 a P < 0                    (Re lambda < -a)
-      disk             [[-R P, P A_cl], [A_cl^T P, -R P]] < 0            (|lambda| < R)
-    with P A_cl = P A_a + Gamma C_a: linear in (P, Gamma).
-  * Tire modes: C2 is fitted to the vehicle's tire curve by default (see ``mode_models``).
-Further departures of the default designs (issue 9); ``DesignOptions(faithful=True)`` turns all of
-them off and reproduces the paper's design (the ``...Paper`` FMUs):
-  * LPV models. Eq. (25) taken literally runs each speed mode's model at its grid speed over the
-    whole band: on an exact linear plant in a 0.3 g turn that biases the bank estimate by +0.59 rad
-    at 23 km/h. Here every mode's model is evaluated at the measured speed (its entries are
-    polynomials in 1/Vx), clamped to the mode's range (its band; for the tire modes the bands'
-    outer edges), and the LMIs hold at the vertices of polytopes covering the curve
-    (1/Vx, 1/Vx^2) over the range (``lpv_vertices``): a rigorous guarantee for every speed of
-    the range, frozen or time-varying (common P).
-  * A second H-infinity channel on the same P (``design``): from the model error d (lateral-
-    force, yaw-moment and roll-moment residuals, ``bicycle_roll_model.model_error_coefficients``)
-    to the bank estimate and the beta error. The paper's criterion bounds only bank -> beta
-    error; nothing bounded the path from model error to the bank estimate, which took the tire
-    design to 5.25 rad in the fishhook. Objective gamma1^2 / gamma_ref^2 + rho gamma2^2.
-    With one P for both channels the bank row's weight b bounds gamma1 from below (~b: in
-    eq. (19)'s coordinates the bank estimate is a state that tracks the bank, so a Lyapunov
-    function that makes it small from d also charges channel 1), hence the small default
-    b = 0.05: both LMI bounds are then certified claims, and the per-band frozen-speed norms
-    (certificate) are the sharp figures.
-  * ``validity``: the runtime's `valid` output and the integral freeze outside the linear domain
-    (estimated slip angles beyond ``valid_alpha_deg``, |vx r| beyond ``valid_ay_g``): the
-    certificate bounds what freezing does (a dwell-time argument).
-Scaling: the LMIs are posed for S^-1 A S / tau with S from a diagonal balancing of the average
-augmented matrix and tau = sqrt(a R) (s^-1), so Clarabel sees entries near 1; gamma is invariant
-under both, the gains and P are mapped back (K = tau S K_bar, P = S^-T P_bar S^-1 / tau).
-"""
+"""Paper 000's design: Theorem 2's switched H-infinity PI observer with a common Lyapunov matrix
+(LMI 20), with regional pole placement, the model at the measured speed (LPV vertices), a second
+H-infinity channel from model error and the validity freeze (or the paper as printed:
+``DesignOptions(faithful=True)``). The LMIs and every departure are on the documentation's
+paper-000 page."""
 from __future__ import annotations
 
 import math

@@ -1,29 +1,7 @@
-"""Paper 001's design model: bicycle model with first-order tire relaxation (Ifqir et al., ACC 2020).
-
-Eq. (7) in the coordinates of eq. (8), written as eq. (9) with ERRATA 001's corrections:
-
-    x = [vy, r, x3, x4],  x3 = (Fyf + Fyr)/m = ay (m/s^2),  x4 = (lf Fyf - lr Fyr)/Iz (rad/s^2)
-    u = delta (road-wheel angle, rad),  y = [r, ay] = C x,  C = [[0, 1, 0, 0], [0, 0, 1, 0]]
-
-    A(vx) = [[0, -vx, 1, 0],
-             [0, 0, 0, 1],
-             [-(cf + cr)/(m s), +(cr lr - cf lf)/(m s), -vx/s, 0],
-             [(cr lr - cf lf)/(Iz s), -(cf lf^2 + cr lr^2)/(Iz s), 0, -vx/s]]
-    B(vx) = [0, 0, cf vx/(m s), cf lf vx/(Iz s)]
-
-with s the relaxation length sigma (m) and cf, cr the AXLE cornering stiffnesses (N/rad).
-Departures from the printed paper, per ERRATA 001 and re-derived here:
-  * A(3,2) = +(cr lr - cf lf)/(m s): eq. (12) prints it with the opposite sign (eq. (9) has it
-    right). From x3' = (vx/s)(-x3 + (cf alpha_f + cr alpha_r)/m) with the slip angles of eq. (4),
-    the r coefficient is (vx/s)(cr lr - cf lf)/(m vx).
-  * The paper names x2 "psi"; it is the yaw RATE r (its derivative is x4 = r').
-  * The paper writes one relaxation length r for both axles; here sigma, one per vehicle.
-vx cancels only in the vy and r columns, so A(vx) = A0 + vx A1 with the stiffnesses only in A0,
-and B(vx) = vx B1. The uncertainty of eqs. (10)-(13) is the stiffness part: dA(dc) (vx-free) and
-dB(vx, dc) = vx dB1(dc), both affine in (dcf, dcr): their elementwise bounds over a box are
-attained at its vertices (:func:`stiffness_bounds`).
-``tests/test_car_plant_001.py`` holds this model against CarPlant's numerical linearisation.
-"""
+"""Paper 001's design model, eq. (9): the bicycle model with first-order tire relaxation, and the
+bounds of its stiffness uncertainty over a box (:func:`stiffness_bounds`); the sign of A(3,2)
+printed in eq. (12) is corrected where it is computed. The documentation's paper-001 page gives
+the model."""
 from __future__ import annotations
 
 import itertools

@@ -1,14 +1,6 @@
-"""The vehicle's lateral tire curve at static load, for choosing switched stiffness modes.
-
-Simplified Magic Formula (vehicles.md): Fy = mu Fz sin(C atan(B a - E (B a - atan(B a)))) per
-wheel, with B set so that mu Fz B C equals the wheel's linear cornering stiffness at static load
-(the same curve as the nonlinear CarPlant; an axle is two such wheels).
-
-Paper 000 (section IV-B, Fig. 1) takes its two tire modes C1, C2 as the slopes of the measured
-lateral force characteristic on either side of alpha*. ``mode_stiffness`` does the same on this
-curve: C1 is the linear stiffness, C2 the least-squares slope through the origin over
-[alpha*, alpha_fit] (a secant stiffness, since eq. (2) has no offset term).
-"""
+"""The vehicle's lateral tire curve at static load (the simplified Magic Formula of CarPlant), and
+paper 000's two tire-mode stiffnesses on it (``mode_stiffness``: C1 linear, C2 a secant slope
+above alpha*)."""
 from __future__ import annotations
 
 import math

@@ -1,51 +1,6 @@
-"""Simple baseline estimates computed from the same signals as an observer (issue 9, item 6).
-
-A validation report shows each observer beside estimates that need no observer at all, so that
-a reader sees what the observer adds. Pure numpy/scipy: the functions here take arrays and
-parameter values, never files or FMUs.
-
-Baselines (name: what it estimates)
-
-``zero``         every estimated quantity is 0 (beta, vy, bank angle, forces, roll angle, rider
-                 torque ...): :func:`zero`.
-``bicycle``      cars: the open-loop linear single-track ("bicycle") model driven by the measured
-                 road-wheel angle delta and speed vx, no feedback from any other measurement
-                 (:func:`bicycle`); it needs m, Iz, lf, lr, Cf, Cr of the vehicle the observer
-                 was designed for.
-``steady_turn``  motorcycles (paper 003): the steady turn at the measured speed and yaw rate:
-                 roll angle atan(vx r / g), rider torque 0, steering rate 0, and (with the
-                 motorcycle's parameters) the tyre side forces and lateral velocity of the
-                 linear model in that steady turn (:func:`steady_turn`).
-
-Units: SI throughout (rad, rad/s, m/s, m/s^2, N, N m, kg, kg m^2, N/rad).
-
-Linear single-track model (Rajamani, *Vehicle Dynamics and Control*, 2nd ed., Springer 2012,
-section 2.3, eq. 2.31, written here with per-AXLE cornering stiffnesses Cf, Cr where Rajamani
-writes 2 C_alpha per tyre; ISO axes: y to the left, delta > 0 steers left)::
-
-    alpha_f = delta - (vy + lf r) / vx          front axle slip angle            [rad]
-    alpha_r = -(vy - lr r) / vx                 rear axle slip angle             [rad]
-    Fyf = Cf alpha_f,  Fyr = Cr alpha_r         axle lateral forces              [N]
-    m (vy' + vx r) = Fyf + Fyr                  lateral force balance
-    Iz r'          = lf Fyf - lr Fyr            yaw moment balance
-
-i.e. x = [vy, r], x' = A(vx) x + B delta with
-
-    A = [[-(Cf + Cr)/(m vx),          -vx - (lf Cf - lr Cr)/(m vx)],
-         [-(lf Cf - lr Cr)/(Iz vx),   -(lf^2 Cf + lr^2 Cr)/(Iz vx)]],    B = [Cf/m, lf Cf/Iz].
-
-Outputs at the centre of gravity: vy, beta = vy / vx (the linear model's sideslip), yaw_rate = r,
-Fyf, Fyr, alpha_f, alpha_r and ay = vy' + vx r = (Fyf + Fyr) / m. Steady state at constant
-delta and vx (Rajamani eq. 3.15 form): r = vx delta / (L + K_us vx^2), L = lf + lr,
-K_us = m / L (lr / Cf - lf / Cr).
-
-Integration: exact zero-order hold, as the co-simulation holds the plant's inputs over each
-communication step [t_k, t_k+1): x_k+1 = Phi_k x_k + Gamma_k delta_k with
-[[Phi, Gamma], [0, 1]] = expm([[A(vx_k), B], [0, 0]] (t_k+1 - t_k)), one matrix exponential per
-step (vectorised: :func:`expm_batch`, scaling and squaring with a Taylor series accurate to
-machine precision). Below ``vx_min`` (1 m/s) the model is singular (1/vx): the state is held
-over the step, and the outputs of such samples use vx_min in place of vx.
-"""
+"""Simple baseline estimates from the same signals as an observer (the estimate 0, a car's
+open-loop linear bicycle, a motorcycle's steady turn), so that a report shows what an observer
+adds. Pure numpy/scipy; defined on the documentation's "Results files" page."""
 from __future__ import annotations
 
 import math

@@ -1,63 +1,7 @@
-"""Scores of a co-simulation: estimation errors, interval enclosure, bank-angle L2 gain, modes.
-
-Every number is in the SI unit of its signal (rad, rad/s, m/s, N ...; the unit is repeated in
-the entry when a modelDescription declares it). Structure returned by :func:`compute`::
-
-    {
-      "scenario": str, "dt_s": float, "duration_s": float, "settle_time_s": float, "n_samples": int,
-      "info": {...}                                    # SimResult.info (scenario amplitudes, noise...)
-      "observers": {
-        label: {
-          "estimates": {"X_hat": {"truth": "X", "unit": str|None, "rms": e, "max_abs": e,
-                                   "rms_after_settle": e, "max_abs_after_settle": e,
-                                   "mean_error_after_settle": e (bias), "truth_rms_after_settle": x,
-                                   "nonfinite_samples": int}},
-          "intervals": {"X": {"truth": "X", "lower": "X_lower", "upper": "X_upper",
-                              "enclosure_violations": int, "enclosure_violations_after_settle": int,
-                              "max_violation": e, "mean_width": w, "mean_width_after_settle": w,
-                              "nonfinite_samples": int}},
-          "beta_error_to_bank_l2_ratio": r | None,              # paper 000 eq. (26)
-          "beta_error_to_bank_l2_ratio_after_settle": r | None,
-          "mode_occupancy": {"1": fraction, ...}, "mode_switches": int,   # if a `mode` output exists
-          "residual_norm": {"rms", "max", "rms_after_settle", "max_after_settle"},  # if such an output
-          "saturation_zone": {"Ff"|"Fr": {"samples", "fraction", "rms", "max_abs", "rms_outside",
-                              "peak_gamma_over_force"}},   # X_hat vs X where |Gamma_x| > 5 % |X|
-          "unscored_outputs": [names without a truth on the bus],
-          "log_messages": int,
-          "baselines": {                     # simple estimates on the same signals (baselines.py)
-            "zero" | "bicycle" | "steady_turn": {name: {same keys as the observer's entry}},
-            "summary": {name: {"statistic": "rms_after_settle", "observer": "estimate"|"interval midpoint",
-                               "observer_rms": x, "baselines": {baseline: rms}, "best_baseline": b,
-                               "best_baseline_rms": y, "ratio": x / y, "baseline_as_good": y <= x,
-                               "baselines_as_good": [every baseline with rms <= x],
-                               "not_computed": {baseline: reason}, "observer_best": bool | None}},
-            "skipped": {baseline: reason}, "about": {baseline: {what, inputs, vehicle ...}}
-          }
-        }
-      }
-    }
-
-Errors are estimate minus truth (X_hat - X). "after settle" uses samples with t >= settle_time.
-Non-finite statistics are written as null so that the file is strict JSON.
-
-Baselines (:func:`baselines_for`): every scored estimate ``X_hat`` (and every scored interval ``X``,
-whose observer value is then the midpoint of its bounds) is also scored, against the same truth
-with the same statistics, for the trivial estimate 0 (``zero``) and for the observer's model
-baseline: the open-loop linear bicycle driven by the measured delta and vx for a car
-(``bicycle``; parameters of the vehicle the observer was designed for, from
-``SimResult.info["observer_designs"]``), the steady turn from the measured vx and yaw rate for a
-motorcycle (``steady_turn``). ``summary`` compares the observer's RMS after settle with every
-baseline's on the same samples (:func:`baseline_summary`: each baseline as good or better is
-listed); a baseline that cannot be computed is listed in ``skipped`` with the reason and, beside
-each estimate it would have given, in the summary's ``not_computed``: the observer is then not
-said to be the best (``observer_best`` null). The vehicle parameters are the design file's only.
-
-Truth at the point the observer estimates: an estimate ``X_hat`` (or a pair ``X_lower`` /
-``X_upper``) is scored against the bus signal ``X`` unless :data:`REFERENCE_SIGNALS` maps ``X``
-of that observer's FMU model to another signal that is on the bus (e.g. paper 001 estimates the
-lateral velocity of the centre of gravity, CarPlant's ``vy_cg``, not its roll-axis ``vy``). The
-entry's ``"truth"`` names the signal used.
-"""
+"""Scores of a co-simulation: estimation errors, interval enclosure, paper 000's bank-angle L2
+ratio, modes, residuals, and every estimate beside the baselines on the same samples
+(:func:`compute`). The structure of ``metrics.json`` is on the documentation's "Results files"
+page."""
 from __future__ import annotations
 
 from ..atomic import atomic_write_text

@@ -1,17 +1,6 @@
-"""PNG figures of a co-simulation (matplotlib, Agg canvas; pyplot's global state is not used).
-
-Angles are drawn in degrees and angular rates in deg/s (axis labels say so); other signals in
-their SI unit. Files written by :func:`plot_all` into ``out_dir``:
-
-    estimates.png   truth vs every observer's estimate (and interval band) per estimated signal;
-                    the truth of an observer is the one its metrics use (metrics.REFERENCE_SIGNALS);
-                    the model baseline of the metrics (a car's open-loop linear bicycle, a
-                    motorcycle's steady turn; latobs.validation.baselines) as a thin dashed line
-    modes.png       active mode of each observer over time (observers with a `mode` output)
-    residual.png    each observer's `residual_norm` output (paper 003)
-    bank_angle.png  road bank angle: truth vs each observer's bank_angle_hat
-    inputs.png      the scenario's plant inputs (delta, vx, bank_angle)
-"""
+"""PNG figures of a co-simulation (matplotlib, Agg canvas, no pyplot state): estimates beside the
+truth and the model baseline, modes, residuals, bank angle, the scenario's inputs; angles in
+degrees."""
 from __future__ import annotations
 
 from ..atomic import atomic_path

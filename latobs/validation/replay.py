@@ -1,42 +1,7 @@
-"""Replay of recorded signals through a built observer FMU, scored against the recorded reference.
-
-``latobs replay CSV --observer NAME`` (CONTRACT.md): the observer FMU is driven, through fmpy
-(:class:`latobs.validation.harness.FmuInstance`), by the columns of a CSV file and scored
-against the reference columns the file has. Only the BUILT FMU is used; its Python internals are
-never imported.
-
-CSV file
-    ``.csv`` or ``.csv.gz``, a header row of column names, one sample per row, SI units (angles
-    in rad). A column ``t`` (s) is required, strictly increasing with a uniform step (judged on
-    t - t_0, within :data:`UNIFORM_RTOL` relative plus :data:`UNIFORM_ULPS` ulps of the times: Unix
-    timestamps are fine); every value must be finite. The columns are named as in the
-    MBDS dataset (:data:`MBDS_CSV`: t, delta, vx, vy, yaw_rate, ay, ax, beta) and as the FMUs'
-    variables, so wiring is by name.
-Wiring
-    Each FMU input is the CSV column of the same name; :func:`check_record` refuses, naming the
-    signals the observer needs, a record without one of them, an angle beyond +-pi rad (degrees)
-    and a value outside an input's declared range, before anything runs.
-Timing (as :mod:`latobs.validation.harness`)
-    The communication step is the CSV's time step dt. Initialisation mode gets the first row's
-    inputs; the outputs read after it are recorded at t_0. Step k: inputs of row k (held over the
-    step), doStep(t_k, dt), outputs recorded at t_{k+1}, where they are compared with row k+1.
-Scoring (:mod:`latobs.validation.metrics` conventions)
-    an output ``X_hat`` against column ``X`` (error = estimate - truth: rms, max_abs, mean_error);
-    a pair ``X_lower``/``X_upper`` against column ``X`` (enclosure_violations, violation_rate,
-    enclosure_rate, max_violation, mean_width); :data:`metrics.REFERENCE_SIGNALS` applies when
-    the file has the mapped column. With force bounds ``Fyf_lower/upper``, ``Fyr_lower/upper``
-    and a column ``ay``: ``may_in_force_sum``, the enclosure of m*ay (N) in
-    [Fyf_lower + Fyr_lower, Fyf_upper + Fyr_upper] (paper 001 eq. 47), m from the design file
-    inside the FMU (else from the vehicle given).
-    Every metric is given on the whole record (``all``) and, with a split time T, separately on
-    t < T (``before_split``) and t >= T (``after_split``). The MBDS file's default split is 425 s:
-    t >= 425 s is its held-out test part, never used for tuning.
-
-Output: ``metrics.json`` (structure in :func:`score`) and, unless disabled, ``replay.png`` (whole
-record; the held-out part shaded) and ``replay_zoom.png`` (the 20 s window of most activity,
-taken before the split when there is one); the model baseline (the car's linear bicycle driven
-by the record's delta and vx) is drawn there as a thin dashed line.
-"""
+"""``latobs replay``: a recorded CSV drives a built observer FMU through fmpy (inputs wired by column
+name, the record checked first) and is scored against the reference columns it holds, on the
+whole record and before and after a split time. Format, timing and scoring are on the
+documentation's "Results files" page."""
 from __future__ import annotations
 
 import hashlib

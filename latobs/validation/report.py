@@ -1,27 +1,6 @@
-"""Markdown report: ``index.md`` with the metrics tables and figures of each validation run.
-
-A section is one of
-
-* a :class:`ReportSection` (title, metrics dict as from :func:`latobs.validation.metrics.compute`,
-  image paths, extra markdown),
-* a mapping with the same keys,
-* a plain string: markdown copied as is (e.g. a design certificate written by the caller).
-
-Image paths are file paths (absolute, or relative to the working directory like any other path);
-their links are written relative to the report directory, and an image that does not exist is an
-error (a report never links to nothing). The markdown shows angles in degrees and angular rates in
-deg/s (:func:`display_units`), every other quantity in its SI unit; metrics.json and the FMUs stay
-SI. The report opens with a table of contents linking every section.
-
-Baselines (``metrics["observers"][label]["baselines"]``, see :mod:`latobs.validation.metrics`): the
-tables show each scored estimate beside the zero estimate and the model baseline (the car's
-open-loop linear bicycle, the motorcycle's steady turn) on the same signals: extra columns (RMS
-after settle) in the markdown tables, extra rows in the text tables and replay tables. The lowest
-RMS of each estimate is marked (**bold** in markdown, ``*`` in text); a ``⚠``/``!`` flags every
-baseline as good as or better than the observer. A baseline that applies but could not be
-computed is shown as "not computed", with the reason below the table, and the observer is then
-given no verdict (never "observer" as the best).
-"""
+"""The Markdown report ``index.md`` of validation runs: a table of contents, each run's metrics
+tables with the baselines beside the observers (the lowest RMS marked, a baseline as good as the
+observer flagged) and its figures, linked relative to the report; angles in degrees."""
 from __future__ import annotations
 
 from ..atomic import atomic_write_text
