@@ -125,7 +125,7 @@ def assert_same(got: dict, want: dict, what: str, platform: str, time: np.ndarra
         if bad.size:
             k = bad[0]
             pytest.fail(f"{what}: {n} differs at {bad.size} of {len(ref)} rows, first at t = {time[k]:.6g} s: "
-                        f"{y[k]!r} vs golden {ref[k]!r}")
+                        f"{float(y[k])!r} vs golden {float(ref[k])!r}")
 
 
 def _variants():
