@@ -44,7 +44,7 @@ def resolve(spec: str, observers: list[str] | None = None, runs: int | None = No
     that scenario, with the scenario's own fields, duration, step and settle time; its observers
     default to those ``latobs validate SCENARIO`` runs. ``observers``, ``runs`` and ``seed``
     override the definition's."""
-    from .synthesis import designs
+    from . import catalogue
     from .validation.scenarios import SCENARIOS
 
     if spec.endswith(".toml") or os.sep in spec:
@@ -53,14 +53,13 @@ def resolve(spec: str, observers: list[str] | None = None, runs: int | None = No
         c = cp.load(shipped()[spec])
     elif spec in SCENARIOS:
         sc = SCENARIOS[spec]
-        names = observers or [n for n, e in designs.DESIGNS.items()
-                              if (e.paper == "000" if sc.plant == "CarPlant" else e.plant == sc.plant)]
+        names = observers or catalogue.default_observers(sc.plant)
         entries = [_design_of(n) for n in names]
         wrong = [n for n, e in zip(names, entries) if e.plant != sc.plant]
         if wrong:
             raise CampaignError(f"scenario {spec!r} drives {sc.plant}; observer(s) {', '.join(wrong)} are validated "
                                 "beside another plant")
-        template = shipped().get(f"robustness-{entries[0].paper}")
+        template = shipped().get(catalogue.get(entries[0].name).campaign or "")
         if template is None:
             raise CampaignError(f"no robustness campaign for paper {entries[0].paper} to take distributions from")
         t = cp.load(template)

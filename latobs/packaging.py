@@ -14,7 +14,7 @@ from importlib import import_module
 from pathlib import Path
 from typing import Callable, Mapping
 
-from . import __version__, identity
+from . import __version__, catalogue, identity
 from .atomic import atomic_paths, locked_folder
 from .synthesis import design_file, designs
 from .synthesis.params import Vehicle, load_vehicle
@@ -39,26 +39,14 @@ class FmuKind:
     default_vehicle: str
 
 
-PLANTS = {"CarPlant": FmuKind("CarPlant", "car_plant", "plant", "sedan"),
-          # paper 003: Sharp's motorcycle (derived by synthesis/motorcycle_model.py)
-          "MotorcyclePlant": FmuKind("MotorcyclePlant", "motorcycle_plant", "plant", "sharp_motorcycle")}
-OBSERVERS = {
-    "SideslipBankObserver": FmuKind("SideslipBankObserver", "sideslip_bank_observer", "design", "sedan"),
-    "SideslipBankObserverTire": FmuKind("SideslipBankObserverTire", "sideslip_bank_observer", "design", "sedan"),
-    # the paper-faithful designs (reproduction; issue 9): same runtime and model file
-    "SideslipBankObserverPaper": FmuKind("SideslipBankObserverPaper", "sideslip_bank_observer", "design", "sedan"),
-    "SideslipBankObserverTirePaper": FmuKind("SideslipBankObserverTirePaper", "sideslip_bank_observer", "design",
-                                             "sedan"),
-    "LateralIntervalObserver": FmuKind("LateralIntervalObserver", "lateral_interval_observer", "design", "sedan"),
-    "SideslipFixedOrderEstimator": FmuKind("SideslipFixedOrderEstimator", "sideslip_fixed_order_estimator",
-                                           "design", "delibasi"),
-    "SideslipFixedOrderEstimatorScheduled": FmuKind("SideslipFixedOrderEstimatorScheduled",
-                                                    "sideslip_fixed_order_estimator_scheduled", "design",
-                                                    "mbds_250lm"),
-    "SideslipKalmanFilter": FmuKind("SideslipKalmanFilter", "sideslip_kalman_filter", "design", "mbds_250lm"),
-    "MotorcycleFaultObserver": FmuKind("MotorcycleFaultObserver", "motorcycle_fault_observer", "design",
-                                       "sharp_motorcycle"),
-}
+def _kind(name: str) -> FmuKind:
+    e = catalogue.get(name)
+    return FmuKind(name, e.model_module, "design" if e.kind == "observer" else "plant", e.default_vehicle)
+
+
+#: the plant and observer FMUs of the catalogue (``latobs.catalogue``)
+PLANTS = {name: _kind(name) for name in catalogue.PLANTS}
+OBSERVERS = {name: _kind(name) for name in catalogue.OBSERVERS}
 
 
 def runtime_sources() -> list[Path]:

@@ -4,30 +4,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import catalogue
 from .identity import Identity
 from .synthesis import designs  # the catalogue only: it imports the solver stack when designing
 
-# Sensor noise and bias of ``latobs validate --noise``: (std, bias) per measured signal, SI units.
-# Typical automotive-grade inertial and steering sensors.
-DEFAULT_NOISE = {
-    "yaw_rate": (0.002, 0.001),      # rad/s
-    "roll_angle": (0.002, 0.0),      # rad
-    "roll_rate": (0.003, 0.0005),    # rad/s
-    "delta": (0.0005, 0.0),          # rad (road wheel)
-    "vx": (0.05, 0.0),               # m/s
-}
-#: ``--noise`` per plant (std, bias) in SI units: the sensors its observers read. The motorcycle's
-#: (paper 003, figure 3: noisy steer angle, yaw rate and roll rate) are zero-mean: an IMU and a
-#: steering encoder, after the usual bias calibration.
-PLANT_NOISE = {
-    "CarPlant": DEFAULT_NOISE,
-    "MotorcyclePlant": {
-        "steer_angle": (0.001, 0.0),   # rad (encoder)
-        "yaw_rate": (0.005, 0.0),      # rad/s
-        "roll_rate": (0.005, 0.0),     # rad/s
-        "vx": (0.05, 0.0),             # m/s
-    },
-}
+#: ``--noise`` per plant (std, bias) in SI units: the sensors its observers read (``latobs.catalogue``)
+PLANT_NOISE = {name: dict(catalogue.get(name).noise) for name in catalogue.PLANTS}
+# Sensor noise and bias of ``latobs validate --noise`` beside CarPlant
+DEFAULT_NOISE = PLANT_NOISE["CarPlant"]
 
 
 class PipelineError(RuntimeError):
@@ -256,39 +240,15 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
     return [built[p.name] for p in plans]
 
 
-@dataclass(frozen=True)
-class ReferenceSpec:
-    """The reference experiment an FMU carries: the first ``seconds`` of its own validation
-    ``scenario``, with the scenario fields ``overrides`` (``note`` says why) that bring the
-    manoeuvre into those seconds."""
-    scenario: str
-    seconds: float
-    overrides: tuple[tuple[str, object], ...] = ()
-    note: str = ""
-
-
-_BANK = ((0.0, 0.0), (0.5, 0.0), (0.5, 2.0), (8.0, 2.0), (12.0, 5.0), (18.0, 5.0), (18.0, -2.0), (22.0, -2.0),
-         (26.0, 0.0))
-_SECONDS = 2.0          # 401 rows at the default step of 5 ms: a few tens of kB in an FMU
-_MOTORCYCLE = ReferenceSpec("motorcycle-lane-change", _SECONDS,
-                            (("t_rise", 0.0), ("t_first", 0.2), ("pulse", 0.8), ("t_second", 1.1)),
-                            "the speed rise and both torque pulses (0.8 s each) within the first 2 s")
-#: Each FMU's reference experiment (``latobs check``): its own validation scenario, two seconds
-#: at the FMU's default step. An observer's inputs are its plant's signals in that scenario (the
-#: plant of the same backend, for the observer's vehicle; for the plant's default vehicle when the
-#: plant cannot be built for it, e.g. a vehicle without roll data); a plant's are the scenario's.
-REFERENCE_EXPERIMENTS = {
-    **dict.fromkeys(("SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
-                     "SideslipBankObserverTirePaper", "CarPlant"),
-                    ReferenceSpec("bank-braking", _SECONDS, (("bank_knots_deg", _BANK), ("t_brake", 1.0)),
-                                  "the 2 deg bank step at 0.5 s and the braking from 1 s")),
-    "LateralIntervalObserver": ReferenceSpec("double-lane-change-15", _SECONDS, (("t_start", 0.2),),
-                                             "the lane change from 0.2 s"),
-    "SideslipFixedOrderEstimator": ReferenceSpec("w1-steer", _SECONDS),
-    **dict.fromkeys(("SideslipFixedOrderEstimatorScheduled", "SideslipKalmanFilter"),
-                    ReferenceSpec("double-lane-change", _SECONDS, (("t_start", 0.2),), "the lane change from 0.2 s")),
-    "MotorcycleFaultObserver": _MOTORCYCLE, "MotorcyclePlant": _MOTORCYCLE,
-}
+#: The reference experiment an FMU carries: the first ``seconds`` of its own validation
+#: ``scenario``, with the scenario fields ``overrides`` (``note`` says why).
+ReferenceSpec = catalogue.Reference
+#: Each FMU's reference experiment (``latobs check``, from ``latobs.catalogue``): its own validation
+#: scenario, two seconds at the FMU's default step. An observer's inputs are its plant's signals in
+#: that scenario (the plant of the same backend, for the observer's vehicle; for the plant's default
+#: vehicle when the plant cannot be built for it, e.g. a vehicle without roll data); a plant's are
+#: the scenario's.
+REFERENCE_EXPERIMENTS = {e.name: e.reference for e in catalogue.ENTRIES}
 
 
 def _reference_spec(model: str) -> ReferenceSpec:
@@ -597,8 +557,7 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
 
     sc = get_scenario(scenario)
     # default: paper 000's observers beside CarPlant, every observer of the plant otherwise
-    observers = observers or [n for n, e in designs.DESIGNS.items()
-                              if (e.paper == "000" if sc.plant == "CarPlant" else e.plant == sc.plant)]
+    observers = observers or catalogue.default_observers(sc.plant)
     fmus = ensure_fmus(observers, fmu_dir, platforms)
     plant_vehicle = plant_vehicle or packaging.PLANTS[sc.plant].default_vehicle
     plant = ensure_plant(sc.plant, plant_vehicle, fmu_dir, platforms)

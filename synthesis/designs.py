@@ -1,4 +1,4 @@
-"""Catalogue of the observer designs: name -> paper, default vehicle, design options.
+"""The observer designs (derived from ``latobs.catalogue``): name -> paper, default vehicle, design options.
 
 ``run(name, vehicle)`` is the design-time pipeline of one observer: parameters -> design model
 -> LMI design -> independent certificate -> design dict (written by ``design_file.write``).
@@ -9,6 +9,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import Callable
 
+from .. import catalogue
 from .params import Vehicle, load_vehicle
 
 # The design and certificate modules (cvxpy, scipy) are imported where they are used, so that
@@ -61,117 +62,20 @@ class DesignEntry:
     plant: str = "CarPlant"                # the plant FMU it is validated beside
 
 
-def _solve_000(vehicle: Vehicle, opts) -> dict:
-    from . import pi_hinf_000
-
-    return pi_hinf_000.to_design_dict(pi_hinf_000.design(vehicle, opts))
-
-
-def _solve_001(vehicle: Vehicle, opts) -> dict:
-    from . import interval_001
-
-    return interval_001.to_design_dict(interval_001.design(vehicle, opts))
-
-
-def _options_001(name: str):
-    from . import interval_001
-
-    return interval_001.DesignOptions(name=name)
-
-
-def _solve_002(vehicle: Vehicle, opts) -> dict:
-    from . import fixed_order_002
-
-    return fixed_order_002.to_design_dict(fixed_order_002.design_for_vehicle(vehicle, opts))
-
-
-def _options_002(scheduled: bool):
+def _entry(e) -> DesignEntry:
+    """The design registry's entry of a catalogue entry (its modules imported when used)."""
     def options(name: str):
-        from . import fixed_order_002
+        return catalogue.resolve(e.options)(name=name, **dict(e.option_args))
 
-        return fixed_order_002.DesignOptions(name=name, scheduled=scheduled)
-    return options
+    def solve(vehicle: Vehicle, opts) -> dict:
+        result = catalogue.resolve(e.design)(vehicle, opts)
+        return catalogue.resolve(e.to_dict)(result) if e.to_dict else result
 
-
-def _solve_kalman(vehicle: Vehicle, opts) -> dict:
-    from . import kalman_baseline
-
-    return kalman_baseline.design(vehicle, opts)
+    return DesignEntry(e.name, e.paper, e.default_vehicle, e.description, options, solve, e.plant)
 
 
-def _options_kalman(name: str):
-    from . import kalman_baseline
-
-    return kalman_baseline.DesignOptions(name=name)
-
-
-def _solve_003(vehicle: Vehicle, opts) -> dict:
-    from . import pi_switched_003
-
-    return pi_switched_003.to_design_dict(pi_switched_003.design(vehicle, opts))
-
-
-def _options_003(name: str):
-    from . import pi_switched_003
-
-    return pi_switched_003.DesignOptions(name=name)
-
-
-def _options_000(switching: str, faithful: bool = False):
-    def options(name: str):
-        from . import pi_hinf_000
-
-        return pi_hinf_000.DesignOptions(name=name, switching=switching, faithful=faithful)
-    return options
-
-
-DESIGNS: dict[str, DesignEntry] = {
-    "SideslipBankObserver": DesignEntry(
-        "SideslipBankObserver", "000", "sedan",
-        "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model "
-        "at the measured speed, robust to model error, valid flag with integral freeze",
-        _options_000("speed"), _solve_000),
-    "SideslipBankObserverTire": DesignEntry(
-        "SideslipBankObserverTire", "000", "sedan",
-        "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) "
-        "at alpha* = 0.5 deg (eq. 27), robust to model error, valid flag with integral freeze",
-        _options_000("tire"), _solve_000),
-    "SideslipBankObserverPaper": DesignEntry(
-        "SideslipBankObserverPaper", "000", "sedan",
-        "the paper's speed-mode design as printed, for reproduction: LMI (20) + pole region only, each mode "
-        "at its grid speed (eq. 25 literally)",
-        _options_000("speed", faithful=True), _solve_000),
-    "SideslipBankObserverTirePaper": DesignEntry(
-        "SideslipBankObserverTirePaper", "000", "sedan",
-        "the paper's tire-mode design as printed, for reproduction: LMI (20) + pole region only on the grid "
-        "speeds 36/63/90 km/h (eq. 27)",
-        _options_000("tire", faithful=True), _solve_000),
-    "LateralIntervalObserver": DesignEntry(
-        "LateralIntervalObserver", "001", "sedan",
-        "switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and axle "
-        "forces for cornering stiffnesses in a +-20 % box, speed modes 11.5/14.5/18 m/s (Theorem 1)",
-        _options_001, _solve_001),
-    "SideslipFixedOrderEstimator": DesignEntry(
-        "SideslipFixedOrderEstimator", "002", "delibasi",
-        "fixed-order robust H-inf sideslip estimator beta^ = (y/x) r from the yaw rate alone, one filter for "
-        "the whole (Cf, Cr, v) box, Lemma 5 + certified polish (Delibasi 2014)",
-        _options_002(False), _solve_002),
-    "SideslipFixedOrderEstimatorScheduled": DesignEntry(
-        "SideslipFixedOrderEstimatorScheduled", "002", "mbds_250lm",
-        "speed-scheduled fixed-order robust H-inf sideslip estimator: one Lemma 5 design per speed band, "
-        "switched on vx (extension of paper 002)",
-        _options_002(True), _solve_002),
-    "SideslipKalmanFilter": DesignEntry(
-        "SideslipKalmanFilter", "002", "mbds_250lm",
-        "baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's authors "
-        "(measurements ay and yaw rate), noise tuned on the record's t < 425 s",
-        _options_kalman, _solve_kalman),
-    "MotorcycleFaultObserver": DesignEntry(
-        "MotorcycleFaultObserver", "003", "sharp_motorcycle",
-        "switched H-inf PI observer of a motorcycle's roll angle and rider torque (unknown inputs), one "
-        "Lyapunov matrix per speed mode 10..30 m/s, LMIs (20)-(23) with their misprints corrected",
-        _options_003, _solve_003, plant="MotorcyclePlant"),
-}
+#: the observers of the catalogue (``latobs.catalogue``)
+DESIGNS: dict[str, DesignEntry] = {name: _entry(catalogue.get(name)) for name in catalogue.OBSERVERS}
 
 
 def get(name: str) -> DesignEntry:
@@ -243,10 +147,8 @@ class Outcome:
 
 def design_errors() -> tuple[type, ...]:
     """The DesignError class of every paper's design module (LMIs infeasible, solver failure)."""
-    from . import fixed_order_002, interval_001, kalman_baseline, pi_hinf_000, pi_switched_003
-
-    return tuple(m.DesignError for m in (pi_hinf_000, interval_001, fixed_order_002, kalman_baseline,
-                                         pi_switched_003))
+    modules = dict.fromkeys(catalogue.get(n).design.partition(":")[0] for n in catalogue.OBSERVERS)
+    return tuple(catalogue.resolve(m).DesignError for m in modules)
 
 
 def attempt(name: str, vehicle: str, **overrides) -> Outcome:

@@ -34,7 +34,7 @@ from importlib import import_module
 from pathlib import Path
 from xml.etree.ElementTree import Element, SubElement, tostring
 
-from .. import __version__
+from .. import __version__, catalogue
 from ..fmu_src import framework as _framework
 from ..native_guard import fmi2_headers
 from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
@@ -45,19 +45,8 @@ LAYER = ("fmi2_layer.c", "model.h", "fp_contract.h", "glibc_compat.h")
 SHARED_HEADERS = ("linalg.h", "model_util.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
-#: the model file (fmu_src/models/<m>.py) -> its emitter module latobs.cbackend.<emitter>
-EMITTERS = {
-    "sideslip_bank_observer": "pi_observer",
-    "lateral_interval_observer": "interval_observer",
-    "sideslip_fixed_order_estimator": "tf_estimator",
-    "sideslip_fixed_order_estimator_scheduled": "tf_estimator",
-    "sideslip_kalman_filter": "kalman_observer",
-    "motorcycle_fault_observer": "motorcycle_observer",
-    "car_plant": "car_plant",
-    "motorcycle_plant": "motorcycle_plant",
-    "signal_source": "signal_source",
-}
-
+#: the model file (fmu_src/models/<m>.py) -> its emitter module latobs.cbackend.<emitter> (``latobs.catalogue``)
+EMITTERS = {e.model_module: e.emitter_module for e in catalogue.ENTRIES}
 
 
 class NativeBuildError(RuntimeError):

@@ -18,13 +18,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .. import catalogue
 from .scenarios import Scenario, get_scenario
 
 KINDS = ("cosim", "replay")
 #: transforms of :class:`PerturbedScenario` (``[signals]``) and their neutral values
 SIGNAL_TRANSFORMS = {"speed_scale": 1.0, "steer_scale": 1.0, "bank_scale": 1.0, "bank_offset": 0.0}
 #: the steering input of each plant, the one ``steer_scale`` multiplies
-STEER_SIGNAL = {"CarPlant": "delta", "MotorcyclePlant": "rider_torque"}
+STEER_SIGNAL = {e.name: e.steer for e in catalogue.ENTRIES if e.steer}
 PARTS = ("both", "train", "test")
 
 

@@ -4,6 +4,7 @@ ratio, modes, residuals, and every estimate beside the baselines on the same sam
 page."""
 from __future__ import annotations
 
+from .. import catalogue
 from ..atomic import atomic_write_text
 
 import json
@@ -26,13 +27,7 @@ SATURATION_FRACTION = 0.05
 #: before ``_<vehicle>`` for a build of another vehicle): {model: {quantity X: bus signal}}. Used
 #: only when the mapped signal is on the bus (else the signal ``X`` itself). CarPlant's ``vy`` and
 #: ``beta`` are at the roll-axis point below the centre of gravity, ``vy_cg``/``beta_cg`` at it.
-REFERENCE_SIGNALS: dict[str, dict[str, str]] = {
-    "LateralIntervalObserver": {"vy": "vy_cg", "beta": "beta_cg"},   # paper 001: CG states
-    # paper 002's estimators and its Kalman baseline: the bicycle model's CG sideslip / velocity
-    "SideslipFixedOrderEstimator": {"beta": "beta_cg"},
-    "SideslipFixedOrderEstimatorScheduled": {"beta": "beta_cg"},
-    "SideslipKalmanFilter": {"vy": "vy_cg", "beta": "beta_cg"},
-}
+REFERENCE_SIGNALS: dict[str, dict[str, str]] = {e.name: dict(e.truth) for e in catalogue.ENTRIES if e.truth}
 
 
 def reference_map(model_name: str | None) -> dict[str, str]:
