@@ -47,7 +47,7 @@ import sys
 import traceback
 from xml.etree.ElementTree import Element, SubElement, tostring
 
-from .spec import ModelSpec, input_starts, max_step, refused_above, var_bounds
+from .spec import DEFAULT_STEP, ModelSpec, input_starts, max_step, refused_above, var_bounds
 
 # FMI 2.0 status codes (fmi2Status)
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
@@ -66,7 +66,6 @@ DERIVATIVE_UNITS = {"1": "1/s", "rad": "rad/s", "rad/s": "rad/s2", "m": "m/s", "
                     "N": "N/s"}
 # display units offered to tools: (name, factor) with display value = factor * SI value
 DISPLAY_UNITS = {"rad": ("deg", 180.0 / math.pi), "rad/s": ("deg/s", 180.0 / math.pi), "m/s": ("km/h", 3.6)}
-DEFAULT_STEP = 0.005  # s, communication step suggested in the model description
 
 # pythonfmu 0.7.0's native findClass() ends with Py_DECREF(PyModule_GetDict(module)): it releases,
 # on every instantiation, a reference to the entry module's __dict__ that it never owned, so the

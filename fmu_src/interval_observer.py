@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 
+from .linalg import expm_taylor as _expm_taylor, phi_gamma
+
 OUTPUT_NAMES = ("vy_lower", "vy_upper", "beta_lower", "beta_upper", "yaw_rate_lower", "yaw_rate_upper",
                 "Fyf_lower", "Fyf_upper", "Fyr_lower", "Fyr_upper")
 INTEGER_OUTPUTS = ("mode", "consistent")
@@ -64,50 +66,6 @@ def _acc_abs(s, coeffs, x):
 
 def _mid_rad(X):
     return [(X[j] + X[_N + j]) * 0.5 for j in _R], [(X[_N + j] - X[j]) * 0.5 for j in _R]
-
-
-def _expm_taylor(M):
-    """exp(M): scaling X = M / 2^s with ||X||_inf <= 1/2, Horner's Taylor series of degree 16, s
-    squarings (the tables' algorithm). ValueError if ||M||_inf is not finite or above 1e300."""
-    m = len(M)
-    norm = max(sum(abs(x) for x in row) for row in M)
-    if not norm <= 1e300:
-        raise ValueError(f"no finite step map (||M h|| = {norm!r})")
-    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
-    scale = 0.5 ** s
-    X = [[x * scale for x in row] for row in M]
-    E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
-    for k in range(16, 0, -1):
-        XE = _matmul(X, E)
-        E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
-    for _ in range(s):
-        E = _matmul(E, E)
-    return E
-
-
-def phi_gamma(N, h: float, eta: float, order: int = 1):
-    """(Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, int_0^h exp(N (h - s)) s ds,
-    int_0^h exp(N (h - s)) s^2/2 ds) for a Metzler N with N + eta I >= 0: the top blocks of the
-    exponential of the nonnegative block matrix [[N + eta I, I, ..], [0, eta I, I, ..], ..] h
-    times exp(-eta h), so every entry is >= 0 in floating point too (Lemma 2: order preserving)."""
-    n = len(N)
-    if not (h > 0 and math.isfinite(h)):
-        raise ValueError(f"step size must be finite and > 0 s, got {h!r}")
-    nb = order + 1
-    m = nb * n
-    M = [[0.0] * m for _ in range(m)]
-    for i in range(n):
-        for j in range(n):
-            M[i][j] = (N[i][j] + (eta if i == j else 0.0)) * h
-    for b in range(1, nb):
-        for i in range(n):
-            M[(b - 1) * n + i][b * n + i] = h
-            M[b * n + i][b * n + i] = eta * h
-    if min(min(row) for row in M) < 0:
-        raise ValueError("phi_gamma needs N + eta I >= 0 elementwise (N Metzler, eta large enough)")
-    E = _expm_taylor(M)
-    damp = math.exp(-eta * h)
-    return tuple([[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb))
 
 
 def expm_gamma(A, h: float):
@@ -690,6 +648,14 @@ class IntervalObserver:
         self._xi = None
         self._xi_mode = -1
         self._pending = None
+
+    @classmethod
+    def build_time_facts(cls, data: dict) -> dict:
+        """What packaging stores in the design's ``runtime`` before building (both backends read
+        it): the longest communication step, when the design file does not hold it yet."""
+        if data.get("runtime", {}).get("max_communication_step") is not None:
+            return {}
+        return {"max_communication_step": cls(data).max_communication_step()}
 
     def max_communication_step(self) -> float:
         """The longest communication step (s) this design accepts (``step`` refuses a longer one):

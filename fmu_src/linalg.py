@@ -1,8 +1,9 @@
 """Small dense linear algebra for the FMU runtimes (standard library only; lists of rows).
 
-Shared by the runtimes that discretise a linear ODE exactly at the FMU's step
-(``tf_estimator.py``, ``motorcycle_observer.py``): the matrix exponential by scaling and squaring
-and the Van Loan block form of the zero-order-hold map.
+Shared by the runtimes that discretise a linear ODE exactly at the FMU's step and by the
+build-time tables that store those maps at the default step (``synthesis.tables``): the matrix
+exponential by scaling and squaring, the Van Loan block form of the zero-order-hold map, and the
+interval observer's order-preserving step maps (``phi_gamma``).
 """
 from __future__ import annotations
 
@@ -13,6 +14,12 @@ def matmul(A, B):
     """A B; products summed with math.fsum (correctly rounded dot products)."""
     cols = list(zip(*B))
     return [[math.fsum(a * b for a, b in zip(row, col)) for col in cols] for row in A]
+
+
+def _matmul_left(A, B):
+    """A B; products summed from the left (the interval observer's arithmetic, as its C model)."""
+    cols = list(zip(*B))
+    return [[sum([a * b for a, b in zip(row, col)]) for col in cols] for row in A]
 
 
 def norm_inf(A) -> float:
@@ -66,3 +73,49 @@ def matrix(x, rows: int, cols: int, what: str):
     if not all(math.isfinite(v) for r in M for v in r):
         raise ValueError(f"design file: {what} has a non-finite entry")
     return M
+
+
+def expm_taylor(M):
+    """exp(M): scaling X = M / 2^s with ||X||_inf <= 1/2, Horner's Taylor series of degree 16
+    (truncation < 0.5^17/17! ~ 2e-20 relative), s squarings, products summed from the left: the
+    interval observer's step maps (its tables at the default step and the runtime at any other).
+    ValueError if ||M||_inf is not finite or above 1e300."""
+    m = len(M)
+    norm = max(sum(abs(x) for x in row) for row in M)
+    if not norm <= 1e300:
+        raise ValueError(f"no finite step map (||M h|| = {norm!r})")
+    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
+    scale = 0.5 ** s
+    X = [[x * scale for x in row] for row in M]
+    E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
+    for k in range(16, 0, -1):
+        XE = _matmul_left(X, E)
+        E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
+    for _ in range(s):
+        E = _matmul_left(E, E)
+    return E
+
+
+def phi_gamma(N, h: float, eta: float, order: int = 1):
+    """(Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, int_0^h exp(N (h - s)) s ds,
+    int_0^h exp(N (h - s)) s^2/2 ds) for a Metzler N with N + eta I >= 0: the top blocks of the
+    exponential of the nonnegative block matrix [[N + eta I, I, ..], [0, eta I, I, ..], ..] h
+    times exp(-eta h), so every entry is >= 0 in floating point too (Lemma 2: order preserving)."""
+    n = len(N)
+    if not (h > 0 and math.isfinite(h)):
+        raise ValueError(f"step size must be finite and > 0 s, got {h!r}")
+    nb = order + 1
+    m = nb * n
+    M = [[0.0] * m for _ in range(m)]
+    for i in range(n):
+        for j in range(n):
+            M[i][j] = (N[i][j] + (eta if i == j else 0.0)) * h
+    for b in range(1, nb):
+        for i in range(n):
+            M[(b - 1) * n + i][b * n + i] = h
+            M[b * n + i][b * n + i] = eta * h
+    if min(min(row) for row in M) < 0:
+        raise ValueError("phi_gamma needs N + eta I >= 0 elementwise (N Metzler, eta large enough)")
+    E = expm_taylor(M)
+    damp = math.exp(-eta * h)
+    return tuple([[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb))

@@ -29,6 +29,9 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 
+DEFAULT_STEP = 0.005  # s: the communication step suggested in the model description (and the step
+#                       the runtime tables' step maps are computed for, synthesis.tables)
+
 # Physical bounds of the signals every FMU takes as inputs (SI). Each is a value no road vehicle
 # or sensor produces, wide enough for any real record (noise and reversing included) and for the
 # runtimes' own documented clamps to stay reachable inside it, narrow enough that no arithmetic

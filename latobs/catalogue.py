@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import import_module
 
-__all__ = ["MODULES", "Entry", "Reference", "ENTRIES", "OBSERVERS", "PLANTS", "get", "resolve", "default_observers"]
+__all__ = ["MODULES", "Entry", "Reference", "ENTRIES", "PART_EMITTERS", "OBSERVERS", "PLANTS", "get", "resolve", "default_observers"]
 
 #: Every module the catalogue points to, by role, in one place: renaming a module is an edit here.
 #: ``{m[KEY]}`` in an entry's strings below stands for ``MODULES[KEY]``.
@@ -44,6 +44,7 @@ MODULES = {
     "emitter_003": "latobs.cbackend.motorcycle_observer",
     "emitter_car": "latobs.cbackend.car_plant",
     "emitter_motorcycle": "latobs.cbackend.motorcycle_plant",
+    "emitter_signals": "latobs.cbackend.signal_source",
 }
 
 
@@ -144,7 +145,7 @@ def _paper_000(name: str, switching: str, faithful: bool, description: str) -> E
         c_model="pi_observer.c", emitter=_m("{m[emitter_000]}"), reference=_BANK_BRAKING,
         options=_m("{m[design_000]}:DesignOptions"), option_args=(("switching", switching), ("faithful", faithful)),
         design=_m("{m[design_000]}:design"), to_dict=_m("{m[design_000]}:to_design_dict"),
-        certificate=_m("{m[certificate]}:_certify_000"), plant="CarPlant", validate=True, campaign="robustness-000")
+        certificate=_m("{m[certificate]}.sideslip_bank_observer:certify"), plant="CarPlant", validate=True, campaign="robustness-000")
 
 
 #: every FMU of ``latobs build``: the observers, then the plants
@@ -168,7 +169,7 @@ ENTRIES: tuple[Entry, ...] = (
           c_model="interval_observer.c", emitter=_m("{m[emitter_001]}"),
           reference=Reference("double-lane-change-15", _SECONDS, (("t_start", 0.2),), "the lane change from 0.2 s"),
           options=_m("{m[design_001]}:DesignOptions"), design=_m("{m[design_001]}:design"),
-          to_dict=_m("{m[design_001]}:to_design_dict"), certificate=_m("{m[certificate]}:_certify_001"),
+          to_dict=_m("{m[design_001]}:to_design_dict"), certificate=_m("{m[certificate]}.lateral_interval_observer:certify"),
           plant="CarPlant", campaign="robustness-001", truth=_CG),
     Entry("SideslipFixedOrderEstimator", "observer", "002", _m("{m[papers]}:DELIBASI_2014"), "delibasi",
           "fixed-order robust H-inf sideslip estimator beta^ = (y/x) r from the yaw rate alone, one filter for "
@@ -177,7 +178,7 @@ ENTRIES: tuple[Entry, ...] = (
           c_model="tf_estimator.c", emitter=_m("{m[emitter_002]}"), reference=Reference("w1-steer", _SECONDS),
           options=_m("{m[design_002]}:DesignOptions"), option_args=(("scheduled", False),),
           design=_m("{m[design_002]}:design_for_vehicle"), to_dict=_m("{m[design_002]}:to_design_dict"),
-          certificate=_m("{m[certificate]}:_certify_002"), plant="CarPlant", campaign="robustness-002",
+          certificate=_m("{m[certificate]}.sideslip_fixed_order_estimator:certify"), plant="CarPlant", campaign="robustness-002",
           truth=_CG[1:]),
     Entry("SideslipFixedOrderEstimatorScheduled", "observer", "002", _m("{m[papers]}:DELIBASI_2014"), "mbds_250lm",
           "speed-scheduled fixed-order robust H-inf sideslip estimator: one Lemma 5 design per speed band, "
@@ -186,7 +187,7 @@ ENTRIES: tuple[Entry, ...] = (
           runtime=_m("{m[runtime_002]}:TfEstimator"), c_model="tf_estimator.c", emitter=_m("{m[emitter_002]}"),
           reference=_LANE_CHANGE, options=_m("{m[design_002]}:DesignOptions"), option_args=(("scheduled", True),),
           design=_m("{m[design_002]}:design_for_vehicle"), to_dict=_m("{m[design_002]}:to_design_dict"),
-          certificate=_m("{m[certificate]}:_certify_002"), plant="CarPlant", campaign="robustness-002",
+          certificate=_m("{m[certificate]}.sideslip_fixed_order_estimator:certify"), plant="CarPlant", campaign="robustness-002",
           truth=_CG[1:]),
     Entry("SideslipKalmanFilter", "observer", "002", _m("{m[papers]}:LEANZA_2021"), "mbds_250lm",
           "baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's authors "
@@ -194,7 +195,7 @@ ENTRIES: tuple[Entry, ...] = (
           model=_m("{m[models]}.sideslip_kalman_filter"), runtime=_m("{m[runtime_kalman]}:KalmanObserver"),
           c_model="kalman_observer.c", emitter=_m("{m[emitter_kalman]}"), reference=_LANE_CHANGE,
           options=_m("{m[design_kalman]}:DesignOptions"), design=_m("{m[design_kalman]}:design"),
-          certificate=_m("{m[certificate]}:_certify_kalman"), plant="CarPlant", campaign="robustness-002",
+          certificate=_m("{m[certificate]}.sideslip_kalman_filter:certify"), plant="CarPlant", campaign="robustness-002",
           truth=_CG),
     Entry("MotorcycleFaultObserver", "observer", "003", _m("{m[papers]}:ICHALAL_2017"), "sharp_motorcycle",
           "switched H-inf PI observer of a motorcycle's roll angle and rider torque (unknown inputs), one "
@@ -202,7 +203,7 @@ ENTRIES: tuple[Entry, ...] = (
           model=_m("{m[models]}.motorcycle_fault_observer"), runtime=_m("{m[runtime_003]}:MotorcycleFaultObserver"),
           c_model="motorcycle_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
           options=_m("{m[design_003]}:DesignOptions"), design=_m("{m[design_003]}:design"),
-          to_dict=_m("{m[design_003]}:to_design_dict"), certificate=_m("{m[certificate]}:_certify_003"),
+          to_dict=_m("{m[design_003]}:to_design_dict"), certificate=_m("{m[certificate]}.motorcycle_fault_observer:certify"),
           plant="MotorcyclePlant", validate=True, campaign="robustness-003"),
     Entry("CarPlant", "plant", None, None, "sedan",
           "two-track car with roll, nonlinear tires and load transfer, on a banked road",
@@ -228,6 +229,10 @@ ENTRIES: tuple[Entry, ...] = (
                  ("vx", (0.05, 0.0))),               # m/s
           steer="rider_torque"),
 )
+
+#: C models that are parts of other artefacts, not FMUs of ``latobs build``: {model file: emitter}
+#: (the SSP export's ``ScenarioSignals`` source, built per scenario by ``latobs.ssp``)
+PART_EMITTERS: dict[str, str] = {"signal_source": _m("{m[emitter_signals]}")}
 
 _BY_NAME = {e.name: e for e in ENTRIES}
 #: the observer FMUs (built from a design file), in catalogue order

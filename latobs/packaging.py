@@ -375,6 +375,26 @@ def package_design(design_path: Path, out_dir: Path, backend: str = "python",
                                platforms=platforms, finish=finish)
 
 
+def complete_runtime_data(data: dict) -> dict:
+    """``data`` (a design dict with its tables) with what only running its runtime decides, stored
+    once so that neither backend has to find it in the FMU: the runtime class's ``build_time_facts``
+    (paper 001: ``runtime.max_communication_step``, the longest step at which its bounds contract).
+    Its tables are computed again when a fact changed them. Returns ``data``."""
+    from .synthesis import tables
+
+    entry = catalogue.get(data.get("design", "")) if data.get("design") in catalogue.OBSERVERS else None
+    runtime = catalogue.resolve(entry.runtime) if entry else None
+    facts = getattr(runtime, "build_time_facts", None)
+    if facts is None:
+        return data
+    tables.attach(data)
+    new = facts(data)
+    if new:
+        data.setdefault("runtime", {}).update(new)
+        data[tables.TABLES_KEY] = tables.compute(data)
+    return data
+
+
 def package_design_data(data: dict, out_dir: Path, backend: str = "python", write_design: bool = False,
                         origin: str | None = None, platforms: list[str] | None = None,
                         finish: Finish | None = None) -> Path:
@@ -384,6 +404,7 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
 
     origin = origin or f"design {data.get('name')!r}"
     tables.attach(data)   # a design file written without its runtime's tables gets them here
+    complete_runtime_data(data)
     ok, checks = certificate.certify(data)
     if not ok or not data.get("certified"):
         failed = [c.name for c in checks if not c.passed]

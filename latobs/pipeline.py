@@ -22,7 +22,9 @@ def solve(name: str, vehicle: str | None, quiet: bool = False) -> dict:
     """Design and certify (``designs.run``); prints the headline figures."""
     from .synthesis import certificate
 
-    data = designs.run(name, vehicle)
+    from .packaging import complete_runtime_data
+
+    data = complete_runtime_data(designs.run(name, vehicle))
     if not quiet:
         s = certificate.summary(data)    # its keys depend on the paper: print those present
         extra = "".join(f", {label} = {s[key]:{fmt}}" for key, label, fmt in

@@ -13,6 +13,11 @@ from ..atomic import atomic_write_text, locked_folder
 
 SCHEMA = "latobs.design/1"
 
+#: the values of optional fields a design file may omit, read by whoever builds or checks from it:
+#: the Kalman peer's initial covariance ``initial.P0`` and its speed clamp ``runtime.vx_min``/``vx_max`` (m/s)
+KALMAN_P0_DEFAULT = [[1.0, 0.0], [0.0, 0.01]]
+KALMAN_VX_RANGE_DEFAULT = (1.0, 200.0)
+
 
 def _plain(obj):
     if isinstance(obj, np.ndarray):

@@ -240,10 +240,6 @@ def to_design_dict(d: Design) -> dict:
             "certificate adds the small-gain check of the width dynamics that Theorem 1 omits.",
         ],
     }
-    # the longest communication step at which the bounds contract, decided by running the runtime
-    # itself (one source for both FMU backends; the FMUs then need not probe at their first step)
-    from ..fmu_src.interval_observer import IntervalObserver
-    from .tables import lateral_interval_observer as tables
-    probe = {**data, "tables": tables.compute(data)}      # the runtime evaluates the tables
-    data["runtime"]["max_communication_step"] = IntervalObserver(probe).max_communication_step()
+    # runtime.max_communication_step (the longest step at which the bounds contract) is decided
+    # by running the runtime itself, at build time: latobs.packaging.complete_runtime_data
     return data

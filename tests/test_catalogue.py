@@ -98,7 +98,7 @@ def test_each_entry_matches_its_model_file_runtime_and_emitter(name):
 
 @pytest.mark.parametrize("name", list(ENTRIES))
 def test_each_entry_names_a_consistent_design_plant_scenario_and_campaign(name):
-    from latobs.campaign import shipped
+    from latobs.campaign_runner import shipped
     from latobs.synthesis.params import load_vehicle
     from latobs.validation.scenarios import SCENARIOS
 
@@ -162,7 +162,10 @@ def test_packaging_registries_are_the_catalogues():
 def test_emitter_registry_is_the_catalogues():
     from latobs import cbackend
 
-    assert cbackend.EMITTERS == {e.model_module: e.emitter_module for e in catalogue.ENTRIES}
+    parts = {model: dotted.rsplit(".", 1)[-1] for model, dotted in catalogue.PART_EMITTERS.items()}
+    assert cbackend.EMITTERS == {**{e.model_module: e.emitter_module for e in catalogue.ENTRIES}, **parts}
+    for dotted in catalogue.PART_EMITTERS.values():
+        catalogue.resolve(dotted)                               # a part's emitter exists
     models = {p.stem for p in Path(catalogue.resolve(catalogue.MODULES["models"]).__file__).parent.glob("*.py")}
     assert models - {"__init__"} == set(cbackend.EMITTERS)     # no model file outside the catalogue
 

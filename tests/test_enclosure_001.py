@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from latobs.packaging import complete_runtime_data
 from latobs import packaging
 from latobs.synthesis import design_file, designs
 
@@ -38,11 +39,11 @@ def fmus(tmp_path_factory):
     out = tmp_path_factory.mktemp("fmus_001")
     backend = packaging.resolve_backend("auto", packaging.OBSERVERS["LateralIntervalObserver"])[0]
     plant_backend = packaging.resolve_backend("auto", packaging.PLANTS["CarPlant"])[0]
-    data = designs.run("LateralIntervalObserver")
+    data = complete_runtime_data(designs.run("LateralIntervalObserver"))
     observer = packaging.package_design(design_file.write(data, out), out, backend)
     plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out, plant_backend)  # paper 001's model class
     plant = packaging.package_plant("CarPlant", None, out, plant_backend)
-    robust = designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND)
+    robust = complete_runtime_data(designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND))
     robust_dir = out / "robust"
     observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir, backend)
     return {"plant_rigid": plant_rigid, "plant": plant, "observer": observer, "observer_robust": observer_robust,
@@ -108,7 +109,7 @@ def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows
     from latobs.synthesis import designs
 
     table, rows = step_rows
-    hmax = IntervalObserver(designs.run("LateralIntervalObserver")).max_communication_step()
+    hmax = IntervalObserver(complete_runtime_data(designs.run("LateralIntervalObserver"))).max_communication_step()
     with capsys.disabled():
         print(f"\n001 at every step (max_communication_step {hmax:g} s): {table}")
     for h in STEPS:

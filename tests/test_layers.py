@@ -25,16 +25,8 @@ import latobs
 PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
 
 #: contracts broken by work that lands separately, with what breaks them; each is expected to fail
-#: (strict: the test fails as soon as the contract holds, so that it is taken off this list). The
-#: lead empties it when merging.
-PENDING = {
-    "design-time-no-runtime": "synthesis/interval_001.py runs the interval runtime to find "
-                              "runtime.max_communication_step (to move with the interval observer's runtime tables)",
-    "validation-through-design-file": "validation/scenarios.py's steady-turn solver imports the fixed-order design "
-                                      "module (the solver moves beside the plant model it solves)",
-    "emitters-read-data": "the C emitters read the Python runtimes' private state (to read the design's runtime "
-                          "tables only)",
-}
+#: (strict: the test fails as soon as the contract holds, so that it is taken off this list)
+PENDING: dict[str, str] = {}
 
 
 def _contracts() -> list[dict]:

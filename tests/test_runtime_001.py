@@ -12,6 +12,7 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
+from latobs.packaging import complete_runtime_data
 from latobs.fmu_src import interval_observer as io
 from latobs.fmu_src.interval_observer import IntervalObserver
 from latobs.fmu_src.models.lateral_interval_observer import SPEC
@@ -99,7 +100,7 @@ def observer(data, params=None):
 
 @pytest.fixture(scope="module")
 def design() -> dict:
-    return designs.run("LateralIntervalObserver")
+    return complete_runtime_data(designs.run("LateralIntervalObserver"))
 
 
 def _pos(a):
@@ -562,7 +563,7 @@ def test_additive_disturbance_bound_is_enclosed(design):
 
 def test_a_design_with_many_bands(design):
     """The real-data vehicle's design: 12 bands over 15-63 m/s (any number of modes)."""
-    d = designs.run("LateralIntervalObserver", "mbds_250lm")
+    d = complete_runtime_data(designs.run("LateralIntervalObserver", "mbds_250lm"))
     obs = IntervalObserver(d, {})
     obs.initialize(_u(vx=16.0))
     for k in range(2000):

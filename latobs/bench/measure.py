@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import catalogue
 from ..synthesis import designs  # the catalogue only (no solver stack)
 
 BACKENDS = ("python", "c")
@@ -61,7 +62,7 @@ def plant_artefact(plant: str, vehicle: str) -> str:
 
 def paper_000_observers() -> tuple[str, ...]:
     """``latobs validate``'s default observers beside CarPlant (the demo's ``PAPER_000``)."""
-    return tuple(n for n, e in designs.DESIGNS.items() if e.paper == "000")
+    return tuple(catalogue.default_observers("CarPlant"))
 
 
 def pairings() -> list[Pairing]:
@@ -79,7 +80,7 @@ def pairings() -> list[Pairing]:
         Pairing("003", "motorcycle-lane-change", "MotorcyclePlant", "sharp_motorcycle", ("MotorcycleFaultObserver",),
                 "demo run motorcycle-lane-change [003]"),
         Pairing("mbds", "double-lane-change", "CarPlant", "sedan",
-                ("SideslipFixedOrderEstimatorScheduled", "SideslipKalmanFilter"),
+                tuple(n for n in catalogue.OBSERVERS if catalogue.get(n).default_vehicle == "mbds_250lm"),
                 "not a demo run: the observers designed for the MBDS record's vehicle (mbds_250lm), which the demo "
                 "only replays, on a CarPlant sedan bus at 22 m/s (inside their speed range); their inputs "
                 "(delta, vx, yaw_rate, ay) are all on it"),

@@ -46,7 +46,8 @@ SHARED_HEADERS = ("linalg.h", "model_util.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 #: the model file (fmu_src/models/<m>.py) -> its emitter module latobs.cbackend.<emitter> (``latobs.catalogue``)
-EMITTERS = {e.model_module: e.emitter_module for e in catalogue.ENTRIES}
+EMITTERS = {**{e.model_module: e.emitter_module for e in catalogue.ENTRIES},
+            **{model: dotted.rsplit(".", 1)[-1] for model, dotted in catalogue.PART_EMITTERS.items()}}
 
 
 class NativeBuildError(RuntimeError):

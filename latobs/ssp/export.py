@@ -34,10 +34,9 @@ from .ssd import Component, ssd_bytes, ssv_bytes
 
 def default_observers(scenario) -> list[str]:
     """The observers ``latobs validate`` runs by default (as :func:`latobs.pipeline.run_validation`)."""
-    from ..synthesis import designs
+    from .. import catalogue
 
-    return [n for n, e in designs.DESIGNS.items()
-            if (e.paper == "000" if scenario.plant == "CarPlant" else e.plant == scenario.plant)]
+    return catalogue.default_observers(scenario.plant)
 
 
 def _check_out(out: Path) -> None:

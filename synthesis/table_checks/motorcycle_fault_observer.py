@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...fmu_src.framework import DEFAULT_STEP
+from ...fmu_src.spec import DEFAULT_STEP
 from .sideslip_fixed_order_estimator import absent, bounded, rel_err, zoh_expm
 
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ...fmu_src.framework import DEFAULT_STEP
+from ...fmu_src.spec import DEFAULT_STEP
 
 
 def rel_err(a, b) -> float:

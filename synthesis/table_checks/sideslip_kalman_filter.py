@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..tables.sideslip_kalman_filter import P0_DEFAULT, VX_RANGE_DEFAULT
+from ..design_file import KALMAN_P0_DEFAULT as P0_DEFAULT, KALMAN_VX_RANGE_DEFAULT as VX_RANGE_DEFAULT
 from .sideslip_fixed_order_estimator import absent, bounded, rel_err
 
 

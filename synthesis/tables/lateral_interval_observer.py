@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import math
 
-DEFAULT_STEP = 0.005          # s: the FMU's default communication step (the maps stored for it)
+from ...fmu_src.linalg import expm_taylor, matrix as _matrix, phi_gamma  # noqa: F401  (the runtime's own arithmetic)
+from ...fmu_src.spec import DEFAULT_STEP   # s: the FMU's default communication step (the maps stored for it)
+
 NX = 4                        # states x = [vy, r, ay, x4]
 TOL = 1e-9                    # relative tolerance of the design file's structural relations
 
@@ -50,18 +52,6 @@ def _rel(a, b) -> float:
     return max(abs(x - y) for x, y in zip(fa, fb)) / max(1.0, max(abs(y) for y in fb))
 
 
-def _matrix(x, rows: int, cols: int, what: str):
-    try:
-        M = [[float(v) for v in row] for row in x]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"design file: {what} must be a {rows}x{cols} matrix of numbers ({exc})") from exc
-    if len(M) != rows or any(len(r) != cols for r in M):
-        raise ValueError(f"design file: {what} must be {rows}x{cols}, got {len(M)}x{len(M[0]) if M else 0}")
-    if not all(math.isfinite(v) for r in M for v in r):
-        raise ValueError(f"design file: {what} has a non-finite entry")
-    return M
-
-
 def _vector(x, n: int, what: str):
     try:
         v = [float(a) for a in x]
@@ -75,49 +65,6 @@ def _vector(x, n: int, what: str):
 
 
 # -- step maps ------------------------------------------------------------------------------------
-def expm_taylor(M):
-    """exp(M): scaling X = M / 2^s with ||X||_inf <= 1/2, Horner's Taylor series of degree 16
-    (truncation < 0.5^17/17! ~ 2e-20 relative), s squarings. The runtimes' algorithm, operation for
-    operation (their maps at other step sizes must continue these)."""
-    m = len(M)
-    norm = max(sum(abs(x) for x in row) for row in M)
-    if not norm <= 1e300:
-        raise ValueError(f"no finite step map (||M h|| = {norm!r})")
-    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
-    scale = 0.5 ** s
-    X = [[x * scale for x in row] for row in M]
-    E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
-    for k in range(16, 0, -1):                       # Horner: I + X/1 (I + X/2 (... (I + X/16)))
-        XE = _matmul(X, E)
-        E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
-    for _ in range(s):
-        E = _matmul(E, E)
-    return E
-
-
-def phi_gamma(N, h: float, eta: float, order: int = 3):
-    """(Phi, Gam, Gam1, Gam2) = (exp(N h), int_0^h exp(N s) ds, int_0^h exp(N (h - s)) s ds,
-    int_0^h exp(N (h - s)) s^2/2 ds) for a Metzler N with N + eta I >= 0: the top blocks of the
-    exponential of a nonnegative block matrix (so every entry is >= 0 in floating point too),
-    times exp(-eta h)."""
-    n = len(N)
-    nb = order + 1
-    m = nb * n
-    M = [[0.0] * m for _ in range(m)]
-    for i in range(n):
-        for j in range(n):
-            M[i][j] = (N[i][j] + (eta if i == j else 0.0)) * h
-    for b in range(1, nb):
-        for i in range(n):
-            M[(b - 1) * n + i][b * n + i] = h
-            M[b * n + i][b * n + i] = eta * h
-    if min(min(row) for row in M) < 0:
-        raise ValueError("phi_gamma needs N + eta I >= 0 elementwise (N Metzler, eta large enough)")
-    E = expm_taylor(M)
-    damp = math.exp(-eta * h)
-    return [[[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb)]
-
-
 def _perron(M) -> float:
     """Spectral radius of |M| (power iteration on a nonnegative matrix; an upper estimate)."""
     A = [[abs(x) for x in row] for row in M]
@@ -327,7 +274,7 @@ def compute(data: dict) -> dict:
         # enclosure substeps: hs rho(|A|) <= substep_rho_h at the band's top speed (the damped
         # diagonal, integrated exactly, left out)
         m["rho"] = _perron(majorant(model, max(abs(m["vx"]), edges[i + 1]), damped))
-        m["maps_h0"] = phi_gamma(m["N"], DEFAULT_STEP, m["eta"], order=3)
+        m["maps_h0"] = list(phi_gamma(m["N"], DEFAULT_STEP, m["eta"], order=3))
     return {"h0": DEFAULT_STEP, "model": model, "meas": meas, "damped": damped, "smooth": smooth,
             "probe_smooth": probe_smooth,
             "stiffness": stiff, "edges": edges, "modes": modes, "nu": nu, "x0_halfwidth": w0,

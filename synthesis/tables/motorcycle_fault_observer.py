@@ -7,7 +7,7 @@ hysteresis (docs/runtime/motorcycle_fault_observer.md).
 """
 from __future__ import annotations
 
-from ...fmu_src.framework import DEFAULT_STEP
+from ...fmu_src.spec import DEFAULT_STEP
 from ...fmu_src.linalg import matmul, matrix, zoh_map
 
 MEASUREMENTS = ("steer_angle", "yaw_rate", "roll_rate")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from ...fmu_src.framework import DEFAULT_STEP
+from ...fmu_src.spec import DEFAULT_STEP
 from ...fmu_src.linalg import zoh_map
 
 

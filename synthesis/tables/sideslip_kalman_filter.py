@@ -7,6 +7,8 @@ vehicle here. No step map: the model changes with the measured speed at every st
 """
 from __future__ import annotations
 
+from ..design_file import KALMAN_P0_DEFAULT, KALMAN_VX_RANGE_DEFAULT
+
 import math
 
 VEHICLE = ("m", "lf", "lr", "Iz", "Cf", "Cr")
@@ -38,9 +40,8 @@ def vehicle_values(data: dict) -> dict:
     return vals
 
 
-#: the filter's defaults: initial covariance on [vy, r], speed clamp (m/s)
-P0_DEFAULT = [[1.0, 0.0], [0.0, 0.01]]
-VX_RANGE_DEFAULT = (1.0, 200.0)
+#: the filter's defaults: initial covariance on [vy, r], speed clamp (m/s) (the design file's)
+P0_DEFAULT, VX_RANGE_DEFAULT = KALMAN_P0_DEFAULT, KALMAN_VX_RANGE_DEFAULT
 
 
 def compute(data: dict) -> dict:
