@@ -41,7 +41,7 @@ FMU_VARIANTS = ([pytest.param((n, "python"), id=n) for n in FMU_NAMES]
 class SessionBuild:
     """Every FMU of ``latobs build`` (default vehicles), designed and packaged on first use.
 
-    ``design(name)``  the design dict of an observer, as ``designs.run(name)`` returns it (shared
+    ``design(name)``  the design dict of an observer, as ``latobs design`` writes it (shared
                       by the whole session: copy it before changing it)
     ``path(name)``    the FMU, built into ``out`` as ``latobs build`` builds it (``pipeline.build``:
                       observers from their design file ``out/NAME.design.json``, re-certified by
@@ -61,7 +61,8 @@ class SessionBuild:
         if name not in packaging.OBSERVERS:
             raise KeyError(f"{name!r} is not an observer of latobs.packaging.OBSERVERS")
         if name not in self._designs:
-            self._designs[name] = designs.run(name)
+            # as `latobs design` writes it (pipeline.solve): what only running the runtime decides included
+            self._designs[name] = packaging.complete_runtime_data(designs.run(name))
         return self._designs[name]
 
     def path(self, name: str) -> Path:

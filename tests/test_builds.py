@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pytest
 
+from latobs.packaging import complete_runtime_data
 from latobs import identity, packaging, pipeline
 from latobs.atomic import LOCK_TIMEOUT_ENV, locked_folder, stale_temporaries
 from latobs.cli import main
@@ -137,7 +138,7 @@ def test_a_design_file_of_the_same_inputs_is_packaged_without_solving_again(tmp_
     """A design is solved only when its inputs change: the FMU missing beside a current design
     file (e.g. a build killed after the design) is packaged from it."""
     out = tmp_path / "fmus"
-    data = designs.run("LateralIntervalObserver")
+    data = complete_runtime_data(designs.run("LateralIntervalObserver"))   # as `latobs design` writes it
     design_file.write(data, out)
 
     def no_solve(*a, **k):

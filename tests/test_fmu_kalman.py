@@ -180,6 +180,7 @@ def test_runtime_refuses_what_the_certificate_refuses(design):
     for r in ([[-1.0, 0.0], [0.0, 1e-4]], [[10.0, 1e-3], [0.0, 1e-4]]):
         d = copy.deepcopy(design)
         d["noise"]["r"] = r
+        d["tables"] = tables.compute(d)          # the runtime reads R from its tables
         with pytest.raises(ValueError, match="noise.r"):
             KalmanObserver(d, {})
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from latobs.fmu_src.car_plant import CarPlantModel
-from latobs.synthesis import certificate, designs
+from latobs.synthesis import tables, certificate, designs
 from latobs.synthesis.params import G, load_vehicle, vehicle_names
 from latobs.validation.scenarios import (SCENARIOS, SteadyTurn, carplant_steady_turn, get_scenario,
                                          steer_for_ay)
@@ -160,6 +160,7 @@ def test_paper_000_designs_certify(design, vehicle):
     opts = entry.options(designs.artefact_name(design, vehicle))
     data = entry.solve(load_vehicle(vehicle), opts)          # designs.run, without its raise, for the figures
     data["design"] = design
+    tables.attach(data)
     ok, checks = certificate.certify(data)
     s = certificate.summary(data)
     gain = max(m["largest_gain"] for m in s["per_mode"])
