@@ -22,7 +22,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from latobs.synthesis import fixed_order_002 as f
+from latobs.synthesis import sideslip_fixed_order_estimator as f
 
 
 def multistart(box, starts: int, seed: int, grid=(9, 9, 9)):

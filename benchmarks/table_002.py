@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from latobs.synthesis import fixed_order_002 as f
+from latobs.synthesis import sideslip_fixed_order_estimator as f
 
 RECENTRE = 2          # the module's recommended setting (design_order2's default, benchmark 7)
 TOL = 1e-6            # relative tolerance of the sanity checks

@@ -19,29 +19,29 @@ __all__ = ["MODULES", "Entry", "Reference", "ENTRIES", "PART_EMITTERS", "OBSERVE
 #: ``{m[KEY]}`` in an entry's strings below stands for ``MODULES[KEY]``.
 MODULES = {
     # design time (latobs.synthesis): the design of each paper, its certificate
-    "design_000": "latobs.synthesis.pi_hinf_000",
-    "design_001": "latobs.synthesis.interval_001",
-    "design_002": "latobs.synthesis.fixed_order_002",
-    "design_kalman": "latobs.synthesis.kalman_baseline",
-    "design_003": "latobs.synthesis.pi_switched_003",
+    "design_000": "latobs.synthesis.sideslip_bank_observer",
+    "design_001": "latobs.synthesis.lateral_interval_observer",
+    "design_002": "latobs.synthesis.sideslip_fixed_order_estimator",
+    "design_kalman": "latobs.synthesis.sideslip_kalman_filter",
+    "design_003": "latobs.synthesis.motorcycle_fault_observer",
     "certificate": "latobs.synthesis.certificate",
     "plant_data": "latobs.packaging",
     # runtime (latobs.fmu_src): the paper's equations, the FMU's declarations, the citations
-    "runtime_000": "latobs.fmu_src.pi_observer",
-    "runtime_001": "latobs.fmu_src.interval_observer",
-    "runtime_002": "latobs.fmu_src.tf_estimator",
-    "runtime_kalman": "latobs.fmu_src.kalman_observer",
-    "runtime_003": "latobs.fmu_src.motorcycle_observer",
+    "runtime_000": "latobs.fmu_src.sideslip_bank_observer",
+    "runtime_001": "latobs.fmu_src.lateral_interval_observer",
+    "runtime_002": "latobs.fmu_src.sideslip_fixed_order_estimator",
+    "runtime_kalman": "latobs.fmu_src.sideslip_kalman_filter",
+    "runtime_003": "latobs.fmu_src.motorcycle_fault_observer",
     "runtime_car": "latobs.fmu_src.car_plant",
     "runtime_motorcycle": "latobs.fmu_src.motorcycle_plant",
     "models": "latobs.fmu_src.models",
     "papers": "latobs.fmu_src.papers",
     # native C backend: the emitters (latobs.cbackend) of the C models (fmu_src/c/*.c)
-    "emitter_000": "latobs.cbackend.pi_observer",
-    "emitter_001": "latobs.cbackend.interval_observer",
-    "emitter_002": "latobs.cbackend.tf_estimator",
-    "emitter_kalman": "latobs.cbackend.kalman_observer",
-    "emitter_003": "latobs.cbackend.motorcycle_observer",
+    "emitter_000": "latobs.cbackend.sideslip_bank_observer",
+    "emitter_001": "latobs.cbackend.lateral_interval_observer",
+    "emitter_002": "latobs.cbackend.sideslip_fixed_order_estimator",
+    "emitter_kalman": "latobs.cbackend.sideslip_kalman_filter",
+    "emitter_003": "latobs.cbackend.motorcycle_fault_observer",
     "emitter_car": "latobs.cbackend.car_plant",
     "emitter_motorcycle": "latobs.cbackend.motorcycle_plant",
     "emitter_signals": "latobs.cbackend.signal_source",
@@ -142,7 +142,7 @@ def _paper_000(name: str, switching: str, faithful: bool, description: str) -> E
     return Entry(
         name, "observer", "000", _m("{m[papers]}:MENHOUR_2014"), "sedan", description,
         model=_m("{m[models]}.sideslip_bank_observer"), runtime=_m("{m[runtime_000]}:SwitchedPIObserver"),
-        c_model="pi_observer.c", emitter=_m("{m[emitter_000]}"), reference=_BANK_BRAKING,
+        c_model="sideslip_bank_observer.c", emitter=_m("{m[emitter_000]}"), reference=_BANK_BRAKING,
         options=_m("{m[design_000]}:DesignOptions"), option_args=(("switching", switching), ("faithful", faithful)),
         design=_m("{m[design_000]}:design"), to_dict=_m("{m[design_000]}:to_design_dict"),
         certificate=_m("{m[certificate]}.sideslip_bank_observer:certify"), plant="CarPlant", validate=True, campaign="robustness-000")
@@ -166,7 +166,7 @@ ENTRIES: tuple[Entry, ...] = (
           "switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and axle "
           "forces for cornering stiffnesses in a +-20 % box, speed modes 11.5/14.5/18 m/s (Theorem 1)",
           model=_m("{m[models]}.lateral_interval_observer"), runtime=_m("{m[runtime_001]}:IntervalObserver"),
-          c_model="interval_observer.c", emitter=_m("{m[emitter_001]}"),
+          c_model="lateral_interval_observer.c", emitter=_m("{m[emitter_001]}"),
           reference=Reference("double-lane-change-15", _SECONDS, (("t_start", 0.2),), "the lane change from 0.2 s"),
           options=_m("{m[design_001]}:DesignOptions"), design=_m("{m[design_001]}:design"),
           to_dict=_m("{m[design_001]}:to_design_dict"), certificate=_m("{m[certificate]}.lateral_interval_observer:certify"),
@@ -175,7 +175,7 @@ ENTRIES: tuple[Entry, ...] = (
           "fixed-order robust H-inf sideslip estimator beta^ = (y/x) r from the yaw rate alone, one filter for "
           "the whole (Cf, Cr, v) box, Lemma 5 + certified polish (Delibasi 2014)",
           model=_m("{m[models]}.sideslip_fixed_order_estimator"), runtime=_m("{m[runtime_002]}:TfEstimator"),
-          c_model="tf_estimator.c", emitter=_m("{m[emitter_002]}"), reference=Reference("w1-steer", _SECONDS),
+          c_model="sideslip_fixed_order_estimator.c", emitter=_m("{m[emitter_002]}"), reference=Reference("w1-steer", _SECONDS),
           options=_m("{m[design_002]}:DesignOptions"), option_args=(("scheduled", False),),
           design=_m("{m[design_002]}:design_for_vehicle"), to_dict=_m("{m[design_002]}:to_design_dict"),
           certificate=_m("{m[certificate]}.sideslip_fixed_order_estimator:certify"), plant="CarPlant", campaign="robustness-002",
@@ -184,7 +184,7 @@ ENTRIES: tuple[Entry, ...] = (
           "speed-scheduled fixed-order robust H-inf sideslip estimator: one Lemma 5 design per speed band, "
           "switched on vx (extension of paper 002)",
           model=_m("{m[models]}.sideslip_fixed_order_estimator_scheduled"),
-          runtime=_m("{m[runtime_002]}:TfEstimator"), c_model="tf_estimator.c", emitter=_m("{m[emitter_002]}"),
+          runtime=_m("{m[runtime_002]}:TfEstimator"), c_model="sideslip_fixed_order_estimator.c", emitter=_m("{m[emitter_002]}"),
           reference=_LANE_CHANGE, options=_m("{m[design_002]}:DesignOptions"), option_args=(("scheduled", True),),
           design=_m("{m[design_002]}:design_for_vehicle"), to_dict=_m("{m[design_002]}:to_design_dict"),
           certificate=_m("{m[certificate]}.sideslip_fixed_order_estimator:certify"), plant="CarPlant", campaign="robustness-002",
@@ -193,7 +193,7 @@ ENTRIES: tuple[Entry, ...] = (
           "baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's authors "
           "(measurements ay and yaw rate), noise tuned on the record's t < 425 s",
           model=_m("{m[models]}.sideslip_kalman_filter"), runtime=_m("{m[runtime_kalman]}:KalmanObserver"),
-          c_model="kalman_observer.c", emitter=_m("{m[emitter_kalman]}"), reference=_LANE_CHANGE,
+          c_model="sideslip_kalman_filter.c", emitter=_m("{m[emitter_kalman]}"), reference=_LANE_CHANGE,
           options=_m("{m[design_kalman]}:DesignOptions"), design=_m("{m[design_kalman]}:design"),
           certificate=_m("{m[certificate]}.sideslip_kalman_filter:certify"), plant="CarPlant", campaign="robustness-002",
           truth=_CG),
@@ -201,7 +201,7 @@ ENTRIES: tuple[Entry, ...] = (
           "switched H-inf PI observer of a motorcycle's roll angle and rider torque (unknown inputs), one "
           "Lyapunov matrix per speed mode 10..30 m/s, LMIs (20)-(23) with their misprints corrected",
           model=_m("{m[models]}.motorcycle_fault_observer"), runtime=_m("{m[runtime_003]}:MotorcycleFaultObserver"),
-          c_model="motorcycle_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
+          c_model="motorcycle_fault_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
           options=_m("{m[design_003]}:DesignOptions"), design=_m("{m[design_003]}:design"),
           to_dict=_m("{m[design_003]}:to_design_dict"), certificate=_m("{m[certificate]}.motorcycle_fault_observer:certify"),
           plant="MotorcyclePlant", validate=True, campaign="robustness-003"),

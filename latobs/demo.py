@@ -133,7 +133,7 @@ def _design_section_003(d: dict, s: dict) -> str:
 
     import numpy as np
 
-    from .synthesis.pi_switched_003 import dwell_report, modes_of_speed
+    from .synthesis.motorcycle_fault_observer import dwell_report, modes_of_speed
     from .validation import get_scenario
 
     ok, checks = d["certified"], d["checks"]

@@ -105,7 +105,7 @@ def parse_artefact(artefact: str) -> tuple[str, str | None]:
 def run(name: str, vehicle: str | None = None, **overrides) -> dict:
     """Design and certify; returns the design dict with ``certified`` and ``checks``.
 
-    Raises ``pi_hinf_000.DesignError`` when the LMIs are infeasible and ``CertificateError``
+    Raises ``sideslip_bank_observer.DesignError`` when the LMIs are infeasible and ``CertificateError``
     (carrying the failed checks) when the certificate fails.
     """
     from .identity import of_design

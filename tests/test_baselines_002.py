@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from latobs.fmu_src import tf_estimator as te
-from latobs.fmu_src.kalman_observer import KalmanObserver
-from latobs.fmu_src.tf_estimator import TfEstimator
-from latobs.synthesis import kalman_baseline as kb
+from latobs.fmu_src import sideslip_fixed_order_estimator as te
+from latobs.fmu_src.sideslip_kalman_filter import KalmanObserver
+from latobs.fmu_src.sideslip_fixed_order_estimator import TfEstimator
+from latobs.synthesis import sideslip_kalman_filter as kb
 from latobs.synthesis.tables import sideslip_fixed_order_estimator as tft
 from latobs.synthesis.tables import sideslip_kalman_filter as kft
 from latobs.synthesis.params import load_vehicle

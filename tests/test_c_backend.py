@@ -234,7 +234,7 @@ def test_a_wrong_guid_or_a_missing_interface_is_refused_with_a_message(observer,
     with pytest.raises(Exception):
         _slave(observer, tmp_path, log, guid="{00000000-0000-5000-0000-000000000000}")
     assert any("guid" in m for m in log.errors()), log.messages
-    kalman = built_fmus.c_path("SideslipKalmanFilter")   # co-simulation only (see kalman_observer.c)
+    kalman = built_fmus.c_path("SideslipKalmanFilter")   # co-simulation only (see sideslip_kalman_filter.c)
     md = read_model_description(str(kalman))
     assert md.modelExchange is None
     from fmpy.fmi2 import FMU2Model

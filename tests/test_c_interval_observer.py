@@ -1,5 +1,5 @@
-"""The native C model of paper 001's interval observer (fmu_src/c/interval_observer.c) against its
-Python runtime (fmu_src/interval_observer.py), and its ModelExchange interface (eq. 23).
+"""The native C model of paper 001's interval observer (fmu_src/c/lateral_interval_observer.c) against its
+Python runtime (fmu_src/lateral_interval_observer.py), and its ModelExchange interface (eq. 23).
 
 Co-simulation: the C FMU must give the Python FMU's outputs within 1e-9 relative on every
 validation run of ``latobs demo`` that drives LateralIntervalObserver (``demo.RUNS``), at the
@@ -25,7 +25,7 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 
 from latobs import demo, packaging
-from latobs.fmu_src.interval_observer import OUTPUT_NAMES, IntervalObserver, lemma3_constant, omega_bounds
+from latobs.fmu_src.lateral_interval_observer import OUTPUT_NAMES, IntervalObserver, lemma3_constant, omega_bounds
 from latobs.pipeline import PLANT_NOISE
 from latobs.synthesis import design_file
 from latobs.synthesis import relaxation_model as rm

@@ -1,5 +1,5 @@
-"""The native C models of paper 002 (``fmu_src/c/tf_estimator.c``: the fixed-order sideslip
-estimator, one or speed-scheduled; ``fmu_src/c/kalman_observer.c``: the Kalman baseline) against
+"""The native C models of paper 002 (``fmu_src/c/sideslip_fixed_order_estimator.c``: the fixed-order sideslip
+estimator, one or speed-scheduled; ``fmu_src/c/sideslip_kalman_filter.c``: the Kalman baseline) against
 their Python runtimes, FMU against FMU.
 
 1. Equivalence, every validation scenario that drives these FMUs (taken from ``latobs.demo``, so a
@@ -27,10 +27,10 @@ from fmpy import read_model_description, simulate_fmu
 
 from latobs import demo, packaging
 from latobs.cbackend import build_c_fmu
-from latobs.cbackend import kalman_observer as kalman_emitter
-from latobs.cbackend import tf_estimator as tf_emitter
+from latobs.cbackend import sideslip_kalman_filter as kalman_emitter
+from latobs.cbackend import sideslip_fixed_order_estimator as tf_emitter
 from latobs.fmu_src.framework import DEFAULT_STEP
-from latobs.fmu_src.tf_estimator import TfEstimator
+from latobs.fmu_src.sideslip_fixed_order_estimator import TfEstimator
 from latobs.native_guard import find_compiler
 from latobs.pipeline import PLANT_NOISE
 from latobs.synthesis import design_file, designs, tables

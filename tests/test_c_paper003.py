@@ -1,6 +1,6 @@
 """Native C models of paper 003 (motorcycle): the switched PI observer of eq. (13)
-(``fmu_src/c/motorcycle_observer.c``) and the nonlinear Sharp motorcycle
-(``fmu_src/c/motorcycle_plant.c``) against their Python twins (``fmu_src/motorcycle_observer.py``,
+(``fmu_src/c/motorcycle_fault_observer.c``) and the nonlinear Sharp motorcycle
+(``fmu_src/c/motorcycle_plant.c``) against their Python twins (``fmu_src/motorcycle_fault_observer.py``,
 ``fmu_src/motorcycle_plant.py``).
 
 1. Co-simulation equivalence, max |c - py| <= 1e-9 max |py| per output (integers equal), on every

@@ -1,5 +1,5 @@
-"""Native C model of paper 000's switched PI observer (``fmu_src/c/pi_observer.c``) against its
-Python twin (``fmu_src/pi_observer.py``), for the four FMUs of the model file
+"""Native C model of paper 000's switched PI observer (``fmu_src/c/sideslip_bank_observer.c``) against its
+Python twin (``fmu_src/sideslip_bank_observer.py``), for the four FMUs of the model file
 ``sideslip_bank_observer``: SideslipBankObserver (speed bands, models at the measured speed,
 validity with integral freeze), ...Tire (tire-slip modes with hysteresis), ...Paper (speed bands
 at fixed grid speeds) and ...TirePaper; all four with the first-order input hold.
@@ -31,7 +31,7 @@ import pytest
 from fmpy import extract, instantiate_fmu, read_model_description, simulate_fmu
 
 from latobs import cbackend, packaging
-from latobs.fmu_src.pi_observer import SwitchedPIObserver
+from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
 from latobs.native_guard import find_compiler
 from latobs.pipeline import PLANT_NOISE
 from latobs.synthesis import design_file, tables

@@ -18,7 +18,7 @@ from fmpy import read_model_description
 from latobs import packaging
 from latobs.fmu_src.car_plant import CarPlantModel
 from latobs.packaging import plant_data
-from latobs.synthesis import fixed_order_002
+from latobs.synthesis import sideslip_fixed_order_estimator
 from latobs.synthesis.params import load_vehicle
 from latobs.validation.harness import FmuInstance, WiringError, run
 from latobs.validation.scenarios import Scenario, get_scenario
@@ -72,7 +72,7 @@ def test_delibasi_parameters_for_the_plant():
     # the paper's values are unchanged
     assert (veh.m, veh.lf, veh.lr, veh.kG, veh.Iz) == (1500.0, 1.4, 1.7, 1.3, 2535.0)
     # Cf = Cr = the centre of the physical box of ERRATA 002 (per axle, N/rad)
-    box = fixed_order_002.boxes(veh)["physical"]
+    box = sideslip_fixed_order_estimator.boxes(veh)["physical"]
     assert veh.Cf == pytest.approx(C_CENTRE, rel=1e-15) and veh.Cr == pytest.approx(C_CENTRE, rel=1e-15)
     assert veh.Cf == pytest.approx(0.5 * sum(box.cf), rel=1e-12)
     assert veh.Cr == pytest.approx(0.5 * sum(box.cr), rel=1e-12)

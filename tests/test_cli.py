@@ -85,7 +85,8 @@ def test_validate_loads_no_design_stack_and_can_skip_plots(tmp_path, fmu_dir):
         f"rc = main(['validate', 'double-lane-change', '--fmu-dir', {str(fmu_dir)!r}, '--out', {str(tmp_path)!r}, "
         "'--no-plots'])\n"
         "print(json.dumps([rc, sorted(m for m in sys.modules if m.split('.')[0] in "
-        "('cvxpy', 'clarabel', 'scipy', 'matplotlib', 'pythonfmu') or m.endswith(('.certificate', '.pi_hinf_000', '.hinf')))]))\n")
+        "('cvxpy', 'clarabel', 'scipy', 'matplotlib', 'pythonfmu') or m.startswith(('latobs.synthesis.certificate', "
+        "'latobs.synthesis.tables', 'latobs.synthesis.sideslip_bank_observer', 'latobs.synthesis.hinf')))]))\n")
     proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     rc, heavy = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -376,7 +377,7 @@ def test_ctrl_c_is_exit_130_with_one_line(capsys, monkeypatch):
 
 def test_list_describes_tire_mode_2_as_the_secant_not_half_c1(capsys):
     """Issue 10: `latobs list` described tire mode 2 as '0.5 C1'; C2 is the secant of the
-    vehicle's tire curve (paper 000's departure, synthesis/pi_hinf_000.py)."""
+    vehicle's tire curve (paper 000's departure, synthesis/sideslip_bank_observer.py)."""
     assert main(["list"]) == 0
     out = capsys.readouterr().out
     assert "0.5 C1" not in out and "0.5*C1" not in out and "0.5·C1" not in out

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from latobs.synthesis import bicycle_roll_model as brm
-from latobs.synthesis import certificate, designs, hinf, pi_hinf_000
+from latobs.synthesis import certificate, designs, hinf, sideslip_bank_observer
 from latobs.synthesis.params import VehicleParameterError, load_vehicle, parse_vehicle
 
 
 def test_t_n_from_pseudo_inverse():
-    T, N = pi_hinf_000.t_n_matrices(brm.C)
+    T, N = sideslip_bank_observer.t_n_matrices(brm.C)
     assert np.allclose(T, np.diag([1, 0.5, 0.5, 0.5]))
     assert np.allclose(N, np.vstack([np.zeros((1, 3)), 0.5 * np.eye(3)]))
     assert np.allclose(T + N @ brm.C, np.eye(4))
@@ -59,7 +59,7 @@ def test_lmi_solution_checked_independently(which, request):
         c = {k: [np.asarray(M) for M in mats] for k, mats in mode["model"].items()}
         A = c["A"][0] + vertex["v"] * c["A"][1] + vertex["w"] * c["A"][2]
         F = c["F"][0] + vertex["v"] * c["F"][1]
-        Aa, Ca, Fa, La = pi_hinf_000.augmented(A, F, C, T)
+        Aa, Ca, Fa, La = sideslip_bank_observer.augmented(A, F, C, T)
         Acl = Aa - np.vstack([mode["gains"]["K_P"], mode["gains"]["K_I"]]) @ Ca
         lmi20 = np.block([[Acl.T @ P + P @ Acl, P @ Fa, La.T],
                           [Fa.T @ P, -gamma**2 * np.eye(1), np.zeros((1, 1))],
@@ -74,7 +74,7 @@ def test_lmi_solution_checked_independently(which, request):
     assert max(norms) <= gamma * (1 + 1e-6)
     # the common-P bound is not vacuous: within a factor 2.5 of the worst vertex norm (the robust
     # objective's bank-row weight 0.05 on the model-error channel keeps gamma near 0.05 with one P,
-    # pi_hinf_000.DesignOptions.robust_output_weights; measured 0.027 / 0.055 for the speed modes)
+    # sideslip_bank_observer.DesignOptions.robust_output_weights; measured 0.027 / 0.055 for the speed modes)
     assert max(norms) >= 0.4 * gamma
 
 
@@ -115,14 +115,14 @@ def test_certificate_rejects_tampered_designs(design_speed):
 
 def test_infeasible_region_gives_a_clear_error():
     v = load_vehicle("sedan")
-    opts = pi_hinf_000.DesignOptions(name="Impossible", switching="speed", alpha=40.0, radius=45.0)
-    with pytest.raises(pi_hinf_000.DesignError, match="Impossible.*infeasible"):
-        pi_hinf_000.design(v, opts)
+    opts = sideslip_bank_observer.DesignOptions(name="Impossible", switching="speed", alpha=40.0, radius=45.0)
+    with pytest.raises(sideslip_bank_observer.DesignError, match="Impossible.*infeasible"):
+        sideslip_bank_observer.design(v, opts)
 
 
 def test_bad_options_and_vehicles_name_the_culprit():
     with pytest.raises(ValueError, match="radius"):
-        pi_hinf_000.DesignOptions(name="X", switching="speed", alpha=5, radius=1).validate()
+        sideslip_bank_observer.DesignOptions(name="X", switching="speed", alpha=5, radius=1).validate()
     with pytest.raises(VehicleParameterError, match="Ix.*hr|hr.*Ix"):
         designs.run("SideslipBankObserver", vehicle="mbds_250lm")
     good = load_vehicle("sedan").as_dict()

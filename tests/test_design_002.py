@@ -6,7 +6,7 @@ import numpy.polynomial.polynomial as P
 import pytest
 import scipy.signal
 
-from latobs.synthesis import fixed_order_002 as f
+from latobs.synthesis import sideslip_fixed_order_estimator as f
 
 REL = 0.005                                 # the paper's gamma within 0.5 %
 

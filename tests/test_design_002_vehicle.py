@@ -8,7 +8,7 @@ from importlib import resources
 import pytest
 
 from latobs.cli import main
-from latobs.synthesis import designs, fixed_order_002 as f
+from latobs.synthesis import designs, sideslip_fixed_order_estimator as f
 from latobs.synthesis.params import VehicleParameterError, load_vehicle
 
 FAST = {"polish": False, "grid": (5, 5, 5)}     # Lemma 5 + certificate on a 5^3 grid (DesignOptions)

@@ -11,7 +11,7 @@ import pytest
 import scipy.linalg
 
 from latobs.synthesis import certificate, design_file, designs, hinf
-from latobs.synthesis import pi_switched_003 as ps
+from latobs.synthesis import motorcycle_fault_observer as ps
 from latobs.synthesis.params import load_vehicle
 
 VEHICLE = load_vehicle("sharp_motorcycle")

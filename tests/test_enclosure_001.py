@@ -105,7 +105,7 @@ def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows
     violations, the vy width after settling bounded and not growing (the last third of a run
     against the middle third); above it, every run refused at once with the limit named (once
     50 ms made the widths 1e30 m/s, silently; then 50-200 ms were refused)."""
-    from latobs.fmu_src.interval_observer import IntervalObserver
+    from latobs.fmu_src.lateral_interval_observer import IntervalObserver
     from latobs.synthesis import designs
 
     table, rows = step_rows

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from latobs.fmu_src.pi_observer import SwitchedPIObserver
+from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
 from latobs.synthesis import tables
 from latobs.synthesis.tables import sideslip_bank_observer as tables_000
 

@@ -11,7 +11,7 @@ from fmpy.validation import validate_fmu
 
 from latobs import packaging
 from latobs.fmu_src.car_plant import CarPlantModel
-from latobs.fmu_src.pi_observer import SwitchedPIObserver
+from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
 from latobs.synthesis import design_file, designs
 from latobs.validation.harness import FmuInstance
 

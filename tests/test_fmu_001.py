@@ -6,7 +6,7 @@ import math
 import pytest
 from fmpy import read_model_description
 
-from latobs.fmu_src.interval_observer import IntervalObserver
+from latobs.fmu_src.lateral_interval_observer import IntervalObserver
 from latobs.validation.harness import FmuInstance
 
 pytestmark = pytest.mark.slow

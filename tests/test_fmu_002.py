@@ -16,7 +16,7 @@ from fmpy import read_model_description
 
 from latobs import packaging
 from latobs.synthesis import certificate, design_file, designs
-from latobs.synthesis import fixed_order_002 as f
+from latobs.synthesis import sideslip_fixed_order_estimator as f
 from latobs.synthesis.params import load_vehicle
 from latobs.validation.harness import FmuInstance
 
@@ -208,7 +208,7 @@ def test_mbds_box_centre_is_the_tuning_half_optimum():
 def test_scheduled_estimator_beats_the_kalman_baseline_on_held_out_data(built_fmus):
     """Issue 7's goal on the real record: beta RMS on t >= 425 s (never used for tuning) below the
     Kalman baseline's (same record, its noise tuned on t < 425 s), through the built FMU."""
-    from latobs.synthesis import kalman_baseline as kb
+    from latobs.synthesis import sideslip_kalman_filter as kb
     from latobs.validation import replay as rp
     fmu = built_fmus.path("SideslipFixedOrderEstimatorScheduled")   # the session build (conftest.py)
     cols = rp.load_csv(rp.MBDS_CSV)

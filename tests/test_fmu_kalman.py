@@ -1,6 +1,6 @@
 """SideslipKalmanFilter, paper 002's baseline peer (the MBDS authors' linear bicycle-model Kalman
 filter): design file + independent certificate, and the FMU equal to the numpy filter
-``kalman_baseline.run_kalman(..., estimate="predicted")`` on the whole MBDS record.
+``sideslip_kalman_filter.run_kalman(..., estimate="predicted")`` on the whole MBDS record.
 
 Timing: the replay (``latobs.validation.replay.drive``) initialises the FMU with row 0 and
 records the outputs after doStep(t_k, dt) with row k's inputs at t_{k+1}; the FMU then outputs
@@ -20,9 +20,9 @@ import scipy.linalg
 from fmpy import read_model_description
 
 from latobs import packaging
-from latobs.fmu_src.kalman_observer import KalmanObserver
+from latobs.fmu_src.sideslip_kalman_filter import KalmanObserver
 from latobs.synthesis import certificate, design_file, tables
-from latobs.synthesis import kalman_baseline as kb
+from latobs.synthesis import sideslip_kalman_filter as kb
 from latobs.synthesis.tables import sideslip_kalman_filter as kft
 from latobs.synthesis.certificate.sideslip_kalman_filter import _kalman_force_model
 from latobs.synthesis.params import VehicleParameterError, load_vehicle

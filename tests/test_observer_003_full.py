@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from latobs.fmu_src.motorcycle_observer import MotorcycleFaultObserver
+from latobs.fmu_src.motorcycle_fault_observer import MotorcycleFaultObserver
 from latobs.synthesis import designs
 from latobs.synthesis import motorcycle_model as mm
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from latobs.fmu_src.pi_observer import SwitchedPIObserver
+from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
 from test_fast_step_000 import OUT, ReferenceObserver, compare, legacy, measurements, observer, speed_run, \
     tire_run, variant, with_tables
 

@@ -13,8 +13,8 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from latobs.packaging import complete_runtime_data
-from latobs.fmu_src import interval_observer as io
-from latobs.fmu_src.interval_observer import IntervalObserver
+from latobs.fmu_src import lateral_interval_observer as io
+from latobs.fmu_src.lateral_interval_observer import IntervalObserver
 from latobs.fmu_src.models.lateral_interval_observer import SPEC
 from latobs.synthesis import designs, relaxation_model as rm
 from latobs.synthesis.tables import lateral_interval_observer as tables

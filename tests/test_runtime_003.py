@@ -8,9 +8,9 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
-from latobs.fmu_src.motorcycle_observer import MotorcycleFaultObserver, step_map
+from latobs.fmu_src.motorcycle_fault_observer import MotorcycleFaultObserver, step_map
 from latobs.synthesis.tables import motorcycle_fault_observer as mft
-from latobs.synthesis import pi_switched_003 as ps
+from latobs.synthesis import motorcycle_fault_observer as ps
 from latobs.synthesis.params import load_vehicle
 from latobs.validation.scenarios import SCENARIOS
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from latobs.fmu_src.framework import DEFAULT_STEP
-from latobs.fmu_src.pi_observer import SwitchedPIObserver
+from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
 from latobs.synthesis import certificate
 from latobs.synthesis.table_checks import sideslip_bank_observer as checks_000
 from latobs.synthesis.tables import sideslip_bank_observer as tables_000

@@ -72,7 +72,7 @@ def test_runtime_step_maps_continue_the_tables_bit_for_bit(design):
     """The runtimes compute the step maps at other step sizes by the tables' algorithm: at the default
     step the runtime's own ``phi_gamma`` gives the stored doubles exactly (so a step of any size is
     evaluated by the same mathematics)."""
-    from latobs.fmu_src.interval_observer import phi_gamma
+    from latobs.fmu_src.lateral_interval_observer import phi_gamma
 
     for m in design["tables"]["modes"]:
         assert [list(map(list, b)) for b in phi_gamma(m["N"], design["tables"]["h0"], m["eta"], order=3)] \

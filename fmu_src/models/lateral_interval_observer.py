@@ -1,9 +1,9 @@
 """FMU model file: LateralIntervalObserver (paper 001).
 
-Interface per CONTRACT.md; the maths is in ``interval_observer.py``; the gains, the stiffness
+Interface per CONTRACT.md; the maths is in ``lateral_interval_observer.py``; the gains, the stiffness
 box and the speed modes come from the design file baked into the FMU.
 """
-from ..interval_observer import IntervalObserver
+from ..lateral_interval_observer import IntervalObserver
 from ..papers import IFQIR_2020
 from ..spec import ACCEL, ANGLE, CAR, CAR_BETA, LEFT, RATE, SPEED, ModelSpec, Var, design_speed
 

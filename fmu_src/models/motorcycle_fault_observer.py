@@ -1,10 +1,10 @@
 """FMU model file: MotorcycleFaultObserver (paper 003).
 
-Interface per CONTRACT.md; the maths is in ``motorcycle_observer.py``; the gains come from the
+Interface per CONTRACT.md; the maths is in ``motorcycle_fault_observer.py``; the gains come from the
 design file baked into the FMU. Signs are those of the design model (``synthesis/motorcycle_model.py``,
 Sharp's SAE axes: y to the right, z down): roll, steer, yaw rate, vy, forces and torque > 0 to the right.
 """
-from ..motorcycle_observer import MotorcycleFaultObserver
+from ..motorcycle_fault_observer import MotorcycleFaultObserver
 from ..papers import ICHALAL_2017
 from ..spec import ANGLE, MOTORCYCLE, RATE, RIGHT, SPEED, ModelSpec, Var, design_speed
 

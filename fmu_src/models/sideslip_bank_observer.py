@@ -1,9 +1,9 @@
 """FMU model file of the paper-000 observers (SideslipBankObserver, SideslipBankObserverTire and variants).
 
-Interface per CONTRACT.md; the maths is in ``pi_observer.py``; the gains come from the design
+Interface per CONTRACT.md; the maths is in ``sideslip_bank_observer.py``; the gains come from the design
 file baked into the FMU.
 """
-from ..pi_observer import SwitchedPIObserver
+from ..sideslip_bank_observer import SwitchedPIObserver
 from ..papers import MENHOUR_2014
 from ..spec import ANGLE, CAR, CAR_BETA, RATE, SPEED, ModelSpec, Var, design_speed
 

@@ -1,11 +1,11 @@
 """FMU model file: SideslipFixedOrderEstimator (paper 002).
 
-Interface per CONTRACT.md (input yaw_rate, output beta_hat); the maths is in ``tf_estimator.py``;
+Interface per CONTRACT.md (input yaw_rate, output beta_hat); the maths is in ``sideslip_fixed_order_estimator.py``;
 the estimator's coefficients come from the design file baked into the FMU.
 """
 from ..papers import DELIBASI_2014
 from ..spec import CAR, CAR_BETA, RATE, ModelSpec, Var
-from ..tf_estimator import TfEstimator
+from ..sideslip_fixed_order_estimator import TfEstimator
 
 
 def describe_estimator(data: dict) -> str:
@@ -28,7 +28,7 @@ def describe_estimator(data: dict) -> str:
     return "; ".join(parts)
 
 
-#: the estimators' start (tf_estimator.TfEstimator.initialize)
+#: the estimators' start (sideslip_fixed_order_estimator.TfEstimator.initialize)
 INITIALIZATION = ("the estimator starts in steady state for the initial yaw rate (as if that yaw rate had been "
                   "held for ever), so beta_hat at the start time is its DC gain times the initial yaw rate")
 

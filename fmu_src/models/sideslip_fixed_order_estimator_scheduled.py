@@ -1,11 +1,11 @@
 """FMU model file: SideslipFixedOrderEstimatorScheduled (paper 002, speed-scheduled extension).
 
 One paper-002 estimator per speed band, switched on vx (the state is kept across a switch). The
-maths is in ``tf_estimator.py``; the estimators come from the design file baked into the FMU.
+maths is in ``sideslip_fixed_order_estimator.py``; the estimators come from the design file baked into the FMU.
 """
 from ..papers import DELIBASI_2014
 from ..spec import CAR, CAR_BETA, RATE, SPEED, ModelSpec, Var, design_speed
-from ..tf_estimator import TfEstimator
+from ..sideslip_fixed_order_estimator import TfEstimator
 from .sideslip_fixed_order_estimator import INITIALIZATION, describe_estimator
 
 SPEC = ModelSpec(

@@ -2,12 +2,12 @@
 
 The linear bicycle-model Kalman filter of the MBDS dataset's authors (Leanza, Reina,
 Blanco-Claraco, Sensors 2021), measuring ay and the yaw rate. Interface as the CarPlant outputs
-and the MBDS record's columns (wiring by name); the maths is in ``kalman_observer.py``; the
+and the MBDS record's columns (wiring by name); the maths is in ``sideslip_kalman_filter.py``; the
 vehicle, the noise covariances and the speed clamp come from the design file baked into the FMU
-(``kalman_baseline.design``). The runtime has no tunable parameter: the covariances are part of
+(``sideslip_kalman_filter.design``). The runtime has no tunable parameter: the covariances are part of
 the certified design.
 """
-from ..kalman_observer import KalmanObserver
+from ..sideslip_kalman_filter import KalmanObserver
 from ..papers import LEANZA_2021
 from ..spec import ACCEL, ANGLE, CAR, CAR_BETA, LEFT, RATE, SPEED, ModelSpec, Var
 

@@ -1,4 +1,4 @@
-"""Tables of paper 001's switched interval observer (``fmu_src/interval_observer.py`` and its native C
+"""Tables of paper 001's switched interval observer (``fmu_src/lateral_interval_observer.py`` and its native C
 twin): the design file checked and turned, once at build time, into the numbers both runtimes
 evaluate (see docs/runtime/lateral_interval_observer.md).
 

@@ -1,6 +1,6 @@
 /*
- * motorcycle_observer.c - paper 003's switched PI observer (motorcycle roll angle and rider torque),
- * eq. (13); the native twin of fmu_src/motorcycle_observer.py (same clamps, warnings, start and
+ * motorcycle_fault_observer.c - paper 003's switched PI observer (motorcycle roll angle and rider torque),
+ * eq. (13); the native twin of fmu_src/motorcycle_fault_observer.py (same clamps, warnings, start and
  * discretisation). C99, libc and libm only.
  *
  * States x^ (5: vy, yaw rate, roll rate, steer angle, steer rate) and f^ (2: roll angle phi, rider

@@ -1,7 +1,7 @@
 /*
- * interval_observer.c - paper 001's switched interval observer (Ifqir, Ichalal, Ait-Oufroukh,
+ * lateral_interval_observer.c - paper 001's switched interval observer (Ifqir, Ichalal, Ait-Oufroukh,
  * Mammar, ACC 2020), eq. (23), with guaranteed bounds between the communication points; the native
- * twin of fmu_src/interval_observer.py (specified in docs/runtime/lateral_interval_observer.md; this file implements the
+ * twin of fmu_src/lateral_interval_observer.py (specified in docs/runtime/lateral_interval_observer.md; this file implements the
  * same steps, in the same floating-point order, so that both give the same bounds). C99, libm.
  *
  * Model (eq. 9, the relaxation term's sign corrected): x = [vy (m/s), r (rad/s), x3 = ay (m/s^2), x4 (rad/s^2)],
@@ -1324,7 +1324,7 @@ void model_outputs(const Model *m, double *y, int *yi)
 /* ------------------------------------------------------------------ model exchange: eq. (23) */
 #if N_STATES > 0
 #if N_STATES != NB || N_EVENT_INDICATORS != 5
-#error "interval_observer.c: the states are [xi_lo; xi_up], five event indicators"
+#error "lateral_interval_observer.c: the states are [xi_lo; xi_up], five event indicators"
 #endif
 
 void model_me_get_states(const Model *m, double *x)

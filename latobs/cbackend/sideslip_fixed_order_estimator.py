@@ -1,5 +1,5 @@
 """Emitter of the native C model of paper 002's fixed-order sideslip estimator
-(``fmu_src/c/tf_estimator.c``), one estimator or one per speed band.
+(``fmu_src/c/sideslip_fixed_order_estimator.c``), one estimator or one per speed band.
 
 Writes the design file's tables (``synthesis/tables/sideslip_fixed_order_estimator.py``: per band
 the controllable canonical form and its exact ZOH map at the default step) as C data: TF_A, TF_B,
@@ -13,7 +13,7 @@ import math
 from ..fmu_src.spec import Var
 from .emit import CModel, nonzero, structure, c_array, c_define
 
-SOURCE = "tf_estimator.c"
+SOURCE = "sideslip_fixed_order_estimator.c"
 
 #: la_zoh_map's limit (fmu_src/c/linalg.h LA_MAX = 16): n states + 1 input
 MAX_ORDER = 15

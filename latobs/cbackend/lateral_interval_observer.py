@@ -1,5 +1,5 @@
 """Emitter of the native C model of paper 001's switched interval observer
-(``fmu_src/c/interval_observer.c``): writes the design's tables (``synthesis.tables.
+(``fmu_src/c/lateral_interval_observer.c``): writes the design's tables (``synthesis.tables.
 lateral_interval_observer``, stored in the design file under "tables") as C data in model_data.h
 (IV_*: the model, the structured stiffness bound, each mode's gains and step maps at the default
 step, the tuning, the longest communication step). Reads nothing but the design data.
@@ -9,7 +9,7 @@ from __future__ import annotations
 from ..fmu_src.spec import Var
 from .emit import CModel, c_array, c_define, nonzero, structure
 
-SOURCE = "interval_observer.c"
+SOURCE = "lateral_interval_observer.c"
 
 _STATE_UNITS = ("m/s", "rad/s", "m/s2", "rad/s2")
 _STATE_NAMES = ("vy", "yaw rate", "ay", "yaw acceleration")
@@ -36,7 +36,7 @@ def emit(data: dict) -> CModel:
         raise ValueError("design file lacks runtime.max_communication_step (the synthesis decides it)")
     mode = lambda key: [m[key] for m in tb["modes"]]  # noqa: E731
     header = "".join([
-        "/* paper 001, eq. (23): the interval observer's design (latobs/cbackend/interval_observer.py) */\n",
+        "/* paper 001, eq. (23): the interval observer's design (latobs/cbackend/lateral_interval_observer.py) */\n",
         c_define("IV_N_MODES", len(tb["modes"])),
         c_define("IV_H0", float(tb["h0"])),
         c_define("IV_CONSISTENCY_TOL", float(tu["consistency_tol"])),
@@ -73,7 +73,7 @@ def emit(data: dict) -> CModel:
                   dependencies=_dependencies(tb))
 
 
-#: the measurement inputs y (measurements() in interval_observer.c)
+#: the measurement inputs y (measurements() in lateral_interval_observer.c)
 MEASURED = ("yaw_rate", "ay")
 #: each output's box bounds (side, column of x) and whether it divides by vx (outputs_of)
 OUTPUT_BOUNDS = {"vy_lower": ("l0",), "vy_upper": ("u0",), "yaw_rate_lower": ("l1",), "yaw_rate_upper": ("u1",),

@@ -1,7 +1,7 @@
 /*
- * kalman_observer.c - paper 002's baseline peer, the linear bicycle-model Kalman filter of the
+ * sideslip_kalman_filter.c - paper 002's baseline peer, the linear bicycle-model Kalman filter of the
  * MBDS dataset's authors (Leanza, Reina, Blanco-Claraco, Sensors 2021); the native twin of
- * fmu_src/kalman_observer.py (same clamps, warnings, start and discretisation, the same
+ * fmu_src/sideslip_kalman_filter.py (same clamps, warnings, start and discretisation, the same
  * arithmetic in the same order, so that the outputs equal the Python FMU's bit for bit).
  * C99, libc and libm only.
  *
@@ -35,7 +35,7 @@
  * the measurements themselves, not to a continuous-time filter. A ModelExchange form (the
  * Kalman-Bucy filter with a measurement noise density R h_s for a chosen sample time h_s, and
  * its Riccati ODE) would be another estimator, equal to this one at no step size; the runtime
- * mirrored here is the sampled filter the design certifies (kalman_baseline.design).
+ * mirrored here is the sampled filter the design certifies (sideslip_kalman_filter.design).
  */
 #include <math.h>
 #include <stdio.h>

@@ -929,7 +929,7 @@ def _asc(p) -> list[float]:
 
 
 def to_design_dict(vd: VehicleDesign) -> dict:
-    """The design file (CONTRACT.md keys) and the runtime's data (``fmu_src/tf_estimator.py``).
+    """The design file (CONTRACT.md keys) and the runtime's data (``fmu_src/sideslip_fixed_order_estimator.py``).
 
     ``gamma`` is the certified worst case over the coefficient-polytope vertices (what Lemma 5
     bounds), ``gamma_grid`` over the grid of true plants, both max over the modes. Coefficients
@@ -1035,10 +1035,10 @@ def identify_rear_stiffness(cols, vehicle: Vehicle, split: float = 425.0,
 
 
 def _main(argv=None) -> int:
-    """``python -m latobs.synthesis.fixed_order_002 identify``: the mbds_250lm rear-stiffness scan
+    """``python -m latobs.synthesis.sideslip_fixed_order_estimator identify``: the mbds_250lm rear-stiffness scan
     (t < 425 s only) behind the Cr box of ``vehicles/mbds_250lm.toml``."""
     import argparse
-    p = argparse.ArgumentParser(prog="python -m latobs.synthesis.fixed_order_002")
+    p = argparse.ArgumentParser(prog="python -m latobs.synthesis.sideslip_fixed_order_estimator")
     p.add_argument("command", choices=["identify"])
     p.add_argument("--split", type=float, default=425.0, help="tuning half is t < SPLIT (s)")
     a = p.parse_args(argv)

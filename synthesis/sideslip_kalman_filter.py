@@ -96,7 +96,7 @@ def run_kalman(data_columns: Mapping, vehicle_values: Mapping, q, r_meas, *, p0=
     h = np.diff(t, append=t[-1] + (t[-1] - t[-2] if N > 1 else 0.01))
     Phi, Gam, C, D = _disc if _disc is not None else discretise(vehicle_values, v, h)
     # Plain numpy matrices, deliberately NOT the hand-expanded 2x2 algebra of the FMU runtime
-    # (fmu_src/kalman_observer.py): tests/test_baselines_002.py holds the two formulations equal.
+    # (fmu_src/sideslip_kalman_filter.py): tests/test_baselines_002.py holds the two formulations equal.
     x = np.array([0.0, float(r[0])])
     I2 = np.eye(2)
     filtered = estimate == "filtered"
@@ -155,7 +155,7 @@ def tune(cols: Mapping, vehicle_values: Mapping, split: float = SPLIT, r_r: floa
 
 def to_data_dict(vehicle_values: Mapping, q, r_meas, p0=P0, vx_min: float = VX_MIN,
                  vx_max: float = VX_MAX) -> dict:
-    """The data file of the runtime ``fmu_src/kalman_observer.py``: vehicle {m (kg), lf, lr (m),
+    """The data file of the runtime ``fmu_src/sideslip_kalman_filter.py``: vehicle {m (kg), lf, lr (m),
     Iz (kg m^2), Cf, Cr (N/rad)}, noise {q: 2x2 ((m/s^2)^2 s, (rad/s^2)^2 s), r: 2x2 ((m/s^2)^2,
     (rad/s)^2)}, initial {P0: 2x2 ((m/s)^2, (rad/s)^2)}, runtime {vx_min, vx_max (m/s)}."""
     return {"kind": "kalman_baseline",
@@ -304,7 +304,7 @@ def design(vehicle, opts: DesignOptions) -> dict:
             "states": ["vy", "r"], "state_units": ["m/s", "rad/s"], "input": "delta",
             "measurements": ["ay", "yaw_rate"], "scheduling": "vx (measured, clamped to [vx_min, vx_max])",
             "form": "x' = A(v) x + B delta, y = C(v) x + D delta; A(v) = A_inv_v / v + A_v v, "
-                    "C(v) = C_inv_v / v + C_0 (linear tires, module docstring of kalman_baseline)",
+                    "C(v) = C_inv_v / v + C_0 (linear tires, module docstring of sideslip_kalman_filter)",
             "A_inv_v": [[-(Cf + Cr) / m, -(lf * Cf - lr * Cr) / m],
                         [-(lf * Cf - lr * Cr) / Iz, -(lf**2 * Cf + lr**2 * Cr) / Iz]],
             "A_v": [[0.0, -1.0], [0.0, 0.0]],
@@ -331,14 +331,14 @@ def design(vehicle, opts: DesignOptions) -> dict:
                           f"at h = {opts.step:g} s (< 1: stable; slowest time constant "
                           f"{max(ss['time_constant_s']):.4g} s)"),
         "certificate": {"step_s": opts.step, "n_speeds": int(len(speeds))},
-        "solver": {"name": "none (tuned by grid search, kalman_baseline.tune)",
-                   "status": "covariances tuned offline on the MBDS record's t < 425 s (kalman_baseline.TUNED)"
+        "solver": {"name": "none (tuned by grid search, sideslip_kalman_filter.tune)",
+                   "status": "covariances tuned offline on the MBDS record's t < 425 s (sideslip_kalman_filter.TUNED)"
                              if (tuple(opts.q), tuple(opts.r_meas)) == (TUNED["q"], TUNED["r_meas"])
                              else "covariances given by the options",
                    "seconds": round(seconds, 4)},
         "notes": [
             "The MBDS dataset authors' estimator with states [vy, r] at the CG (theirs: [beta, r]); "
-            "predicted estimate x_{k|k-1} at each output instant (see kalman_observer.py).",
+            "predicted estimate x_{k|k-1} at each output instant (see sideslip_kalman_filter.py).",
             "Covariances tuned on t < 425 s of the MBDS record only; t >= 425 s is held out.",
             "The certificate checks the frozen-speed steady-state filter on a speed grid; the runtime's "
             "time-varying filter converges to it at a constant speed.",
@@ -361,5 +361,5 @@ def report(estimate: str = "filtered") -> dict:
     return out
 
 
-if __name__ == "__main__":     # python -m latobs.synthesis.kalman_baseline
+if __name__ == "__main__":     # python -m latobs.synthesis.sideslip_kalman_filter
     print(report())

@@ -1,4 +1,4 @@
-"""Emitter of the native C model of paper 003's switched PI observer (``fmu_src/c/motorcycle_observer.c``).
+"""Emitter of the native C model of paper 003's switched PI observer (``fmu_src/c/motorcycle_fault_observer.c``).
 
 Writes the design file's tables (``synthesis/tables/motorcycle_fault_observer.py``) as C data: per
 mode OBS_M, OBS_G (s' = M s + G y, s = [x^; f^]), OBS_C, OBS_F and OBS_MAP_H0 (the exact step map
@@ -9,7 +9,7 @@ from __future__ import annotations
 from ..fmu_src.spec import Var
 from .emit import CModel, c_array, c_define, nonzero, structure
 
-SOURCE = "motorcycle_observer.c"
+SOURCE = "motorcycle_fault_observer.c"
 
 #: ModelExchange states: s = [x^ (5); f^ (2)] (eq. 13), the order of the runtime's state vector
 STATES = (
@@ -46,7 +46,7 @@ def emit(data: dict) -> CModel:
                   dependencies=_dependencies(modes, measurements))
 
 
-#: the outputs that are one state each (outputs_of in motorcycle_observer.c)
+#: the outputs that are one state each (outputs_of in motorcycle_fault_observer.c)
 STATE_OUTPUTS = {"roll_angle_hat": "fhat_roll_angle", "rider_torque_hat": "fhat_rider_torque",
                  "vy_hat": "xhat_vy", "steer_rate_hat": "xhat_steer_rate"}
 

@@ -1,7 +1,7 @@
 /*
- * tf_estimator.c - paper 002's transfer-function sideslip estimator (Delibasi 2014),
+ * sideslip_fixed_order_estimator.c - paper 002's transfer-function sideslip estimator (Delibasi 2014),
  * beta^ = (y(s)/x(s)) r, one estimator or one per speed band; the native twin of
- * fmu_src/tf_estimator.py (same clamps, warnings, start and discretisation). C99, libc and libm.
+ * fmu_src/sideslip_fixed_order_estimator.py (same clamps, warnings, start and discretisation). C99, libc and libm.
  *
  * Realisation (controllable canonical form, model_data.h per band i): with x(s) monic,
  *     z' = A_i z + B_i r,  A_i companion (last row -a_0 .. -a_(n-1)), B_i = e_n,
@@ -57,7 +57,7 @@
 #endif
 
 #if N_STATES != N || (N_EVENT_INDICATORS != 0 && N_EVENT_INDICATORS != 4)
-#error "fmu_config.h does not match the tf_estimator emitter's states and event indicators"
+#error "fmu_config.h does not match the sideslip_fixed_order_estimator emitter's states and event indicators"
 #endif
 
 struct Model {

@@ -2,7 +2,7 @@
 
 A reference implementation, standard library only, that evaluates the tables of its design file
 (``synthesis.tables.sideslip_bank_observer``): the model M(v), G(v) in v = 1/vx and the step maps at
-the default step. It gives the native C model's (``c/pi_observer.c``) outputs bit for bit, with the
+the default step. It gives the native C model's (``c/sideslip_bank_observer.c``) outputs bit for bit, with the
 same operations in the same order. FMI is in ``framework.py``; the behaviour (holds, modes, clamps,
 validity) is specified in ``docs/runtime/sideslip_bank_observer.md``.
 """

@@ -3,7 +3,7 @@ ACC 2020): Theorem 1's observer eq. (23) with guaranteed bounds between the comm
 
 Evaluates the design's tables (``synthesis.tables.lateral_interval_observer``: the model, the gains,
 the step maps at the default step) with the standard library only; the native C model
-(``c/interval_observer.c``) performs the same operations in the same order. The behaviour, every
+(``c/lateral_interval_observer.c``) performs the same operations in the same order. The behaviour, every
 departure from the printed paper and the tuning are specified in
 docs/runtime/lateral_interval_observer.md; the departures are also commented where they happen.
 State x = [vy, r, ay, x4]; a box is [lower0..3, upper0..3]; y = [r, ay] = [x2, x3].

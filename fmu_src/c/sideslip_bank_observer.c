@@ -1,8 +1,8 @@
 /*
- * pi_observer.c - paper 000's switched H-infinity PI observer of sideslip and road bank angle
+ * sideslip_bank_observer.c - paper 000's switched H-infinity PI observer of sideslip and road bank angle
  * (Menhour, Koenig, d'Andrea-Novel, ECC 2014), eq. (5) written out with Pi = T A - K_P C; the
  * behaviour (clamps, warnings, start, input hold, discretisation) is specified in
- * docs/runtime/sideslip_bank_observer.md, and the Python reference fmu_src/pi_observer.py gives
+ * docs/runtime/sideslip_bank_observer.md, and the Python reference fmu_src/sideslip_bank_observer.py gives
  * the same outputs bit for bit. C99, libc and libm only.
  *
  * States s = [z (4); w^ (1)], w^ the bank angle; w = [y; delta], y = [yaw rate, roll angle, roll rate]:
@@ -87,10 +87,10 @@
 #define EI_TIRE (EI_EDGE + PI_NEDGES)
 #define EI_VALID (EI_TIRE + !PI_SPEED_BANDS)
 #if EI_VALID + 2 * PI_VALIDITY != N_EVENT_INDICATORS || PI_NEI != N_EVENT_INDICATORS
-#error "pi_observer.c: the event indicators do not match the emitter's count"
+#error "sideslip_bank_observer.c: the event indicators do not match the emitter's count"
 #endif
 #if NZ != 4 || NY != 3 || N_STATES != NS
-#error "pi_observer.c: 4 states z, 3 measurements"
+#error "sideslip_bank_observer.c: 4 states z, 3 measurements"
 #endif
 
 struct Model {

@@ -1,5 +1,5 @@
 """Emitter of the native C model of the Kalman peer of paper 002, the linear bicycle-model Kalman
-filter of the MBDS dataset's authors (``fmu_src/c/kalman_observer.c``).
+filter of the MBDS dataset's authors (``fmu_src/c/sideslip_kalman_filter.c``).
 
 Writes the design file's tables (``synthesis/tables/sideslip_kalman_filter.py``) as C data: KF_A,
 KF_B (the model's speed-free coefficients), KF_Q, KF_R, KF_P0, KF_VX_MIN, KF_VX_MAX. No step map:
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from .emit import CModel, c_array, c_define
 
-SOURCE = "kalman_observer.c"
+SOURCE = "sideslip_kalman_filter.c"
 
 
 def emit(data: dict) -> CModel:

@@ -1,4 +1,4 @@
-"""Emitter of the native C model of paper 000's switched PI observer (``fmu_src/c/pi_observer.c``).
+"""Emitter of the native C model of paper 000's switched PI observer (``fmu_src/c/sideslip_bank_observer.c``).
 
 Writes the design's tables (``data["tables"]``, ``synthesis.tables.sideslip_bank_observer``) as C
 data, nothing else computed here. With s = [z; w^] (eq. 5) and w = [y; delta], s' = M(v) s + G(v) w,
@@ -20,14 +20,14 @@ v = 1/vx:
                                    the interval runs the RK4 substeps.
 Also the switching (PI_SLIP_*: lf, lr (m), alpha* +- hysteresis (rad); zeros for speed bands), the
 validity limits (PI_A_MAX, PI_AY_MAX, their release values, lf, lr; zeros without validity), the
-design grid, max_step and the ModelExchange event indicators' count (see pi_observer.c).
+design grid, max_step and the ModelExchange event indicators' count (see sideslip_bank_observer.c).
 """
 from __future__ import annotations
 
 from ..fmu_src.spec import Var
 from .emit import CModel, c_array, c_define, nonzero, structure
 
-SOURCE = "pi_observer.c"
+SOURCE = "sideslip_bank_observer.c"
 
 #: ModelExchange states: s = [z (4); w^ (1)] (eq. 5), the order of the runtime's state vector
 STATES = (
@@ -41,7 +41,7 @@ STATES = (
 
 def _event_indicators(tab: dict) -> int:
     """vx - vx_hold; vx - edge per speed-band edge or design-grid end; the tire premise; the two
-    validity limits (see pi_observer.c)."""
+    validity limits (see sideslip_bank_observer.c)."""
     bands = tab["switching"]["kind"] == "speed_bands"
     edges = len(tab["switching"]["edges"]) if bands else 2
     return 1 + edges + (0 if bands else 1) + (2 if tab["validity"] is not None else 0)
@@ -129,9 +129,9 @@ def emit(data: dict) -> CModel:
                   dependencies=_dependencies(tab, mc, gc))
 
 
-#: w = [y; delta] (measurements() in pi_observer.c), y = the first three
+#: w = [y; delta] (measurements() in sideslip_bank_observer.c), y = the first three
 MEASURED = ("yaw_rate", "roll_angle", "roll_rate", "delta")
-#: x^ = z + N y, row by row (OUT_X in pi_observer.c); bank_angle_hat = w^ (the last state)
+#: x^ = z + N y, row by row (OUT_X in sideslip_bank_observer.c); bank_angle_hat = w^ (the last state)
 ESTIMATES = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat")
 
 

@@ -16,7 +16,7 @@ OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat")
 
 
 # Small dense algebra on lists of rows. Every dot product is summed left to right from its first
-# term (not math.fsum, not from 0.0), so the results are those of the C model (kalman_observer.c).
+# term (not math.fsum, not from 0.0), so the results are those of the C model (sideslip_kalman_filter.c).
 def _dot(a, b) -> float:
     return reduce(add, map(mul, a, b))
 
