@@ -4,7 +4,7 @@ named), and the seconds of design + certificate. Prints a Markdown table (the RE
 
     python benchmarks/vehicle_matrix.py [VEHICLE ...]
 
-The test ``tests/test_vehicle_matrix.py`` walks the same matrix (paper 002 on a coarser grid).
+The test ``tests/synthesis/test_vehicle_matrix.py`` walks the same matrix (paper 002 on a coarser grid).
 """
 from __future__ import annotations
 

@@ -96,7 +96,7 @@ def run_kalman(data_columns: Mapping, vehicle_values: Mapping, q, r_meas, *, p0=
     h = np.diff(t, append=t[-1] + (t[-1] - t[-2] if N > 1 else 0.01))
     Phi, Gam, C, D = _disc if _disc is not None else discretise(vehicle_values, v, h)
     # Plain numpy matrices, deliberately NOT the hand-expanded 2x2 algebra of the FMU runtime
-    # (fmu_src/sideslip_kalman_filter.py): tests/test_baselines_002.py holds the two formulations equal.
+    # (fmu_src/sideslip_kalman_filter.py): tests/runtime/test_sideslip_fixed_order_estimator_and_kalman_runtime.py holds the two formulations equal.
     x = np.array([0.0, float(r[0])])
     I2 = np.eye(2)
     filtered = estimate == "filtered"

@@ -1,4 +1,4 @@
-"""Subprocess runner of tests/test_conformance.py and tests/test_fmu_properties.py.
+"""Subprocess runner of tests/integration/test_conformance.py and tests/integration/test_fmu_properties.py.
 
 Two modes, each meant to run in a fresh process so that a host crash is a return code, not the end
 of the pytest process:

@@ -1,4 +1,4 @@
-"""Worker of paper 001's enclosure campaign (tests/test_enclosure_001.py): co-simulations of given
+"""Worker of paper 001's enclosure campaign (tests/runtime/test_lateral_interval_observer_enclosure.py): co-simulations of given
 seeds and stiffness scales, in a process of its own (the campaign spreads them over the cores)."""
 from __future__ import annotations
 

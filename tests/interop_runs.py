@@ -1,6 +1,6 @@
 """Run latobs FMUs one after another in ONE process, as a user would, in fmpy or in libcosim.
 
-Used by tests/test_fmu_interop.py in fresh subprocesses:
+Used by tests/integration/test_fmu_interop.py in fresh subprocesses:
 
     python interop_runs.py fmpy|libcosim FMU [FMU ...]   ->  JSON {"runs": [{fmu, outputs}]}
 

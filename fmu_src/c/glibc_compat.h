@@ -4,7 +4,7 @@
  * glibc 2.29 gave exp, exp2, log, log2 and pow new symbol versions (new implementations; old and
  * new are both accurate to within an ulp, and may differ in the last bit); a library linked
  * against a newer glibc then needs GLIBC_2.29 at load time. Binding them to their original versions keeps every
- * symbol of the shared object at GLIBC_2.17 or older (tests/test_c_backend.py checks it), so the
+ * symbol of the shared object at GLIBC_2.17 or older (tests/cbackend/test_c_backend.py checks it), so the
  * FMU loads on old enterprise Linux distributions too. Linux x86-64 with glibc only; elsewhere
  * this header does nothing (aarch64's oldest glibc version is 2.17 anyway).
  */

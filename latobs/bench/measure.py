@@ -67,7 +67,7 @@ def paper_000_observers() -> tuple[str, ...]:
 
 def pairings() -> list[Pairing]:
     """The co-simulations benchmarked: the first run of each paper in ``latobs.demo.RUNS`` with
-    nominal plant parameters (tests/test_bench.py checks they are there), and the replay-only
+    nominal plant parameters (tests/validation/test_bench.py checks they are there), and the replay-only
     observers on a CarPlant bus."""
     return [
         Pairing("000", "bank-braking", "CarPlant", "sedan", paper_000_observers(),

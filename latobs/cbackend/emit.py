@@ -30,7 +30,7 @@ class CModel:
                         directly within a mode (a speed that only selects the mode at events is not
                         one; Integer outputs change at events only: no dependency). Written into the
                         model description's ``ModelStructure`` (Outputs, Derivatives);
-                        ``tests/test_model_structure.py`` checks it against finite differences of
+                        ``tests/cbackend/test_model_structure.py`` checks it against finite differences of
                         the FMU. Required when ``states`` is not empty.
     """
 

@@ -5,7 +5,7 @@ brings a C compiler and its cross targets; zig builds each target's C runtime on
 keeps it in the user cache folder; ``python -m latobs.cbackend.toolchain --prepare`` builds them
 all at once). On x86-64 Linux, linux64 is compiled with the system C compiler when there is one
 (``$CC``, ``cc``, ``gcc``: no first-build cost; once zig's runtime is built, zig is as fast); the
-outputs are the same bit for bit (``tests/test_cross_build.py``). The targets of one build are
+outputs are the same bit for bit (``tests/cbackend/test_cross_build.py``). The targets of one build are
 compiled in parallel, a thread per target running its compiler.
 
 Platform folders as FMI 2.0.4 names them: ``linux64`` (x86-64, glibc 2.17 and newer), ``win64``

@@ -133,7 +133,7 @@ class SteadyTurn(Scenario):
     metrics (CarPlant's ay and roll angle are within 0.1 % of the steady state < 1 s after the
     end of the ramp for sedan, compact and suv; the observers get 12 s). Open loop.
 
-    Calibration figures at 50 km/h, 0.19 g (tests/test_vehicles_000.py): steer 0.032627 rad
+    Calibration figures at 50 km/h, 0.19 g (tests/synthesis/test_sideslip_bank_observer_vehicles.py): steer 0.032627 rad
     (sedan), 0.029633 rad (compact), 0.032086 rad (suv); the CarPlant FMU settles at
     ay = 1.8639 m/s^2 to 1e-9. The linear bicycle's angles (0.2 % smaller) would give 0.1896 g.
     """

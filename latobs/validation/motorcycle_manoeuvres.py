@@ -38,7 +38,7 @@ class MotorcycleLaneChange(Scenario):
     is reached: the tyres at 55 % / 50 % of mu Fz, slip up to 0.014 / 0.012 rad). Open
     loop, a small left lean remains (-0.1 rad at the end: the capsize mode is slightly unstable at
     12-20 m/s and turns stable as the speed falls to 10 m/s); the motorcycle stays upright,
-    bounded and finite over the whole run (tests/test_motorcycle_plant.py). With 40 N m the
+    bounded and finite over the whole run (tests/runtime/test_motorcycle_plant.py). With 40 N m the
     front tyre just reaches 10 % and the rear 8 %; 50 N m leans to 0.55 rad. Equal
     pulses (paper 003's "positive then negative torque") do not lean the motorcycle the other
     way: that would take a larger second pulse (x1.6 for a +0.4 rad lean).

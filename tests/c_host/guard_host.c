@@ -1,5 +1,5 @@
 /*
- * guard_host.c - a plain C FMI 2.0 host for tests/test_guard.py.
+ * guard_host.c - a plain C FMI 2.0 host for tests/cbackend/test_guard.py.
  *
  * Loads an extracted FMU's binaries/linux64/<id>.so (the latobs guard) with
  * dlopen, like a simulation tool would, and checks the guard's behaviour.

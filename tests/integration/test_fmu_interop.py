@@ -24,7 +24,7 @@ from latobs.synthesis import design_file, designs
 from latobs.validation.harness import FmuInstance
 
 pytestmark = pytest.mark.slow
-RUNS = Path(__file__).with_name("interop_runs.py")
+RUNS = Path(__file__).resolve().parents[1] / "interop_runs.py"
 H = 0.005
 
 

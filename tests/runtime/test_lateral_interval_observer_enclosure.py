@@ -34,8 +34,8 @@ ROLL_ERROR_BOUND = (0.0, 0.0, 36.0, 15.0)   # 1.2 x the largest residual measure
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     """The FMUs of latobs build's default backend (native C where a C compiler is present, whose
-    outputs equal the pythonfmu FMUs' bit for bit: tests/test_c_interval_observer.py and
-    tests/test_c_car_plant.py; five times faster per run)."""
+    outputs equal the pythonfmu FMUs' bit for bit: tests/cbackend/test_c_lateral_interval_observer.py and
+    tests/cbackend/test_c_car_plant.py; five times faster per run)."""
     out = tmp_path_factory.mktemp("fmus_001")
     backend = packaging.resolve_backend("auto", packaging.OBSERVERS["LateralIntervalObserver"])[0]
     plant_backend = packaging.resolve_backend("auto", packaging.PLANTS["CarPlant"])[0]

@@ -11,7 +11,7 @@ outputs when run here on the golden inputs by a plain fmpy master. One ulp anywh
 the recording platform a libm may differ in the last bit: there the FMI-LS-REF tolerance applies.
 
 Regenerate (only when a change of the outputs is intended, from FMUs built by ``latobs build``):
-``python tests/test_golden.py C_FOLDER PYTHON_FOLDER``.
+``python tests/integration/test_golden.py C_FOLDER PYTHON_FOLDER``.
 """
 from __future__ import annotations
 
@@ -187,7 +187,7 @@ def write(c_folder: Path, python_folder: Path) -> None:
     ``latobs build --backend c`` / ``--backend python``), after checking that fmpy reproduces them."""
     from latobs import reference
 
-    sys.path.insert(0, str(Path(__file__).parent))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from conftest import C_NAMES, FMU_NAMES
 
     GOLDEN.mkdir(exist_ok=True)

@@ -47,7 +47,7 @@ pytestmark = pytest.mark.slow
 CROSS = ("win64", "aarch64-linux")
 SECONDS = 2.5
 RELATIVE = 1e-12
-PROBE = Path(__file__).resolve().parent / "c_host" / "libm_probe.c"
+PROBE = Path(__file__).resolve().parents[1] / "c_host" / "libm_probe.c"
 #: each FMU's own validation scenario: the reference experiment latobs build embeds
 #: (``pipeline.REFERENCE_EXPERIMENTS``), run a little longer here
 SCENARIO = pipeline.REFERENCE_EXPERIMENTS

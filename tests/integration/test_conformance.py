@@ -46,7 +46,7 @@ from latobs.validation.harness import FmuInstance
 from latobs.validation.scenarios import SCENARIOS, get_scenario
 
 pytestmark = pytest.mark.slow
-RUNNER = Path(__file__).with_name("conformance_runs.py")
+RUNNER = Path(__file__).resolve().parents[1] / "conformance_runs.py"
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
 from conftest import C_NAMES, FMU_VARIANTS  # noqa: E402  (every FMU, pythonfmu and native C)
 C_PLANTS = [n for n in C_NAMES if n in packaging.PLANTS]

@@ -22,7 +22,7 @@ import pytest
 
 import latobs
 
-PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
+PYPROJECT = Path(__file__).resolve().parents[2] / "pyproject.toml"
 
 #: contracts broken by work that lands separately, with what breaks them; each is expected to fail
 #: (strict: the test fails as soon as the contract holds, so that it is taken off this list)

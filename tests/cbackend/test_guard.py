@@ -5,7 +5,7 @@ pythonfmu library sits beside it as <id>_pythonfmu.so. It is driven here by a pl
 (tests/c_host/guard_host.c) and by fmpy, each in its own process: without the guard, unknown
 value references would segfault the host.
 
-Run as a script (``python tests/test_guard.py fmpy-host FMU WORKDIR``) this file is the fmpy host.
+Run as a script (``python tests/cbackend/test_guard.py fmpy-host FMU WORKDIR``) this file is the fmpy host.
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ import pytest
 from latobs.native_guard import (GuardBuildError, build_guard, find_compiler, fmi2_headers,
                                  guard_header)
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]   # tests/
 C_HOST = HERE / "c_host" / "guard_host.c"
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (set CC, or install cc/gcc)")
 MAX_GLIBC = (2, 17)

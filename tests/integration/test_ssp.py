@@ -21,7 +21,7 @@ from latobs.ssp import export
 from latobs.validation import get_scenario, harness
 
 pytestmark = pytest.mark.slow
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "open_ssp_in_libcosim.py"
 OBSERVERS = ["SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
              "SideslipBankObserverTirePaper"]       # latobs validate's default beside CarPlant

@@ -36,7 +36,7 @@ from latobs.synthesis import design_file, designs
 
 from conftest import FMU_VARIANTS
 
-SEDAN_TOML = Path(__file__).resolve().parents[1] / "synthesis" / "vehicles" / "sedan.toml"
+SEDAN_TOML = Path(__file__).resolve().parents[2] / "synthesis" / "vehicles" / "sedan.toml"
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler: the native backend cannot build")
 
 

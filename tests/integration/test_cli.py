@@ -111,7 +111,7 @@ def test_bench_takes_its_own_options(capsys):
 # culprit, never a traceback; a bug is exit 1 (one line, the traceback with LATOBS_DEBUG=1);
 # Ctrl-C is exit 130 (one line)
 # --------------------------------------------------------------------------------------------
-SEDAN_TOML = Path(__file__).resolve().parents[1] / "synthesis" / "vehicles" / "sedan.toml"
+SEDAN_TOML = Path(__file__).resolve().parents[2] / "synthesis" / "vehicles" / "sedan.toml"
 
 
 def _cli(argv, capsys):

@@ -50,7 +50,7 @@ from hypothesis import strategies as st
 from latobs import packaging
 
 pytestmark = pytest.mark.slow
-RUNNER = Path(__file__).with_name("conformance_runs.py")
+RUNNER = Path(__file__).resolve().parents[1] / "conformance_runs.py"
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
 from conftest import C_NAMES, FMU_VARIANTS  # noqa: E402  (every FMU, pythonfmu and native C)
 from conformance_runs import declared_max_step  # noqa: E402

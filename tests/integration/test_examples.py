@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 WORKFLOW = ROOT / ".github" / "workflows" / "build-fmus.yml"
 OURS = ("simulate_with_fmpy.py", "model_exchange_with_fmpy.py", "replay_csv.py", "custom_vehicle.py")

@@ -27,7 +27,7 @@ from latobs import datasheet, packaging
 from latobs.cli import parser, reference_markdown
 from latobs.fmu_src import framework
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 #: what user-facing text must never say: a path outside the repository, the project's internal
 #: reference files, an issue number
