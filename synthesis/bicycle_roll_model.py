@@ -54,8 +54,8 @@ def lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: float | None
                    [-Ca1 / Iz, 0.0, 0.0, 0.0],
                    [0.0, 0.0, 0.0, 1.0],
                    [-Ca0 * hr / Ix, 0.0, (m * G * hr - Kr) / Ix, -br / Ix]])
-    A1 = np.array([[-Ieq * Ca0 / (Ix * m), 0.0, Ca3 / Ix, -hr * br / Ix],   # A(1,4): ERRATA, printed hr*Lr
-                   [0.0, -Ca2 / Iz, 0.0, 0.0],                              # A(2,2): ERRATA, printed Ix
+    A1 = np.array([[-Ieq * Ca0 / (Ix * m), 0.0, Ca3 / Ix, -hr * br / Ix],   # A(1,4): misprint corrected, printed hr*Lr
+                   [0.0, -Ca2 / Iz, 0.0, 0.0],                              # A(2,2): misprint corrected, printed Ix
                    [0.0, 0.0, 0.0, 0.0],
                    [0.0, -Ca1 * hr / Ix, 0.0, 0.0]])
     A2 = np.zeros((4, 4))

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Iterator
 
 
-#: Clarabel settings of the fallback solve (ERRATA 002: "If Clarabel stops on a numerical error,
+#: Clarabel settings of the fallback solve (paper 002's solves: "If Clarabel stops on a numerical error,
 #: chordal decomposition and equilibration off is a working fallback").
 FALLBACK_SETTINGS = {"equilibrate_enable": False, "chordal_decomposition_enable": False}
 #: Statuses after which the fallback is tried (a numerical failure, not a clean verdict).

@@ -54,7 +54,7 @@ class DesignOptions:
     hysteresis
         m/s, the runtime keeps a mode until the speed leaves its band by this much (not in the paper).
     lmi22
-        "corrected" (ERRATA 003) or "printed" (the paper's (22), infeasible: for the tests).
+        "corrected" (a misprint corrected: docs/papers/003.md, departures) or "printed" (the paper's (22), infeasible: for the tests).
     """
 
     name: str
@@ -130,7 +130,7 @@ class ModeDesign:
 
     @property
     def gamma(self) -> float:
-        return math.sqrt(max(self.gamma_bar, 0.0))    # ERRATA 003: gamma = sqrt(gamma_bar)
+        return math.sqrt(max(self.gamma_bar, 0.0))    # corrected misprint (docs/papers/003.md): gamma = sqrt(gamma_bar)
 
 
 @dataclass
@@ -286,7 +286,7 @@ def _cp_bmat(blocks):
 
 
 def lmi_blocks(At, Ct, Edt, It, Fd, P, U, gamma_bar):
-    """The matrices of (20) and (21) (numpy or cvxpy expressions), ERRATA 003: C~'U' not C~'U."""
+    """The matrices of (20) and (21) (numpy or cvxpy expressions), with the misprint corrected (docs/papers/003.md): C~'U' not C~'U."""
     bm = np.block if isinstance(P, np.ndarray) else _cp_bmat
     na, nd, nxi = At.shape[0], Edt.shape[1], It.shape[1]
     PA = P @ At + U @ Ct                                   # = P (A~ - L C~) with L = -P^-1 U
@@ -304,7 +304,7 @@ def lmi_blocks(At, Ct, Edt, It, Fd, P, U, gamma_bar):
 
 
 def lmi_22(P, alpha_bar, printed: bool = False):
-    """(22): ERRATA 003's [[alpha_bar I, P], [P, I]] (>= 0); printed: [[-alpha_bar I, P], [P, -I]]."""
+    """(22), corrected (docs/papers/003.md): [[alpha_bar I, P], [P, I]] (>= 0); printed: [[-alpha_bar I, P], [P, -I]]."""
     na = P.shape[0]
     bm = np.block if isinstance(P, np.ndarray) else _cp_bmat
     s = -1.0 if printed else 1.0
@@ -329,7 +329,7 @@ def solve_mode(mm: ModeModel, opts: DesignOptions) -> ModeDesign:
     fam = {
         "(20) H-infinity d~ -> r": [_sym(m20) << -eps * np.eye(m20.shape[0])],
         "(21) ISS": [_sym(m21) << -eps * np.eye(m21.shape[0])],
-        # ERRATA 003: the printed (22) has -alpha_bar I and -I on the diagonal (never >= 0)
+        # corrected misprint (docs/papers/003.md): the printed (22) has -alpha_bar I and -I on the diagonal (never >= 0)
         f"(22) {opts.lmi22}": [_sym(lmi_22(P, ab, opts.lmi22 == "printed")) >> eps * np.eye(2 * na)],
         "(23) P >= I": [P >> (1 + eps) * np.eye(na)],
     }
@@ -346,7 +346,7 @@ def solve_mode(mm: ModeModel, opts: DesignOptions) -> ModeDesign:
         raise DesignError(f"design {opts.name}: {mm.where}: no solution of LMIs (20)-(23) ({lmi.label()}: {status}); "
                           + _diagnose(fam))
     Pn, Un = _sym(P.value), U.value
-    Ln = -np.linalg.solve(Pn, Un)                         # L = -P^-1 U (ERRATA 003), normalised
+    Ln = -np.linalg.solve(Pn, Un)                         # L = -P^-1 U (a misprint corrected: docs/papers/003.md, departures), normalised
     L = sc["D"] @ Ln @ np.linalg.inv(Y)                   # back to SI: L = D L_n Y^-1
     n = mm.A.shape[0]
     return ModeDesign(P=Pn, U=Un, gamma_bar=float(gb.value), alpha_bar=float(ab.value), L_P=L[:n], L_I=L[n:],

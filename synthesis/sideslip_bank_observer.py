@@ -40,7 +40,7 @@ class DesignOptions:
     margin: float = 1e-6                # strictness of every LMI in scaled units
     gain_limit: float = 1e4             # certificate: largest admissible gain entry
     cond_limit: float = 1e7             # certificate: largest admissible cond(P)
-    # -- issue 9 (departures from the paper; faithful=True turns every one of them off) -----------
+    # -- departures from the paper (docs/papers/000.md; faithful=True turns every one of them off) -----------
     faithful: bool = False              # True: the paper as printed (LMI 20 + region; speed modes at their
                                         # grid speed, eq. 25 literally; tire modes on the 3 grid speeds)
     lpv_range_kmh: tuple[float, float] | None = None   # LPV modes' speed range; None: the speed bands' outer
@@ -165,7 +165,7 @@ def speed_band_edges(speeds: tuple[float, ...]) -> list[float]:
 def mode_models(vehicle: Vehicle, opts: DesignOptions) -> list[ModeModel]:
     """The switched modes of eq. (25) (speed) or eq. (27) (tire).
 
-    Departure (issue 9) unless ``opts.faithful``: every mode's model is evaluated at the
+    Departure from the paper (docs/papers/000.md) unless ``opts.faithful``: every mode's model is evaluated at the
     measured speed (LPV, the model's 1/Vx polynomial), clamped to the mode's range: its own
     speed band for speed modes, ``lpv_range_kmh`` (default: the bands' outer edges) for the tire
     modes. Eq. (25) taken literally (faithful) uses the grid speed's model over the whole band,
@@ -315,7 +315,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         D = cp.bmat([[-R_s * P, PA], [PA.T, -R_s * P]])
         families[disk_key].append((D + D.T) / 2 << -eps * np.eye(2 * na))
         if opts.robust:
-            # departure (issue 9, not in the paper): a second H-infinity channel on the same P,
+            # departure (not in the paper, docs/papers/000.md): a second H-infinity channel on the same P,
             # from the weighted model error Wd d to the weighted [bank estimate; beta error]
             Es = Si @ Ea @ Wd / tau
             Zs = Wz @ robust_output_matrix(La) @ S

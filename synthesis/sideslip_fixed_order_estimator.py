@@ -99,7 +99,7 @@ class Box:
 
 
 def boxes(vehicle: Vehicle | None = None) -> dict[str, Box]:
-    """The ``physical`` and ``paper`` boxes of ERRATA 002 from the delibasi vehicle file."""
+    """The ``physical`` and ``paper`` boxes (docs/papers/002.md, the boxes) from the delibasi vehicle file."""
     veh = vehicle or load_vehicle("delibasi")
     m, lf, lr = veh.value("m"), veh.value("lf"), veh.value("lr")
     Iz = m * veh.value("kG") ** 2
@@ -394,7 +394,7 @@ def evaluate_estimator(box: Box | str, y, x, box_grid: int = 0) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------
-# 4. Issue 7: certificate independent of the LMI, polish, full order
+# 4. Certificate independent of the LMI, polish, full order
 # ----------------------------------------------------------------------------------------------
 #
 # The estimator is open loop (beta_hat = (y/x) r, no feedback), so d = df1 df2 a x: a closed loop
@@ -599,7 +599,7 @@ def broadband_worst(box: Box, y, x, grid=(9, 9, 9), n_w: int = 2000, wmin=1e-5, 
 
 
 def _tie_break(box, y, x, cert, grid, tol, maxiter):
-    """Issue 7 "done right": the W2 of eq. (6) weights only errors below ~0.01 rad/s, so many
+    """The W2 of eq. (6) weights only errors below ~0.01 rad/s, so many
     estimators share the certified optimum while their gain above it is arbitrary (seen: a
     feedthrough of -5.6 that amplifies every yaw-rate wiggle). Among the estimators whose
     certified grid worst case stays within (1 + tol) of ``cert``'s, take the one with the least
@@ -722,7 +722,7 @@ class DesignOptions:
                improves).
     polish     certified local optimisation of the grid worst case (``polish``) after Lemma 5.
     grid       (k_Cf, k_Cr, k_v) of the certificate's grid of true plants, per mode.
-    box        "physical" (delibasi: ERRATA's SI box) or "paper"; other vehicles: their ranges.
+    box        "physical" (delibasi: the SI box of docs/papers/002.md) or "paper"; other vehicles: their ranges.
     """
 
     name: str = "SideslipFixedOrderEstimator"
@@ -744,7 +744,7 @@ VEHICLE_KEYS = ("m", "Iz", "lf", "lr")
 def vehicle_box(vehicle: Vehicle, box: str = "physical") -> Box:
     """The (Cf, Cr, v) box of a vehicle, per axle, SI.
 
-    ``delibasi`` (paper 002): the ERRATA's ``physical`` or ``paper`` box from its per-tyre ranges.
+    ``delibasi`` (paper 002): the ``physical`` or ``paper`` box from its per-tyre ranges.
     Any other vehicle: its ``[ranges]`` ``Cf``, ``Cr`` (N/rad, per axle) and ``speed`` (m/s), e.g.
     ``mbds_250lm`` (where the Cr range is identified on the record's tuning half, see its file).
     """
@@ -929,7 +929,7 @@ def _asc(p) -> list[float]:
 
 
 def to_design_dict(vd: VehicleDesign) -> dict:
-    """The design file (CONTRACT.md keys) and the runtime's data (``fmu_src/sideslip_fixed_order_estimator.py``).
+    """The design file (the keys of docs/interface.md) and the runtime's data (``fmu_src/sideslip_fixed_order_estimator.py``).
 
     ``gamma`` is the certified worst case over the coefficient-polytope vertices (what Lemma 5
     bounds), ``gamma_grid`` over the grid of true plants, both max over the modes. Coefficients

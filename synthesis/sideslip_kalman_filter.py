@@ -260,7 +260,7 @@ def steady_state(vehicle_values: Mapping, q, r_meas, speeds, h: float) -> dict:
 
 def design(vehicle, opts: DesignOptions) -> dict:
     """The design file dict of the Kalman baseline for ``vehicle`` (a ``synthesis.params.Vehicle``):
-    CONTRACT keys + everything ``to_data_dict`` gives the runtime. Nothing is solved: the filter
+    the design-file keys of docs/interface.md + everything ``to_data_dict`` gives the runtime. Nothing is solved: the filter
     is the MBDS authors' linear bicycle-model Kalman filter, its covariances tuned offline
     (``tune``, ``TUNED``); the file's one mode holds them and the model (see the module
     docstring). ``gamma`` is the worst steady-state error-dynamics spectral radius over the

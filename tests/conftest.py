@@ -196,3 +196,14 @@ def _live_fmpy_logger():
     """Every test starts with a live logger behind fmpy's proxy (a test before may have freed one)."""
     restore_fmpy_logger()
     yield
+
+
+def fmutool() -> str:
+    """The ``fmutool`` executable of fmu-manipulation-toolbox (a test extra) beside this Python."""
+    import shutil
+    import sys
+
+    exe = Path(sys.executable).with_name("fmutool")
+    found = str(exe) if exe.is_file() else shutil.which("fmutool")
+    assert found, "fmutool (fmu-manipulation-toolbox, a test extra) is not installed"
+    return found

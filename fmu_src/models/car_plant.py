@@ -1,6 +1,6 @@
 """FMU model file: CarPlant, the nonlinear two-track truth model of every car observer.
 
-Interface per CONTRACT.md; the maths is in ``car_plant.py``; the vehicle parameters come from
+Interface: the documentation's interface page (docs/interface.md); the maths is in ``car_plant.py``; the vehicle parameters come from
 the plant data file baked into the FMU. The inputs stiffness_scale_f/r extend the contract's
 inputs (delta, vx, bank_angle): hosts that do not drive them leave them at their start value 1.0.
 """

@@ -1,6 +1,6 @@
 """FMU model file: LateralIntervalObserver (paper 001).
 
-Interface per CONTRACT.md; the maths is in ``lateral_interval_observer.py``; the gains, the stiffness
+Interface: the documentation's interface page (docs/interface.md); the maths is in ``lateral_interval_observer.py``; the gains, the stiffness
 box and the speed modes come from the design file baked into the FMU.
 """
 from ..lateral_interval_observer import IntervalObserver

@@ -1,6 +1,6 @@
 """FMU model file: MotorcycleFaultObserver (paper 003).
 
-Interface per CONTRACT.md; the maths is in ``motorcycle_fault_observer.py``; the gains come from the
+Interface: the documentation's interface page (docs/interface.md); the maths is in ``motorcycle_fault_observer.py``; the gains come from the
 design file baked into the FMU. Signs are those of the design model (``synthesis/motorcycle_model.py``,
 Sharp's SAE axes: y to the right, z down): roll, steer, yaw rate, vy, forces and torque > 0 to the right.
 """

@@ -3,7 +3,7 @@
 Sharp's (1971) two-frame lateral motorcycle model (derived at build time by
 ``latobs.synthesis.motorcycle_model``; the numbers arrive in the plant data file) with Magic
 Formula tyres on slip and camber, relaxation and sin() gravity terms; the maths is in
-``motorcycle_plant.py``. Interface per CONTRACT.md (inputs rider_torque, vx; outputs steer_angle,
+``motorcycle_plant.py``. Interface: the documentation's interface page (docs/interface.md) (inputs rider_torque, vx; outputs steer_angle,
 steer_rate, yaw_rate, roll_angle, roll_rate, vy, Ff, Fr) extended by Gamma_f, Gamma_r (the
 nonlinear parts of the tyre forces that paper 003's observer estimates) and alpha_f, alpha_r.
 Axes are Sharp's (SAE): x forward, y RIGHT, z down.

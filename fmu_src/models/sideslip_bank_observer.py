@@ -1,6 +1,6 @@
 """FMU model file of the paper-000 observers (SideslipBankObserver, SideslipBankObserverTire and variants).
 
-Interface per CONTRACT.md; the maths is in ``sideslip_bank_observer.py``; the gains come from the design
+Interface: the documentation's interface page (docs/interface.md); the maths is in ``sideslip_bank_observer.py``; the gains come from the design
 file baked into the FMU.
 """
 from ..sideslip_bank_observer import SwitchedPIObserver

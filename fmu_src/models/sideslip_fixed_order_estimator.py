@@ -1,6 +1,6 @@
 """FMU model file: SideslipFixedOrderEstimator (paper 002).
 
-Interface per CONTRACT.md (input yaw_rate, output beta_hat); the maths is in ``sideslip_fixed_order_estimator.py``;
+Interface: the documentation's interface page (docs/interface.md) (input yaw_rate, output beta_hat); the maths is in ``sideslip_fixed_order_estimator.py``;
 the estimator's coefficients come from the design file baked into the FMU.
 """
 from ..papers import DELIBASI_2014

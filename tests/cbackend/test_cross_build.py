@@ -151,10 +151,10 @@ def test_linux_libraries_need_libc_and_libm_at_glibc_2_17(built_fmus, name, plat
 
 @pytest.mark.slow
 def test_fmpy_validate_and_fmutool_check_a_five_platform_fmu(built_fmus):
-    """(test_conformance.py runs both on every native FMU; here on one, its platforms checked.)"""
+    """(integration/test_conformance.py runs both on every native FMU; here on one, its platforms checked.)"""
     from fmpy.validation import validate_fmu
 
-    from test_conformance import _fmutool
+    from conftest import fmutool as _fmutool
 
     fmu = built_fmus.c_path("CarPlant")
     assert {m.split("/")[1] for m in _binaries(fmu)} == set(toolchain.PLATFORMS)

@@ -280,5 +280,5 @@ def test_probe_survives_a_logger_freed_before(built_fmus):
     name = "SideslipBankObserver"        # logs at its mode switches: the probe crosses them
     path = built_fmus.c_path(name)
     r = subprocess.run([sys.executable, "-X", "faulthandler", "-c", _FREED_LOGGER_HOST, str(path), name],
-                       cwd=Path(__file__).parent, capture_output=True, text=True, timeout=300)
+                       cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "survived" in r.stdout, (r.returncode, r.stdout[-2000:], r.stderr[-2000:])

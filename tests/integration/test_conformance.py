@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from conftest import fmutool as _fmutool
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
@@ -87,11 +88,6 @@ def test_fmpy_validate_finds_no_problem(built_fmus, variant):
     assert validate_fmu(str(built_fmus.get(*variant))) == []
 
 
-def _fmutool() -> str:
-    exe = Path(sys.executable).with_name("fmutool")
-    found = str(exe) if exe.is_file() else shutil.which("fmutool")
-    assert found, "fmutool (fmu-manipulation-toolbox, a test extra) is not installed"
-    return found
 
 
 @pytest.mark.parametrize("variant", FMU_VARIANTS)

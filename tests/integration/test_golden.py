@@ -1,7 +1,7 @@
 """Golden reference outputs: every FMU of ``latobs build``, both backends, reproduces its stored
 reference experiment bit for bit.
 
-``tests/golden/`` holds, per FMU, the inputs and outputs of the reference experiment it carries
+``tests/integration/golden/`` holds, per FMU, the inputs and outputs of the reference experiment it carries
 (FMI-LS-REF, ``latobs check``): one CSV (``time``, the inputs, the outputs; every value as the
 shortest text that reads back as the same double) shared by both backends when their results are
 the same bits, else one per backend (``NAME.c.csv``, ``NAME.python.csv``); ``golden.json`` says
@@ -11,7 +11,7 @@ outputs when run here on the golden inputs by a plain fmpy master. One ulp anywh
 the recording platform a libm may differ in the last bit: there the FMI-LS-REF tolerance applies.
 
 Regenerate (only when a change of the outputs is intended, from FMUs built by ``latobs build``):
-``python tests/integration/test_golden.py C_FOLDER PYTHON_FOLDER``.
+``PYTHONPATH=tests python tests/integration/test_golden.py C_FOLDER PYTHON_FOLDER``.
 """
 from __future__ import annotations
 
@@ -183,11 +183,11 @@ def test_a_one_ulp_change_fails():
 
 
 def write(c_folder: Path, python_folder: Path) -> None:
-    """Rewrite ``tests/golden`` from the reference experiments of the FMUs in the two folders (built by
+    """Rewrite ``tests/integration/golden`` from the reference experiments of the FMUs in the two folders (built by
     ``latobs build --backend c`` / ``--backend python``), after checking that fmpy reproduces them."""
     from latobs import reference
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # tests/: conftest
     from conftest import C_NAMES, FMU_NAMES
 
     GOLDEN.mkdir(exist_ok=True)

@@ -16,7 +16,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
-from test_fast_step_000 import OUT, ReferenceObserver, compare, legacy, measurements, observer, speed_run, \
+from test_sideslip_bank_observer_step_maps import OUT, ReferenceObserver, compare, legacy, measurements, observer, speed_run, \
     tire_run, variant, with_tables
 
 VALIDITY = {"alpha_max": math.radians(4.0), "ay_max": 0.4 * 9.81, "release": 0.8, "lf": 1.0, "lr": 1.6,

@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from latobs.synthesis import bicycle_roll_model as brm
 from latobs.synthesis.params import load_vehicle
-from test_fast_step_000 import observer, variant
+from test_sideslip_bank_observer_step_maps import observer, variant
 
 H = 0.005  # s, communication step
 
