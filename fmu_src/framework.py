@@ -1,4 +1,5 @@
 """The one FMI 2.0 co-simulation glue of every latobs FMU (pythonfmu backend). No maths here.
+Over ~600 lines: the whole layer (the twin of ``c/fmi2_layer.c``) in the one file every FMU carries.
 
 pythonfmu's native library (``binaries/<platform>/<id>.so``, taken unchanged from pythonfmu) embeds
 Python, imports the module named in ``resources/slavemodule.txt`` and calls, on an instance of the

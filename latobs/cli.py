@@ -1,6 +1,8 @@
 """latobs: vehicle lateral-dynamics observers from published LMI designs, designed, certified,
 packaged as FMI 2.0 FMUs and validated. Commands: list, design, build, validate, replay, campaign,
-bench, demo, export-ssp, check (``latobs COMMAND --help``)."""
+bench, demo, export-ssp, check (``latobs COMMAND --help``). Over ~600 lines: one argparse parser
+with its help per command (the documentation's CLI reference is generated from them); the work
+is in the pipeline, validation and bench."""
 from __future__ import annotations
 
 import argparse

@@ -1,7 +1,8 @@
 """The datasheet of every FMU: ``documentation/index.html`` and the icon ``model.png`` inside it,
 and the same page as Markdown for the documentation site (:func:`markdown`), generated from what
 the model description is generated from (the model's ``ModelSpec`` and the design or plant file).
-Byte-reproducible: no date, no path, a PNG written with zlib by hand."""
+Byte-reproducible: no date, no path, a PNG written with zlib by hand. Over ~600 lines: the HTML
+page, its Markdown twin and the icon share one reading of the spec, so they stay in one module."""
 from __future__ import annotations
 
 import html

@@ -1,4 +1,6 @@
-"""The whole pipeline, as the CLI and the demo run it: design -> FMU -> validation."""
+"""The whole pipeline, as the CLI and the demo run it: design -> FMU -> validation. Over ~600
+lines: one function per stage and command (design, build with its artefact cache, validate,
+replay, reference experiments), each calling its package; no maths here."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -31,6 +31,8 @@
  *   - warnings of the model (clamps, excursions): fmi2Warning for that call.
  * fmi2GetFMUstate/fmi2SetFMUstate and their serialisation copy the whole instance state (the
  * model holds no pointers).
+ * Over ~600 lines: the whole FMI 2.0 API (co-simulation and model exchange, states, serialisation,
+ * every refusal of a bad call) for every C model; one layer, one file.
  */
 #include <math.h>
 #include <stdarg.h>

@@ -3,6 +3,9 @@
  * Mammar, ACC 2020), eq. (23), with guaranteed bounds between the communication points; the native
  * twin of fmu_src/lateral_interval_observer.py (specified in docs/runtime/lateral_interval_observer.md; this file implements the
  * same steps, in the same floating-point order, so that both give the same bounds). C99, libm.
+ * Over ~600 lines for its Python twin's reason: the guarantee between the samples needs more than
+ * eq. (23) (the a priori enclosure of each step, the sampled-measurement correction), kept in one
+ * file that reads beside the Python reference operation by operation.
  *
  * Model (eq. 9, the relaxation term's sign corrected): x = [vy (m/s), r (rad/s), x3 = ay (m/s^2), x4 (rad/s^2)],
  *     x' = (A0 + vx A1 + dA) x + vx (B1 + dB1) delta,  y = [r, ay] = C x,

@@ -4,6 +4,8 @@
  * behaviour (clamps, warnings, start, input hold, discretisation) is specified in
  * docs/runtime/sideslip_bank_observer.md, and the Python reference fmu_src/sideslip_bank_observer.py gives
  * the same outputs bit for bit. C99, libc and libm only.
+ * Over ~600 lines: eq. (5) at any step and speed (the tables' step maps and Taylor series in 1/vx,
+ * the maps for other steps, the clamps) kept whole, in the order of its Python reference.
  *
  * States s = [z (4); w^ (1)], w^ the bank angle; w = [y; delta], y = [yaw rate, roll angle, roll rate]:
  *     x^ = z + N y

@@ -30,6 +30,7 @@
  * Build (see latobs/native_guard.py): cc -std=c99 -O2 -fPIC -shared
  *   -fvisibility=hidden -I<fmpy>/c-code -include guard_config.h fmi2_guard.c -ldl
  * Only the fmi2* functions are exported (FMI2_Export in fmi2Functions.h).
+ * Over ~600 lines: every fmi2* function of the API checked and forwarded, compiled on its own.
  */
 #define _GNU_SOURCE /* dladdr */
 
