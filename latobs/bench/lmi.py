@@ -87,7 +87,7 @@ def lmi_row_isolated(name: str, solver: str, scs_max_iters: int | None = None,
     # the solver stack and the design modules imported first: the design time is not an import time
     code = ("import json, cvxpy, scipy.linalg; from latobs.bench.lmi import lmi_row; from latobs.bench.measure import _jsonable; "
             "from latobs.synthesis import certificate, sideslip_fixed_order_estimator, lateral_interval_observer, sideslip_kalman_filter, "
-            "pi_hinf_000, motorcycle_fault_observer; "
+            "sideslip_bank_observer, motorcycle_fault_observer; "
             f"print('LMI-ROW ' + json.dumps(_jsonable(lmi_row({name!r}, {solver!r}, {scs_max_iters!r}))))")
     base = {"design": name, "paper": entry.paper, "vehicle": entry.default_vehicle, "solver": solver,
             "gamma": None, "design_seconds": None, "lmi_seconds": 0.0, "lmi_solves": 0, "lmi_statuses": [],

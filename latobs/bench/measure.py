@@ -249,7 +249,7 @@ def runtime_step_time(name: str, data: dict, inputs: dict[str, np.ndarray], n: i
 
     from ..fmu_src.framework import start_values
 
-    spec = import_module(f"{__package__}.fmu_src.models.{_kind(name).model_module}").SPEC
+    spec = import_module(f"{__package__.rpartition('.')[0]}.fmu_src.models.{_kind(name).model_module}").SPEC
     base = {v.name: float(v.start) for v in spec.inputs}
     given = [v.name for v in spec.inputs if v.name in inputs]
     rows = [{**base, **{k: float(inputs[k][i]) for k in given}} for i in range(n)]
@@ -269,10 +269,14 @@ def runtime_step_time(name: str, data: dict, inputs: dict[str, np.ndarray], n: i
 def _c_host_time(path: Path, inputs: dict[str, np.ndarray], n: int, repeats: int) -> dict:
     """µs per fmi2DoStep alone and per set + doStep + get in the plain C host ({"c_host_error"}:
     no C host here: no compiler, or a pythonfmu FMU and no shared libpython)."""
+    from fmpy import read_model_description
+
     from ..cbackend import host
 
     try:
-        r = host.bench(path, {k: v[:n] for k, v in inputs.items()}, DT, repeats=max(repeats, 5))
+        # the bus carries every signal of the pairing; the host sets the FMU's own inputs only
+        names = {v.name for v in read_model_description(str(path)).modelVariables if v.causality == "input"}
+        r = host.bench(path, {k: v[:n] for k, v in inputs.items() if k in names}, DT, repeats=max(repeats, 5))
     except Exception as exc:
         return {"c_host_error": _reason(exc)}
     return {"c_host_us_per_doStep": r["ns_per_doStep"] / 1e3, "c_host_us_per_step": r["ns_per_step_with_io"] / 1e3,

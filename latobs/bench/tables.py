@@ -251,6 +251,11 @@ def markdown(r: dict) -> str:
                 ("fmus", "One FMU step", lambda: fmu_table(r)),
                 ("coupled", "Coupled runs", lambda: coupled_table(r["coupled"])),
                 ("scaling", "Scaling with length and observers", lambda: scaling_table(r["scaling"])))
-    parts = [machine_statement(r)]
+    parts = ["# Speed",
+             "This page is the output of `latobs bench --markdown` (to regenerate it: `latobs bench --markdown "
+             "--json bench.json > docs/speed.md`; `latobs bench --from-json bench.json --markdown` renders a saved "
+             "run again). Each figure stands beside a reference measured in the same run: compare the ratios "
+             "within one run, not the times across machines.",
+             machine_statement(r)]
     parts += [f"## {title}\n\n{render()}" for key, title, render in sections if r.get(key)]
     return "\n\n".join(parts) + "\n"

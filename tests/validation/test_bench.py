@@ -225,7 +225,8 @@ def test_a_bad_bench_option_is_one_line_and_exit_2(argv, culprit, capsys):
 
 def test_markdown_is_the_speed_page_without_a_date(tmp_path, capsys):
     """`latobs bench --markdown` (here on the figures of an earlier `--json`, measuring nothing):
-    the machine and its load, then a heading and the table of every measured section; no date."""
+    its title and how it is made, the machine and its load, then a heading and the table of every
+    measured section; no date."""
     from latobs.cli import main
 
     r = _synthetic_result()
@@ -236,7 +237,8 @@ def test_markdown_is_the_speed_page_without_a_date(tmp_path, capsys):
     f.write_text(json.dumps(bench._jsonable(r)), encoding="utf-8")
     assert main(["bench", "--from-json", str(f), "--markdown"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("Measured on Test CPU 9000 (2 logical cores)") and "1.50 / 1.25 / 1.00" in out
+    assert out.startswith("# Speed\n\nThis page is the output of `latobs bench --markdown`")
+    assert "\n\nMeasured on Test CPU 9000 (2 logical cores)" in out and "1.50 / 1.25 / 1.00" in out
     headings = [line for line in out.splitlines() if line.startswith("## ")]
     assert headings == ["## Whole build", "## LMI designs: Clarabel and SCS", "## One FMU step", "## Coupled runs",
                         "## Scaling with length and observers"]
@@ -245,3 +247,22 @@ def test_markdown_is_the_speed_page_without_a_date(tmp_path, capsys):
     assert "2031" not in out and "ERRATA" not in out
     assert main(["bench", "--from-json", str(f)]) == 0             # without --markdown: the tables alone
     assert capsys.readouterr().out.strip() == bench.table(r).strip()
+
+
+@pytest.mark.slow
+def test_the_fmu_section_measures_every_column_of_both_backends(built_fmus, tmp_path):
+    """One FMU, a few steps: the fmpy figure, the plain C host's (the bus carries more signals than
+    the FMU's inputs) and the Python runtime's reference are all there, in both backends."""
+    from latobs.bench import measure
+
+    name = "SideslipBankObserver"
+    folders = {"python": built_fmus.path(name).parent, "c": built_fmus.c_path(name).parent}
+    plant = "CarPlant"
+    built_fmus.get(plant, "python")
+    built_fmus.get(plant, "c")
+    entry = measure.fmu_section(folders, [name], 20, 1, {})[name]
+    assert "python_runtime_error" not in entry and entry["python_runtime_us_per_step"] > 0, entry
+    for backend in ("python", "c"):
+        e = entry["backends"][backend]
+        assert "c_host_error" not in e or "libpython" in e["c_host_error"], (backend, e)
+        assert e["fmpy_us_per_step"] > 0 and e.get("reference_us_per_step") is not None, (backend, e)
