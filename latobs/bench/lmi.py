@@ -16,9 +16,10 @@ from .measure import SOLVER_LABEL, SOLVERS, _progress, _reason
 # ------------------------------------------------------------------------------------------------
 def lmi_row(name: str, solver: str, scs_max_iters: int | None = None) -> dict:
     """Design ``name`` (default vehicle) with ``solver`` and certify it as the pipeline does
-    (``designs.run``: ``entry.solve`` then ``certificate.certify``), timing each part. Never raises:
+    (``designs.run``: ``entry.solve``, then ``tables.attach`` and ``certificate.certify``, timed
+    together as the certificate), timing each part. Never raises:
     a failure is ``result`` ("no solution", "certificate failed", "error") with ``reason``."""
-    from ..synthesis import certificate, lmi
+    from ..synthesis import certificate, lmi, tables
     from ..synthesis.params import load_vehicle
 
     entry = designs.get(name)
@@ -52,6 +53,7 @@ def lmi_row(name: str, solver: str, scs_max_iters: int | None = None) -> dict:
     data["design"] = name
     t1 = time.perf_counter()
     try:
+        tables.attach(data)
         ok, checks = certificate.certify(data)
     except Exception as exc:
         row["certificate_seconds"] = time.perf_counter() - t1

@@ -60,9 +60,15 @@ def test_a_design_records_the_solver_it_was_solved_with():
         assert data["solver"]["name"] == solver and usage.calls
 
 
+def test_lmi_row_certifies_as_the_pipeline_does():
+    """A design the pipeline certifies is a certified row (its tables attached, as designs.run)."""
+    row = bench.lmi_row("SideslipBankObserverPaper", "CLARABEL")
+    assert row["result"] == "certified" and row["checks_passed"] == row["checks_total"] > 0, row
+
+
 def test_lmi_row_reports_a_certificate_failure_and_a_solver_failure(monkeypatch):
     """A design that fails is a row with its reason, never a crash."""
-    from latobs.synthesis import certificate
+    from latobs.synthesis import certificate, tables
 
     class DesignError(RuntimeError):
         pass
@@ -77,6 +83,7 @@ def test_lmi_row_reports_a_certificate_failure_and_a_solver_failure(monkeypatch)
     base = designs.get("LateralIntervalObserver")
     check = SimpleNamespace(name="LMI (20) on the stored P", value=0.02, limit=0.0, passed=False)
     monkeypatch.setattr(certificate, "certify", lambda data: (False, [check]))
+    monkeypatch.setattr(tables, "attach", lambda data: data)          # a fake design has no runtime
     monkeypatch.setitem(designs.DESIGNS, "Fake", base.__class__("Fake", "001", "sedan", "", base.options, solve_ok))
     row = bench.lmi_row("Fake", "SCS")
     assert row["result"] == "certificate failed" and "LMI (20) on the stored P: 0.02 > 0" in row["reason"]
