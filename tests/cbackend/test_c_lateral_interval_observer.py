@@ -100,17 +100,17 @@ def test_equals_python_fmu_across_the_speed_bands(sweep):
 @pytest.mark.slow
 def test_equals_python_fmu_on_the_mbds_record(built_fmus, tmp_path):
     """The demo's replay of the real record (its own design, 10 ms steps, measured signals): its
-    first 130 s, 13 000 steps from 10 to 60 m/s through most of the design's speed modes (the whole
+    first 60 s, 6 000 steps from 18 to 57 m/s through 10 of the design's 12 speed modes (the whole
     record is 55 000 steps, 80 s for the pythonfmu FMU alone)."""
     from latobs.synthesis import designs
     from latobs.validation import replay
 
     path = design_file.write(packaging.complete_runtime_data(designs.run(NAME, "mbds_250lm")), tmp_path)
     py, c = packaging.package_design(path, tmp_path), packaging.package_design(path, tmp_path / "c", backend="c")
-    data = {k: v[:13000] for k, v in replay.load_csv(replay.resolve_csv("mbds")).items()}
+    data = {k: v[:6000] for k, v in replay.load_csv(replay.resolve_csv("mbds")).items()}
     outs = replay.drive(c, data).outputs
     assert_same(replay.drive(py, data).outputs, outs, "mbds record")
-    assert len(set(np.asarray(outs["mode"]).tolist())) >= 8
+    assert len(set(np.asarray(outs["mode"]).tolist())) >= 10
 
 
 def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):

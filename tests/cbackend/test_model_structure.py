@@ -242,6 +242,7 @@ import gc, sys
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
+sys.path.insert(0, "cbackend")          # run from tests/: conftest there, this file in tests/cbackend
 import conftest, test_model_structure
 
 path, name = sys.argv[1], sys.argv[2]
