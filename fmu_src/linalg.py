@@ -61,17 +61,17 @@ def zoh_map(A, B, h: float):
     return expm(big)[:n]
 
 
-def matrix(x, rows: int, cols: int, what: str):
-    """A rows x cols matrix of finite floats from a design file's nested lists, or a ValueError
-    naming ``what``."""
+def matrix(x, rows: int, cols: int, what: str, source: str = "design file"):
+    """A rows x cols matrix of finite floats from a data file's nested lists, or a ValueError
+    naming ``source`` and ``what``."""
     try:
         M = [[float(v) for v in row] for row in x]
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"design file: {what} must be a {rows}x{cols} matrix of numbers ({exc})") from exc
+        raise ValueError(f"{source}: {what} must be a {rows}x{cols} matrix of numbers ({exc})") from exc
     if len(M) != rows or any(len(r) != cols for r in M):
-        raise ValueError(f"design file: {what} must be {rows}x{cols}, got {len(M)}x{len(M[0]) if M else 0}")
+        raise ValueError(f"{source}: {what} must be {rows}x{cols}, got {len(M)}x{len(M[0]) if M else 0}")
     if not all(math.isfinite(v) for r in M for v in r):
-        raise ValueError(f"design file: {what} has a non-finite entry")
+        raise ValueError(f"{source}: {what} has a non-finite entry")
     return M
 
 

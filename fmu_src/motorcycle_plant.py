@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+from .linalg import matrix
 from .spec import runtime_parameters, tables_of
 
 _atan = math.atan
@@ -16,14 +17,8 @@ G = 9.81  # m/s^2; must equal latobs.synthesis.params.G (checked by the tests)
 SCHEMA = "latobs.motorcycle_structure/1"
 
 
-def _mat(obj, rows, cols, name):
-    try:
-        m = [[float(x) for x in row] for row in obj]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"MotorcyclePlant: structure {name!r} must be a {rows}x{cols} matrix of numbers") from exc
-    if len(m) != rows or any(len(r) != cols for r in m) or not all(math.isfinite(x) for r in m for x in r):
-        raise ValueError(f"MotorcyclePlant: structure {name!r} must be a finite {rows}x{cols} matrix")
-    return m
+def _mat(obj, rows: int, cols: int, name: str) -> list:
+    return matrix(obj, rows, cols, f"structure {name!r}", source="MotorcyclePlant")
 
 
 def _vec(obj, n, name):

@@ -5,17 +5,11 @@ From the derived equations in the plant file (``data["structure"]``): the invers
 """
 from __future__ import annotations
 
-import math
+from ...fmu_src.linalg import matrix
 
 
 def _mat(obj, rows: int, cols: int, name: str) -> list:
-    try:
-        m = [[float(x) for x in row] for row in obj]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"MotorcyclePlant: structure {name!r} must be a {rows}x{cols} matrix of numbers") from exc
-    if len(m) != rows or any(len(r) != cols for r in m) or not all(math.isfinite(x) for r in m for x in r):
-        raise ValueError(f"MotorcyclePlant: structure {name!r} must be a finite {rows}x{cols} matrix")
-    return m
+    return matrix(obj, rows, cols, f"structure {name!r}", source="MotorcyclePlant")
 
 
 def inverse(a) -> list:
