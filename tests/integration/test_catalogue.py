@@ -41,7 +41,7 @@ def test_the_catalogue_imports_only_the_standard_library():
     code = ("import sys, latobs.catalogue; heavy = [m for m in ('numpy', 'cvxpy', 'fmpy', 'scipy') if m in sys.modules]; "
             "mods = [m for m in sys.modules if m.startswith('latobs.') and m != 'latobs.catalogue']; "
             "print(heavy, mods)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[] []", out
 
 

@@ -37,5 +37,6 @@ def test_scenarios_reach_vehicles_only_through_params():
             "s = get_scenario('sine-with-dwell-varying-stiffness'); s.stiffness_ranges('delibasi'); "
             "print(sorted(m for m in sys.modules if m.startswith('latobs.synthesis.') "
             "and m not in ('latobs.synthesis.params',)))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    # -P: the installed latobs, not the source folder of the working directory
+    out = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]", out
