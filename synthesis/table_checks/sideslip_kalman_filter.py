@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..design_file import KALMAN_P0_DEFAULT as P0_DEFAULT, KALMAN_VX_RANGE_DEFAULT as VX_RANGE_DEFAULT
+from ..design_file import KALMAN_P0_DEFAULT, KALMAN_VX_RANGE_DEFAULT
 from .sideslip_fixed_order_estimator import absent, bounded, rel_err
 
 
@@ -28,8 +28,8 @@ def checks(data: dict) -> list:
     p = veh.require(("m", "lf", "lr", "Iz", "Cf", "Cr"), "the Kalman filter's table checks")
     A, B = _force_model(p)
     rt = data.get("runtime", {}) or {}
-    want = {"Q": data["noise"]["q"], "R": data["noise"]["r"], "P0": data.get("initial", {}).get("P0", P0_DEFAULT),
-            "vx_min": rt.get("vx_min", VX_RANGE_DEFAULT[0]), "vx_max": rt.get("vx_max", VX_RANGE_DEFAULT[1])}
+    want = {"Q": data["noise"]["q"], "R": data["noise"]["r"], "P0": data.get("initial", {}).get("P0", KALMAN_P0_DEFAULT),
+            "vx_min": rt.get("vx_min", KALMAN_VX_RANGE_DEFAULT[0]), "vx_max": rt.get("vx_max", KALMAN_VX_RANGE_DEFAULT[1])}
     return [
         bounded("Kalman filter tables: model coefficients a, b = the tyre forces' slip Jacobian (max rel. error)",
                 lambda: max(rel_err(np.reshape(t["a"], (2, 2)), A), rel_err(t["b"], B)), 1e-12),

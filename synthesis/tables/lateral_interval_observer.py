@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from ...fmu_src.linalg import expm_taylor, matrix as _matrix, phi_gamma  # noqa: F401  (the runtime's own arithmetic)
+from ...fmu_src.linalg import matrix as _matrix, phi_gamma   # the runtime's own arithmetic
 from ...fmu_src.spec import DEFAULT_STEP   # s: the FMU's default communication step (the maps stored for it)
 
 NX = 4                        # states x = [vy, r, ay, x4]

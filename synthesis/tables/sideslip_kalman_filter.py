@@ -40,10 +40,6 @@ def vehicle_values(data: dict) -> dict:
     return vals
 
 
-#: the filter's defaults: initial covariance on [vy, r], speed clamp (m/s) (the design file's)
-P0_DEFAULT, VX_RANGE_DEFAULT = KALMAN_P0_DEFAULT, KALMAN_VX_RANGE_DEFAULT
-
-
 def compute(data: dict) -> dict:
     """{"a": [a00, a01, a10, a11], "b": [b0, b1], "Q", "R", "P0", "vx_min", "vx_max"}:
     a00 = -(Cf + Cr)/m, a01 = -(lf Cf - lr Cr)/m, a10 = -(lf Cf - lr Cr)/Iz,
@@ -53,9 +49,9 @@ def compute(data: dict) -> dict:
     try:
         rt = data.get("runtime", {}) or {}
         settings = {"Q": _floats(data["noise"]["q"]), "R": _floats(data["noise"]["r"]),
-                    "P0": _floats(data.get("initial", {}).get("P0", P0_DEFAULT)),
-                    "vx_min": float(rt.get("vx_min", VX_RANGE_DEFAULT[0])),
-                    "vx_max": float(rt.get("vx_max", VX_RANGE_DEFAULT[1]))}
+                    "P0": _floats(data.get("initial", {}).get("P0", KALMAN_P0_DEFAULT)),
+                    "vx_min": float(rt.get("vx_min", KALMAN_VX_RANGE_DEFAULT[0])),
+                    "vx_max": float(rt.get("vx_max", KALMAN_VX_RANGE_DEFAULT[1]))}
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ValueError(f"data file: noise.q, noise.r (2x2), initial.P0 (2x2) and runtime.vx_min/vx_max "
                          f"needed by the Kalman filter: {exc!r}") from exc
