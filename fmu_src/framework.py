@@ -502,27 +502,9 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
         "canGetAndSetFMUstate": "true" if native else "false", "canSerializeFMUstate": "true" if native else "false"})
     if native:
         _source_files(cs, native.source_files)
-    table = variable_table(spec)
-    first_state = len(table)
-    table += [(first_state + k, "Real", "state", v) for k, v in enumerate(states)]
-    table += [(first_state + len(states) + k, "Real", "derivative", v) for k, v in enumerate(states)]
-    used = sorted({v.unit for _, typ, caus, v in table if typ == "Real" and caus != "derivative"
-                   and v.unit in BASE_UNITS}
-                  | {DERIVATIVE_UNITS[v.unit] for _, _, caus, v in table if caus == "derivative"
-                     and v.unit in DERIVATIVE_UNITS})
-    if used:
-        ud = SubElement(root, "UnitDefinitions")
-        for u in used:
-            unit = SubElement(ud, "Unit", name=u)
-            SubElement(unit, "BaseUnit", BASE_UNITS[u])
-            if u in DISPLAY_UNITS:
-                name, factor = DISPLAY_UNITS[u]
-                SubElement(unit, "DisplayUnit", name=name, factor=repr(factor))
-    cats = SubElement(root, "LogCategories")
-    for name, desc in (("logStatusWarning", "warnings: clamps, speed outside the design grid, ignored calls"),
-                       ("logStatusError", "errors: refused steps, bad value references, bad parameters"),
-                       ("logAll", "all other messages")):
-        SubElement(cats, "Category", name=name, description=desc)
+    table = full_table(spec, states)
+    unit_definitions(root, used_units(table))
+    log_categories(root)
     SubElement(root, "DefaultExperiment", startTime="0", stopTime=_num(spec.stop_time),
                stepSize=repr(min(DEFAULT_STEP, longest)))
     # the longest communication step both FMI layers accept (FMI 2.0 has no attribute for it)
@@ -530,9 +512,7 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     SubElement(va, "CommunicationStep", max=repr(longest), unit="s")
     starts = start_values(spec, data)
     in_starts = input_starts(spec, data)
-    bounds = {}
-    for group in (spec.parameters, spec.inputs, spec.outputs, spec.integer_outputs):
-        bounds.update(var_bounds(spec, data, group))
+    bounds = all_bounds(spec, data)
     mv = SubElement(root, "ModelVariables")
     for vr, typ, caus, v in table:
         attrs = {"name": v.name, "valueReference": str(vr),
@@ -572,7 +552,8 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     ms = SubElement(root, "ModelStructure")
     outputs = [vr for vr, _, caus, _ in table if caus == "output"]
     derivatives = [vr for vr, _, caus, _ in table if caus == "derivative"]
-    deps = _me_dependencies(table, native) if states else {}
+    deps = {vr: " ".join(str(k + 1) for k in knowns)
+            for vr, knowns in me_dependencies(table, native).items()} if states else {}
     if outputs:
         out_el = SubElement(ms, "Outputs")
         for vr in outputs:
@@ -590,10 +571,57 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="unicode") + "\n").encode("utf-8")
 
 
-def _me_dependencies(table, native: "NativeInterfaces") -> dict[int, str]:
-    """{value reference of a Real output or a derivative: its ``dependencies`` attribute} from
-    ``native.dependencies`` ({name or ``der(state)``: names of inputs and states}); ValueError naming
-    the unknown or known when the declaration does not fit the variables."""
+def full_table(spec: ModelSpec, states=()) -> list[tuple[int, str, str, object]]:
+    """:func:`variable_table` with the ModelExchange ``states`` (causality "state") and their
+    derivatives ("derivative") after it, in value-reference order (both FMI layers' numbering)."""
+    table = variable_table(spec)
+    first_state = len(table)
+    table += [(first_state + k, "Real", "state", v) for k, v in enumerate(states)]
+    table += [(first_state + len(states) + k, "Real", "derivative", v) for k, v in enumerate(states)]
+    return table
+
+
+def used_units(table) -> list[str]:
+    """The units of :data:`BASE_UNITS` the variables of ``table`` (:func:`full_table`) use, sorted."""
+    return sorted({v.unit for _, typ, caus, v in table if typ == "Real" and caus != "derivative"
+                   and v.unit in BASE_UNITS}
+                  | {DERIVATIVE_UNITS[v.unit] for _, _, caus, v in table if caus == "derivative"
+                     and v.unit in DERIVATIVE_UNITS})
+
+
+def unit_definitions(root: Element, used) -> None:
+    """The ``UnitDefinitions`` of the units ``used`` (the same element in FMI 2.0 and 3.0)."""
+    if used:
+        ud = SubElement(root, "UnitDefinitions")
+        for u in used:
+            unit = SubElement(ud, "Unit", name=u)
+            SubElement(unit, "BaseUnit", BASE_UNITS[u])
+            if u in DISPLAY_UNITS:
+                name, factor = DISPLAY_UNITS[u]
+                SubElement(unit, "DisplayUnit", name=name, factor=repr(factor))
+
+
+def log_categories(root: Element) -> None:
+    """The ``LogCategories`` the FMI layers log under (the same element in FMI 2.0 and 3.0)."""
+    cats = SubElement(root, "LogCategories")
+    for name, desc in (("logStatusWarning", "warnings: clamps, speed outside the design grid, ignored calls"),
+                       ("logStatusError", "errors: refused steps, bad value references, bad parameters"),
+                       ("logAll", "all other messages")):
+        SubElement(cats, "Category", name=name, description=desc)
+
+
+def all_bounds(spec: ModelSpec, data: dict) -> dict:
+    """{name: (min, max)} of the parameters, inputs and outputs, as declared for ``data``."""
+    bounds = {}
+    for group in (spec.parameters, spec.inputs, spec.outputs, spec.integer_outputs):
+        bounds.update(var_bounds(spec, data, group))
+    return bounds
+
+
+def me_dependencies(table, native: "NativeInterfaces") -> dict[int, list[int]]:
+    """{value reference of a Real output or a derivative: the value references it depends on, sorted}
+    from ``native.dependencies`` ({name or ``der(state)``: names of inputs and states}); ValueError
+    naming the unknown or known when the declaration does not fit the variables."""
     declared = native.dependencies
     if declared is None:
         raise ValueError("a model with continuous states must declare its ModelExchange dependencies")
@@ -608,7 +636,7 @@ def _me_dependencies(table, native: "NativeInterfaces") -> dict[int, str]:
         bad = sorted(set(names) - set(knowns))
         if bad:
             raise ValueError(f"ModelExchange dependencies of {name}: {bad} are not inputs or states")
-        out[unknowns[name]] = " ".join(str(vr + 1) for vr in sorted(knowns[k] for k in set(names)))
+        out[unknowns[name]] = sorted(knowns[k] for k in set(names))
     return out
 
 
