@@ -110,3 +110,64 @@ def test_fmi3_model_exchange_is_fmi2_bit_for_bit(fmi3_fmus, name):
     want = _simulate(fmi2, e, "ModelExchange", stop)
     got = _simulate(fmu, e, "ModelExchange", stop)
     assert _same_bits(want, got) == []
+
+
+def test_fmi3_misuse_is_refused_and_the_state_kept(fmi3_fmus):
+    """The FMI 2.0 layer's contract: an out-of-order call, an unknown value reference, a wrong
+    nValues, a non-finite input are refused with an error logged, the state kept; the FMU state
+    round-trips through serialisation."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import FMU3Slave
+
+    _, fmu = fmi3_fmus["CarPlant"]
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    messages: list[tuple[int, str]] = []
+    s = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(fmu)), modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName="misuse")
+    s.instantiate(logMessage=lambda env, status, category, message: messages.append((status, message.decode())))
+    try:
+        with pytest.raises(FMICallException):
+            s.doStep(0.0, 0.01)
+        assert "fmi3DoStep called in instantiated" in messages[-1][1]
+        s.enterInitializationMode(startTime=0.0)
+        s.exitInitializationMode()
+        y = [vr["beta"], vr["yaw_rate"], vr["ay"]]
+        s.setFloat64([vr["delta"]], [0.05])
+        for k in range(20):
+            s.doStep(k * 0.01, 0.01)
+        state = s.getFMUState()
+        before = s.getFloat64(y)
+        assert any(before)
+        with pytest.raises(FMICallException):
+            s.getFloat64([10_000])
+        assert "is not a variable of CarPlant" in messages[-1][1]
+        with pytest.raises(FMICallException):
+            s.getFloat64([vr["beta"]], nValues=2)
+        assert "2 values for 1 value references" in messages[-1][1]
+        with pytest.raises(FMICallException):
+            s.getInt32([vr["beta"]])
+        with pytest.raises(FMICallException):
+            s.setFloat64([vr["beta"]], [1.0])              # an output
+        s.setFloat64([vr["delta"]], [float("nan")])
+        with pytest.raises(FMICallException):
+            s.doStep(0.2, 0.01)
+        assert "non-finite input(s) delta = nan" in messages[-1][1]
+        assert s.getFloat64(y) == before                    # state held
+        with pytest.raises(FMICallException):
+            s.doStep(0.2, 1e3)                              # longer than the longest step
+        s.setFloat64([vr["delta"]], [0.05])
+        s.doStep(0.2, 0.01)
+        after = s.getFloat64(y)
+        assert after != before
+        restored = s.deserializeFMUState(s.serializeFMUState(state))
+        s.setFMUState(restored)
+        assert s.getFloat64(y) == before
+        s.doStep(0.2, 0.01)
+        assert s.getFloat64(y) == after                     # the same step again, bit for bit
+        s.freeFMUState(restored)
+        s.freeFMUState(state)
+        s.terminate()
+    finally:
+        s.freeInstance()
