@@ -10,9 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from latobs import packaging
+from latobs import cbackend, packaging
 
-NAMES = ["CarPlant", "SideslipBankObserver"]
+#: every FMU of ``latobs build`` that has a C model (CarPlant and SideslipBankObserver among them)
+NAMES = [n for n in [*packaging.OBSERVERS, *packaging.PLANTS]
+         if cbackend.emitter((packaging.OBSERVERS.get(n) or packaging.PLANTS[n]).model_module)]
 ME_SECONDS = 2.0     # ModelExchange runs on the first seconds of the reference inputs (a variable-step solver)
 
 
