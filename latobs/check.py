@@ -53,6 +53,7 @@ def run_host(fmu: str | Path, e: reference.Experiment) -> dict[str, np.ndarray]:
     """Run ``e`` on ``fmu`` in this process with fmpy, as :data:`reference.RUN_RULE` says: the
     outputs {name: values at e.time} (Integer outputs as integers)."""
     from .validation.harness import FmuInstance
+    from .validation.instance import fmi_type
 
     f = FmuInstance("reference", Path(fmu))
     try:
@@ -62,14 +63,14 @@ def run_host(fmu: str | Path, e: reference.Experiment) -> dict[str, np.ndarray]:
         n = len(e.time)
         row = lambda k: {name: float(v[k]) for name, v in e.inputs.items()}  # noqa: E731
         first = f.start(row(0), {}, start_time=e.start, stop_time=e.stop)
-        out = {name: np.zeros(n, dtype=float if v.type == "Real" else np.int64)
+        out = {name: np.zeros(n, dtype=float if fmi_type(v) == "Real" else np.int64)
                for name, v in ((v.name, v) for v in f.outputs)}
         for name, val in first.items():
             out[name][0] = val
         for k in range(n - 1):
             try:
                 f.set_inputs(row(k))
-                f.slave.doStep(float(e.time[k]), e.step)
+                f.do_step(float(e.time[k]), e.step)
                 values = f.get_outputs()
             except Exception as exc:                # fmpy's error status: this run failed
                 raise RuntimeError(f"at t = {e.time[k]:.6g} s: {exc}; log: {f.log_tail()}") from exc
@@ -88,13 +89,29 @@ def _runner():
     return runner
 
 
+def _fmi3(fmu: Path) -> bool:
+    with zipfile.ZipFile(fmu) as z:
+        return b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000]
+
+
+def _vocabulary(fmu: Path) -> tuple[list[str], str | None, dict[str, str]]:
+    """(the platform folders an FMU of this FMI version may hold, in order; this machine's; {folder:
+    the ``toolchain.PLATFORMS`` platform whose binaries the cross-platform runner runs for it}):
+    FMI 2.0's linux64, win64, ... or FMI 3.0's x86_64-linux, x86_64-windows, ..."""
+    from .cbackend import fmi3
+    from .cbackend.toolchain import PLATFORMS, host_platform
+
+    if _fmi3(fmu):
+        return ([f for fs in fmi3.FOLDERS.values() for f in fs], fmi3.host_folder(),
+                {fs[0]: p for p, fs in fmi3.FOLDERS.items() if len(fs) == 1})
+    return list(PLATFORMS), host_platform(), {p: p for p in PLATFORMS}
+
+
 def _folders(fmu: Path) -> list[str]:
     """The platform folders under ``binaries/``, the FMI platforms first in their order."""
-    from .cbackend.toolchain import PLATFORMS
-
     with zipfile.ZipFile(fmu) as z:
         held = {n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") >= 2}
-    order = list(PLATFORMS)
+    order = _vocabulary(fmu)[0]
     return sorted(held - {""}, key=lambda p: (order.index(p) if p in order else len(order), p))
 
 
@@ -108,16 +125,17 @@ def _why_not(fmu: Path, platform: str, host: str | None) -> str | None:
     runner = _runner()
     if runner is None:
         return "no cross-platform runner in this installation"
-    return runner.available(platform)
+    cross = _vocabulary(fmu)[2].get(platform)
+    if cross is None:
+        return "the cross-platform runner does not run this platform's binaries"
+    return runner.available(cross)
 
 
 def platforms(fmu: Path, requested: str) -> tuple[list[str], list[tuple[str, str]]]:
     """(platforms to run, [(platform, why skipped)]) for ``--platform requested``: "host", "all"
     (every platform folder of the FMU that can run here) or one platform folder. CheckError for an
     unknown platform, one the FMU does not hold, or one that cannot run here (saying why)."""
-    from .cbackend.toolchain import PLATFORMS, host_platform
-
-    host = host_platform()
+    known, host, _ = _vocabulary(fmu)
     held = _folders(fmu)
     if requested == "all":
         run, skipped = [], []
@@ -130,9 +148,9 @@ def platforms(fmu: Path, requested: str) -> tuple[list[str], list[tuple[str, str
         return run, skipped
     p = host if requested == "host" else requested
     if p is None:
-        raise CheckError("this machine is none of the FMU platforms " + ", ".join(PLATFORMS))
-    if p not in PLATFORMS:
-        raise CheckError(f"unknown platform {requested!r} (host, all, or one of: {', '.join(PLATFORMS)})")
+        raise CheckError("this machine is none of the FMU platforms " + ", ".join(known))
+    if p not in known:
+        raise CheckError(f"unknown platform {requested!r} (host, all, or one of: {', '.join(known)})")
     if p not in held:
         raise CheckError(f"{fmu} holds no binaries/{p} (it holds: {', '.join(held) or 'none'})")
     why = _why_not(fmu, p, host)
@@ -149,7 +167,7 @@ def run_on(fmu: Path, e: reference.Experiment, platform: str, host: str | None) 
         return run_host(fmu, e)
     runner = _runner()
     try:
-        r = runner.run(fmu, platform, e.time, e.inputs, list(e.outputs), {}, step=e.step)
+        r = runner.run(fmu, _vocabulary(fmu)[2][platform], e.time, e.inputs, list(e.outputs), {}, step=e.step)
     except runner.RunnerError as exc:
         raise RuntimeError(str(exc)) from None
     if not r.ok:
@@ -161,8 +179,6 @@ def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[t
     """Run every reference experiment of ``fmu`` on ``platform`` ("host", "all" or a platform
     folder): the results (one per experiment and platform) and the platforms skipped (with why).
     CheckError for a user error (the message says which)."""
-    from .cbackend.toolchain import host_platform
-
     fmu = Path(fmu)
     if not fmu.is_file():
         raise CheckError(f"{fmu}: no such file")
@@ -176,7 +192,7 @@ def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[t
     except reference.ReferenceResultsError as exc:
         raise CheckError(str(exc)) from None
     run, skipped = platforms(fmu, platform)
-    host = host_platform()
+    host = _vocabulary(fmu)[1]
     results = []
     for p in run:
         for e in experiments:

@@ -62,10 +62,11 @@ def toolchain(backend: str) -> str:
 @lru_cache(maxsize=None)
 def _toolchain_c(compilers: bytes) -> str:
     from .cbackend import FMI_HEADERS
+    from .cbackend.fmi3 import FMI_HEADERS as FMI3_HEADERS
     from .native_guard import fmi2_headers
 
     h = hashlib.sha256(compilers)
-    for name in FMI_HEADERS:
+    for name in (*FMI_HEADERS, *FMI3_HEADERS):
         h.update((fmi2_headers() / name).read_bytes())
     return h.hexdigest()
 
@@ -82,15 +83,18 @@ def _toolchain_python(cc: str | None) -> str:
     return h.hexdigest()
 
 
-def of_fmu(base: Identity, backend: str, platforms: list[str] | None = None) -> Identity:
+def of_fmu(base: Identity, backend: str, platforms: list[str] | None = None, fmi: int = 2) -> Identity:
     """The identity of the FMU of ``backend`` ("c" or "python") built from the data of ``base``;
-    a native FMU's for ``platforms`` (FMI platform folders; None: all), a pythonfmu FMU's holds
+    a native FMU's for ``platforms`` (``toolchain.PLATFORMS`` folders; None: all) and FMI version
+    ``fmi`` (2 or 3; an FMI 2.0 FMU's identity does not name it), a pythonfmu FMU's holds
     pythonfmu's binaries (the toolchain)."""
     parts = {**base.parts, "backend": backend, "packaging_code": packaging_code(), "toolchain": toolchain(backend)}
     if backend == "c":
         from .cbackend import platforms_of
 
         parts["platforms"] = ",".join(platforms_of(platforms))
+    if fmi != 2:
+        parts["fmi"] = str(fmi)
     return Identity(parts)
 
 

@@ -215,11 +215,11 @@ def check_name(class_name: str) -> str:
 
 
 def identity_file(data: dict, backend: str, base: identity.Identity | None = None,
-                  platforms: list[str] | None = None) -> dict[str, bytes]:
+                  platforms: list[str] | None = None, fmi: int = 2) -> dict[str, bytes]:
     """The FMU member holding the identity of the FMU of ``backend`` made from ``data``, whose
     own identity is ``base`` (default: the one ``data`` carries, else its content); a native
-    FMU's for ``platforms`` (None: all)."""
-    ident = identity.of_fmu(base or identity.of_data(data), backend, platforms)
+    FMU's for ``platforms`` (None: all) and FMI version ``fmi``."""
+    ident = identity.of_fmu(base or identity.of_data(data), backend, platforms, fmi)
     return {identity.FMU_MEMBER: identity.fmu_bytes(ident)}
 
 
@@ -350,15 +350,18 @@ def resolve_backend(requested: str, kind: FmuKind, platforms: list[str] | None =
 
 def _build(kind: FmuKind, class_name: str, data: dict, out_dir: Path, backend: str,
            base: identity.Identity | None = None, beside: Mapping[str, bytes] | None = None,
-           platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
+           platforms: list[str] | None = None, finish: Finish | None = None, fmi: int = 2) -> Path:
     if backend == "c":
         from . import cbackend
 
         try:
             return cbackend.build_c_fmu(kind, class_name, data, out_dir, base=base, beside=beside,
-                                        platforms=platforms, finish=finish)
+                                        platforms=platforms, finish=finish, fmi=fmi)
         except cbackend.NativeBuildError as exc:
             raise PackagingError(str(exc)) from exc
+    if fmi != 2:
+        raise PackagingError(f"{class_name}: the pythonfmu backend makes FMI 2.0 FMUs only (pythonfmu has no FMI 3.0); "
+                             "FMI 3.0 FMUs are native (--backend c)")
     if platforms is not None:   # pythonfmu's binaries are pythonfmu's platforms
         raise PackagingError(f"{class_name}: the pythonfmu backend ships pythonfmu's binaries; platforms "
                              f"({', '.join(platforms)}) are chosen for native FMUs only")
@@ -397,9 +400,10 @@ def complete_runtime_data(data: dict) -> dict:
 
 def package_design_data(data: dict, out_dir: Path, backend: str = "python", write_design: bool = False,
                         origin: str | None = None, platforms: list[str] | None = None,
-                        finish: Finish | None = None) -> Path:
+                        finish: Finish | None = None, fmi: int = 2) -> Path:
     """:func:`package_design` of a design dict; with ``write_design`` its design file
-    ``out_dir/NAME.design.json`` is written with the FMU, as one unit (:func:`install`)."""
+    ``out_dir/NAME.design.json`` is written with the FMU, as one unit (:func:`install`); ``fmi``:
+    the FMI version (2, or 3 with the native backend)."""
     from .synthesis import certificate, tables  # scipy: only when packaging a design
 
     origin = origin or f"design {data.get('name')!r}"
@@ -416,7 +420,8 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
                              f"(known: {', '.join(OBSERVERS)})")
     beside = {design_file.path_of(data, out_dir).name: design_file.dumps(data).encode("utf-8")} if write_design \
         else None
-    return _build(kind, data["name"], data, out_dir, backend, beside=beside, platforms=platforms, finish=finish)
+    return _build(kind, data["name"], data, out_dir, backend, beside=beside, platforms=platforms, finish=finish,
+                  fmi=fmi)
 
 
 def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, Vehicle, str, identity.Identity]:
@@ -433,9 +438,10 @@ def plant_artefact(name: str, vehicle: str | Vehicle | None) -> tuple[FmuKind, V
 
 
 def package_plant(name: str, vehicle: str | Vehicle | None, out_dir: Path, backend: str = "python",
-                  platforms: list[str] | None = None, finish: Finish | None = None) -> Path:
+                  platforms: list[str] | None = None, finish: Finish | None = None, fmi: int = 2) -> Path:
     """Package the plant ``name``'s FMU for ``vehicle`` (:func:`plant_artefact`) with ``backend``
-    (native: for ``platforms``, as :func:`package_design`; ``finish``: see :func:`install`)."""
+    (native: for ``platforms``, as :func:`package_design`; ``finish``: see :func:`install`; ``fmi``:
+    the FMI version, 3 with the native backend only)."""
     kind, veh, class_name, base = plant_artefact(name, vehicle)
     return _build(kind, class_name, plant_data(veh), out_dir, backend, base=base, platforms=platforms,
-                  finish=finish)
+                  finish=finish, fmi=fmi)

@@ -24,9 +24,9 @@ LABELS = {"kind": "the kind of artefact", "model": "the catalogue model", "artef
           "latobs": "the latobs version", "data": "the design (made outside the catalogue)",
           "backend": "the backend", "packaging_code": "the runtime or packaging code",
           "toolchain": "the toolchain (C compiler, FMI headers, pythonfmu binaries)",
-          "platforms": "the platforms"}
+          "platforms": "the platforms", "fmi": "the FMI version"}
 #: parts shown with their values when they differ (short plain values, not hashes)
-_PLAIN = ("kind", "model", "artefact", "latobs", "backend", "platforms")
+_PLAIN = ("kind", "model", "artefact", "latobs", "backend", "platforms", "fmi")
 
 
 @dataclass(frozen=True)

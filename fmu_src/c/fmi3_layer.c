@@ -48,7 +48,8 @@
 #define VR_DER0 (VR_STATE0 + N_STATES)
 #define VR_EVI0 (VR_DER0 + N_STATES)
 #define VR_TIME (VR_EVI0 + N_EVENT_INDICATORS)
-#define N_VR (VR_TIME + 1)
+#define VR_ARR0 (VR_TIME + 1) /* the gain arrays (constants, fmu_config.h: ARR_*) */
+#define N_VR (VR_ARR0 + N_ARRAYS)
 
 #define MAGIC 0x4c415433u /* "LAT3": marks a live instance of this layer */
 #define MSG_MAX 1024
@@ -158,7 +159,14 @@ static const char *var_name(fmi3ValueReference vr, char buf[64])
         snprintf(buf, 64, "event_indicator_%ld", r - VR_EVI0 + 1);
         return buf;
     }
+    if (r >= VR_ARR0 && r < N_VR) return ARR_NAMES[r - VR_ARR0];
     return r == VR_TIME ? "time" : "?";
+}
+
+/* how many values variable r has: an array's elements, else 1 (a scalar or an unknown reference) */
+static size_t n_values(long r)
+{
+    return r >= VR_ARR0 && r < N_VR ? (size_t)ARR_SIZE[r - VR_ARR0] : 1u;
 }
 
 static int all_finite(const double *x, int n)
@@ -449,9 +457,11 @@ static int check_array(Instance *inst, const char *what, const void *vr, size_t 
         say(inst, LOG_ERROR, "%s: NULL array for %zu value references", what, nvr);
         return 0;
     }
-    if (nValues != nvr) {
-        say(inst, LOG_ERROR, "%s: %zu values for %zu value references (every variable is a scalar)", what, nValues,
-            nvr);
+    size_t expected = 0;
+    for (size_t i = 0; i < nvr; i++) expected += n_values((long)((const fmi3ValueReference *)vr)[i]);
+    if (nValues != expected) {
+        say(inst, LOG_ERROR, "%s: %zu values for %zu value references, which hold %zu values", what, nValues, nvr,
+            expected);
         return 0;
     }
     return 1;
@@ -484,19 +494,24 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     double z[N_EVENT_INDICATORS];
     int have_z = 0;
 #endif
-    for (size_t i = 0; i < nvr; i++) {
+    for (size_t i = 0, j = 0; i < nvr; j += n_values((long)vr[i]), i++) {
         long r = (long)vr[i];
-        values[i] = 0.0;
-        if (r < VR_IN0) values[i] = inst->v.p[r - VR_PAR0];
-        else if (r < VR_OUT0) values[i] = inst->v.u[r - VR_IN0];
-        else if (r < VR_INT0) values[i] = inst->v.y[r - VR_OUT0];
-        else if (r == VR_TIME) values[i] = inst->v.time;
+        if (r >= VR_ARR0 && r < N_VR) { /* a gain array: its elements, row-major */
+            memcpy(values + j, ARR_VALUES + ARR_OFFSET[r - VR_ARR0], sizeof(double) * n_values(r));
+            continue;
+        }
+        double *out = values + j;
+        *out = 0.0;
+        if (r < VR_IN0) *out = inst->v.p[r - VR_PAR0];
+        else if (r < VR_OUT0) *out = inst->v.u[r - VR_IN0];
+        else if (r < VR_INT0) *out = inst->v.y[r - VR_OUT0];
+        else if (r == VR_TIME) *out = inst->v.time;
 #if N_STATES > 0
         else if (r >= VR_STATE0 && r < VR_TIME && !inst->v.ready) {
-            values[i] = 0.0; /* not set up yet: computed at fmi3ExitInitializationMode */
+            *out = 0.0; /* not set up yet: computed at fmi3ExitInitializationMode */
         } else if (r >= VR_STATE0 && r < VR_DER0) {
             if (!have_x) model_me_get_states(inst->model, x), have_x = 1;
-            values[i] = x[r - VR_STATE0];
+            *out = x[r - VR_STATE0];
         } else if (r >= VR_DER0 && r < VR_EVI0) {
             if (!have_dx) {
                 if (!inputs_valid(inst->v.u)) {
@@ -506,7 +521,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
                 }
                 model_me_derivatives(inst->model, inst->v.u, dx), have_dx = 1;
             }
-            values[i] = dx[r - VR_DER0];
+            *out = dx[r - VR_DER0];
         }
 #if N_EVENT_INDICATORS > 0
         else if (r >= VR_EVI0 && r < VR_TIME) {
@@ -518,7 +533,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
                 }
                 model_me_event_indicators(inst->model, inst->v.u, z), have_z = 1;
             }
-            values[i] = z[r - VR_EVI0];
+            *out = z[r - VR_EVI0];
         }
 #endif
 #endif
@@ -552,13 +567,15 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     if (inst == NULL) return fmi3Error;
     if (!check_array(inst, "fmi3SetFloat64", vr, nvr, values, nValues)) return fmi3Error;
     int before_init = inst->v.phase == PHASE_INSTANTIATED || inst->v.phase == PHASE_INIT;
-    for (size_t i = 0; i < nvr; i++) {
+    for (size_t i = 0, j = 0; i < nvr; j += n_values((long)vr[i]), i++) {
         long r = (long)vr[i];
         if (r >= VR_IN0 && r < VR_OUT0) {
-            inst->v.u[r - VR_IN0] = values[i]; /* checked (finite, in range) where it is used */
+            inst->v.u[r - VR_IN0] = values[j]; /* checked (finite, in range) where it is used */
         } else if (r < VR_IN0) {
-            if (before_init) inst->v.p[r - VR_PAR0] = values[i];
+            if (before_init) inst->v.p[r - VR_PAR0] = values[j];
             else say(inst, LOG_WARNING, "parameter %s set after initialisation: ignored", var_name(vr[i], n));
+        } else if (r >= VR_ARR0 && r < N_VR) {
+            say(inst, LOG_ERROR, "fmi3SetFloat64: %s is a constant; ignored", var_name(vr[i], n));
         } else if (r < VR_INT0 || (r >= VR_STATE0 && r < N_VR)) {
             say(inst, LOG_ERROR, "fmi3SetFloat64: value reference %u (%s) is not an input or a parameter; ignored",
                 vr[i], var_name(vr[i], n));

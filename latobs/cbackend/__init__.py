@@ -44,6 +44,8 @@ C_SRC = Path(_framework.__file__).resolve().parent / "c"
 LAYER = ("fmi2_layer.c", "model.h", "fp_contract.h", "glibc_compat.h")
 SHARED_HEADERS = ("linalg.h", "model_util.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+#: the FMI versions the native backend builds (``latobs build --fmi``)
+FMI_VERSIONS = (2, 3)
 
 #: the model file (fmu_src/models/<m>.py) -> its emitter module latobs.cbackend.<emitter> (``latobs.catalogue``)
 EMITTERS = {**{e.model_module: e.emitter_module for e in catalogue.ENTRIES},
@@ -93,8 +95,9 @@ def unavailable_reason(model_module: str, platforms: list[str] | None = None) ->
     return None
 
 
-def _config_header(spec, data: dict, model_identifier: str, guid: str, cm: CModel) -> str:
-    """fmu_config.h: identifiers, sizes, index macros and (for the layer) the variable tables."""
+def _config_header(spec, data: dict, model_identifier: str, guid: str, cm: CModel, extra: str = "") -> str:
+    """fmu_config.h: identifiers, sizes, index macros and (for the layer) the variable tables;
+    ``extra``: more of the layer's tables (the FMI 3.0 layer's gain arrays)."""
     table = _framework.variable_table(spec)
     starts = _framework.start_values(spec, data)
     bounds = {**var_bounds(spec, data, spec.parameters), **var_bounds(spec, data, spec.inputs)}
@@ -129,6 +132,7 @@ def _config_header(spec, data: dict, model_identifier: str, guid: str, cm: CMode
     out.append(c_array("IN_MAX", [lo_hi(v)[1] for v in spec.inputs] + [0.0]))
     out.append(c_array("OUT_START", [v.start for v in spec.outputs] + [0.0]))
     out.append(c_array("INT_START", [int(v.start) for v in spec.integer_outputs] + [0], "int"))
+    out.append(extra)
     out.append("#endif\n\n#endif\n")
     return "".join(out)
 
@@ -184,52 +188,73 @@ def native_sources(kind, class_name: str, em, cm: CModel, layer, fmi_headers) ->
 
 
 def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, beside=None,
-                platforms: list[str] | None = None, finish=None) -> Path:
-    """Build ``out_dir/<class_name>.fmu`` with the native C backend for ``platforms`` (FMI platform
+                platforms: list[str] | None = None, finish=None, fmi: int = 2) -> Path:
+    """Build ``out_dir/<class_name>.fmu`` with the native C backend for ``platforms`` (platform
     folders of ``toolchain.PLATFORMS``; None: all), compiled in parallel; returns its path.
 
-    ``kind``: a ``latobs.packaging.FmuKind``. The Python runtime must accept ``data`` (the same
-    checks as the pythonfmu backend), then the model's emitter writes its C data. Raises
-    NativeBuildError when there is no C compiler or no C model for this runtime (see
-    :func:`unavailable_reason`) or the compiler fails, PackagingError when ``fmpy validate`` does.
-    ``base``, ``beside``, ``finish``: as in ``latobs.packaging.build_fmu``."""
+    ``fmi``: 2 (FMI 2.0, ``fmi2_layer.c``) or 3 (FMI 3.0, ``fmi3_layer.c`` and the description,
+    platform folders, terminals and gain arrays of :mod:`latobs.cbackend.fmi3`): the same model
+    file, data and ``fmu_config.h`` either way. ``kind``: a ``latobs.packaging.FmuKind``. The
+    Python runtime must accept ``data`` (the same checks as the pythonfmu backend), then the
+    model's emitter writes its C data. Raises NativeBuildError when there is no C compiler or no C
+    model for this runtime (see :func:`unavailable_reason`) or the compiler fails, PackagingError
+    when ``fmpy validate`` does. ``base``, ``beside``, ``finish``: as in
+    ``latobs.packaging.build_fmu``."""
     from ..packaging import COPYRIGHT, check_name, identity_file, install, seal_fmu
     from ..synthesis import design_file
-    from . import toolchain
+    from . import fmi3, toolchain
 
+    if fmi not in FMI_VERSIONS:
+        raise NativeBuildError(f"{class_name}: unknown FMI version {fmi!r} (known: {', '.join(map(str, FMI_VERSIONS))})")
     check_name(class_name)
     data = design_file.reproducible(data)       # no wall-clock figure enters an FMU
     platforms = platforms_of(platforms)
     spec, em, cm = native_model(kind, class_name, data, platforms)
-    sources, model_c = native_sources(kind, class_name, em, cm, LAYER, FMI_HEADERS)
-    c_files = ["fmi2_layer.c", model_c]
+    layer, headers = (LAYER, FMI_HEADERS) if fmi == 2 else (fmi3.LAYER, fmi3.FMI_HEADERS)
+    sources, model_c = native_sources(kind, class_name, em, cm, layer, headers)
+    c_files = [layer[0], model_c]
     sources["buildDescription.xml"] = _build_description(class_name, c_files)
     data_name = f"{class_name}.{kind.data_kind}.json"
     files = {f"sources/{name}": raw for name, raw in sources.items()}
     files[f"resources/{data_name}"] = design_file.dumps(data).encode("utf-8")
-    files.update(identity_file(data, "c", base, platforms))
+    files.update(identity_file(data, "c", base, platforms, fmi))
 
     native = _framework.NativeInterfaces(cm.states, cm.n_event_indicators, c_files, cm.dependencies)
-    tool = f"latobs {__version__} (native C backend)"
+    tool = f"latobs {__version__} (native C backend{', FMI 3.0' if fmi == 3 else ''})"
+    folders = platforms if fmi == 2 else fmi3.folders(platforms)
     from ..datasheet import files as datasheet_files   # documentation/index.html and model.png
 
-    files.update(datasheet_files(spec, data, class_name, data_kind=kind.data_kind, backend="c", platforms=platforms,
-                                 generation_tool=tool, copyright=COPYRIGHT, states=cm.states))
-    md = lambda guid: _framework.model_description(  # noqa: E731
-        spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT,
-        native=native)
+    files.update(datasheet_files(spec, data, class_name, data_kind=kind.data_kind, backend="c", platforms=folders,
+                                 generation_tool=tool, copyright=COPYRIGHT, states=cm.states, fmi=fmi))
+    try:
+        gains = fmi3.gain_arrays(em, data) if fmi == 3 else []
+        if fmi == 3:
+            files.update(fmi3.terminals_and_icons(spec, files["model.png"], plant=kind.data_kind == "plant"))
+    except ValueError as exc:
+        raise NativeBuildError(f"{class_name}: {exc}") from exc
+    if fmi == 2:
+        md = lambda guid: _framework.model_description(  # noqa: E731
+            spec, data, class_name, guid, version=__version__, generation_tool=tool, copyright=COPYRIGHT,
+            native=native)
+    else:
+        md = lambda token: fmi3.model_description(  # noqa: E731
+            spec, data, class_name, token, native=native, gains=gains, version=__version__, generation_tool=tool,
+            copyright=COPYRIGHT)
 
     def compiled(guid: str) -> dict[str, bytes]:
-        config = _config_header(spec, data, class_name, guid, cm).encode()
+        config = _config_header(spec, data, class_name, guid, cm, fmi3.config_tables(gains) if fmi == 3 else "")
+        config = config.encode()
         try:
             libraries = toolchain.compile_platforms({p: class_name + toolchain.SUFFIX[p] for p in platforms},
                                                     {**sources, "fmu_config.h": config}, c_files)
         except toolchain.ToolchainError as exc:
             raise NativeBuildError(f"{class_name}: {exc}") from exc
+        held = ({p: (toolchain.SUFFIX[p], raw) for p, raw in libraries.items()} if fmi == 2
+                else fmi3.binaries(libraries))
         return {"sources/fmu_config.h": config,
-                **{f"binaries/{p}/{class_name}{toolchain.SUFFIX[p]}": raw for p, raw in libraries.items()}}
+                **{f"binaries/{p}/{class_name}{suffix}": raw for p, (suffix, raw) in held.items()}}
 
-    # the compilers' identity and the platforms are part of what the binaries are made from
-    stamp = toolchain.describe() + b"\0" + ",".join(platforms).encode()
+    # the compilers' identity, the FMI version and the platforms are part of what the binaries are made from
+    stamp = toolchain.describe() + (b"\0fmi3" if fmi == 3 else b"") + b"\0" + ",".join(platforms).encode()
     return install(Path(out_dir), class_name, lambda tmp: seal_fmu(
         files, class_name, md, [], tmp, native=compiled, native_sources=stamp), beside, finish)

@@ -119,3 +119,11 @@ def _dependencies(tb: dict) -> dict:
     for out, parts in OUTPUT_BOUNDS.items():
         deps[out] = set().union(*({p} if p == "vx" else box(p[0], int(p[1])) for p in parts))
     return structure(deps)
+
+
+def gains(data: dict) -> list:
+    """The certified gains as the FMI 3.0 FMU's array constants (``latobs.cbackend.fmi3``): per mode
+    the observer gain K and the unknown-input matrix E (the design file's ``modes[i]``)."""
+    modes = data["modes"]
+    return [("K", "observer gain K of each mode (modes x states x measurements, SI)", [m["K"] for m in modes]),
+            ("E", "gain E of each mode (modes x states x measurements, SI)", [m["E"] for m in modes])]

@@ -63,3 +63,13 @@ def _dependencies(modes: list, measurements: list) -> dict:
     n = len(modes[0]["C"][0])
     deps["residual_norm"] = set(measurements) | nonzero(names[:n], *(row for m in modes for row in m["C"]))
     return structure(deps)
+
+
+def gains(data: dict) -> list:
+    """The certified gains as the FMI 3.0 FMU's array constants (``latobs.cbackend.fmi3``): per mode
+    the proportional L_P and integral L_I gains of the PI observer (the design file's ``modes[i].gains``)."""
+    modes = data["modes"]
+    return [("L_P", "proportional gain L_P of each mode (modes x states x measurements, SI)",
+             [m["gains"]["L_P"] for m in modes]),
+            ("L_I", "integral gain L_I of each mode (modes x unknown inputs x measurements, SI)",
+             [m["gains"]["L_I"] for m in modes])]

@@ -45,7 +45,8 @@ WINE_LOADERS = ("/usr/lib/wine/wine64", "wine64", "wine")
 QEMU_AARCH64 = ("qemu-aarch64", "qemu-aarch64-static")
 AARCH64_SYSROOT = Path("/usr/aarch64-linux-gnu")
 #: the one letter a variable type has in the host's CSV columns (r12: Real, value reference 12)
-TYPE_LETTER = {"Real": "r", "Integer": "i", "Enumeration": "i", "Boolean": "b"}
+TYPE_LETTER = {"Real": "r", "Integer": "i", "Enumeration": "i", "Boolean": "b",
+               "Float64": "r", "Int32": "i"}     # (FMI 3.0: scalar Float64, Int32, Boolean)
 #: fmi2Status values
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 
@@ -148,7 +149,8 @@ def _sources() -> dict[str, bytes]:
 
     headers = fmi2_headers()
     out = {"fmu_runner.c": SOURCE.read_bytes()}
-    for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
+    for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3Functions.h",
+              "fmi3FunctionTypes.h", "fmi3PlatformTypes.h"):
         out[h] = (headers / h).read_bytes()
     return out
 
@@ -253,11 +255,18 @@ def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mappi
     if md.coSimulation is None:
         raise RunnerError(f"{fmu.name}: no co-simulation interface")
     ident = md.coSimulation.modelIdentifier
-    lib_name = f"binaries/{platform}/{ident}{toolchain.SUFFIX[platform]}"
+    fmi3 = str(md.fmiVersion).startswith("3")
+    if fmi3:       # the FMI 3.0 folder of this platform's binaries (darwin64: two thin files, not run here)
+        from .fmi3 import FOLDERS
+
+        if len(FOLDERS[platform]) != 1:
+            raise RunnerError(f"{fmu.name}: the host does not run FMI 3.0 {platform} binaries")
+    folder = FOLDERS[platform][0] if fmi3 else platform
+    lib_name = f"binaries/{folder}/{ident}{toolchain.SUFFIX[platform]}"
     with zipfile.ZipFile(fmu) as z:
         names = set(z.namelist())
     if lib_name not in names:
-        raise RunnerError(f"{fmu.name} has no {platform} binary ({lib_name}): build it with "
+        raise RunnerError(f"{fmu.name} has no {folder} binary ({lib_name}): build it with "
                           f"latobs build --platforms {platform}")
     python_fmu = "resources/slavemodule.txt" in names
     preload = libpython() if python_fmu and platform == toolchain.host_platform() else None
@@ -270,7 +279,7 @@ def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mappi
         v = by_name.get(name)
         if v is None:
             raise RunnerError(f"{fmu.name} has no variable {name!r} ({what})")
-        if v.type not in TYPE_LETTER:
+        if v.type not in TYPE_LETTER or getattr(v, "dimensions", None):
             raise RunnerError(f"{fmu.name}: {what} {name!r} is of type {v.type}, which the host does not set or get")
         return f"{TYPE_LETTER[v.type]}{v.valueReference}"
 
@@ -293,14 +302,18 @@ def _invoke(fmu: Path, platform: str, mode: str, time: np.ndarray, inputs: Mappi
     exe = compile_runner(platform)
     with tempfile.TemporaryDirectory(prefix="latobs-run-", dir=workdir) as tmp:
         tmp = Path(tmp)
-        folder = tmp / "fmu"
+        unpacked = tmp / "fmu"
         with zipfile.ZipFile(fmu) as z:
-            z.extractall(folder)
+            z.extractall(unpacked)
         table = np.column_stack(columns)
         (tmp / "in.csv").write_text("time," + ",".join(var(n, "input") for n in in_names) + "\n"
                                     + "".join(",".join(map(_text, row)) + "\n" for row in table.tolist()))
         path, uri = _host_paths(platform)
-        args = [mode, path(folder / lib_name), uri(folder / "resources"), ident, md.guid, path(tmp / "in.csv"),
+        # FMI 3.0 takes the resources folder as a native path ending in a separator, FMI 2.0 as a URI
+        resources = path(unpacked / "resources") + ("\\" if platform == "win64" else "/") if fmi3 \
+            else uri(unpacked / "resources")
+        args = [("fmi3:" if fmi3 else "") + mode, path(unpacked / lib_name), resources, ident, md.guid,
+                path(tmp / "in.csv"),
                 path(tmp / "out.csv"), ",".join(out_vars) or "-", _text(step) if step else "-",
                 str(preload) if preload else "-", *sets]
         code, log, seconds = execute(platform, exe, args, timeout, f"{fmu.name} on {platform}")

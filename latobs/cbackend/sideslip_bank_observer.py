@@ -151,3 +151,13 @@ def _dependencies(tab: dict, mc, gc) -> dict:
         deps[out] = {names[i]} | nonzero(MEASURED[:3], tab["N"][i])
     deps["bank_angle_hat"] = {names[-1]}
     return structure(deps)
+
+
+def gains(data: dict) -> list:
+    """The certified gains as the FMI 3.0 FMU's array constants (``latobs.cbackend.fmi3``): per mode
+    the proportional K_P and integral K_I gains of the PI observer (the design file's ``modes[i].gains``)."""
+    modes = data["modes"]
+    return [("K_P", "proportional gain K_P of each mode (modes x observer states x measurements, SI)",
+             [m["gains"]["K_P"] for m in modes]),
+            ("K_I", "integral gain K_I of each mode (modes x estimated inputs x measurements, SI)",
+             [m["gains"]["K_I"] for m in modes])]

@@ -88,3 +88,14 @@ def _dependencies(bands, n: int) -> dict:
             | nonzero(["yaw_rate"], *([b["B"][i]] for b in bands)) for i in range(n)}
     deps["beta_hat"] = nonzero(z, *(b["C"] for b in bands)) | nonzero(["yaw_rate"], *([b["D"]] for b in bands))
     return structure(deps)
+
+
+def gains(data: dict) -> list:
+    """The certified estimator(s) as the FMI 3.0 FMU's array constants (``latobs.cbackend.fmi3``):
+    each band's transfer function beta^(s) / r(s), its numerator and denominator coefficients in
+    ascending powers of s (the design file's ``modes[i].estimator``)."""
+    modes = data["modes"]
+    return [("estimator_num", "numerator of each band's estimator beta^/r, ascending powers of s (bands x coefficients)",
+             [m["estimator"]["num"] for m in modes]),
+            ("estimator_den", "denominator of each band's estimator beta^/r, ascending powers of s "
+                              "(bands x coefficients)", [m["estimator"]["den"] for m in modes])]

@@ -25,3 +25,12 @@ def emit(data: dict) -> CModel:
         c_define("KF_VX_MAX", float(t["vx_max"])),
     ])
     return CModel(header=header)
+
+
+def gains(data: dict) -> list:
+    """The filter's tuning as the FMI 3.0 FMU's array constants (``latobs.cbackend.fmi3``): Q, R, P0
+    (the Kalman gain itself changes with the speed at every step)."""
+    t = data["tables"]
+    return [("Q", "process noise covariance Q (x = [vy, r], SI)", t["Q"]),
+            ("R", "measurement noise covariance R (y = [ay, r], SI)", t["R"]),
+            ("P0", "initial error covariance P0 (x = [vy, r], SI)", t["P0"])]

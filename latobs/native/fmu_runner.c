@@ -1,19 +1,22 @@
 /*
- * fmu_runner.c - a portable plain C FMI 2.0 co-simulation host (C99; POSIX or Windows, one code
+ * fmu_runner.c - a portable plain C FMI 2.0 and 3.0 co-simulation host (C99; POSIX or Windows, one code
  * path but the loader and the clock): runs an extracted FMU's binary on an input CSV and writes
  * its outputs, or times it. Compiled for each platform (zig cc), it proves an FMU's win64 binary
  * under Wine and its aarch64-linux binary under qemu give the linux64 numbers
  * (latobs.cbackend.runner); natively it is `latobs bench`'s host, with no Python in the loop.
  *
  * usage: fmu_runner MODE LIBRARY URI ID GUID IN.csv OUT.csv OUTPUTS STEP PRELOAD [VAR=VALUE...]
- *   MODE     run, or bench=REPEATS
- *   LIBRARY  the FMU's shared library for this platform; URI its resources folder (file:///...)
- *   ID, GUID the modelIdentifier and the guid
+ *   MODE     run, or bench=REPEATS; prefixed "fmi3:" for an FMI 3.0 FMU (fmi3InstantiateCoSimulation,
+ *            fmi3Get/SetFloat64, Int32, Boolean, fmi3DoStep; a step that asks to terminate the
+ *            simulation counts as an error), else FMI 2.0
+ *   LIBRARY  the FMU's shared library for this platform; URI its resources folder (FMI 2.0: a
+ *            file:/// URI; FMI 3.0: a native path ending in a separator)
+ *   ID, GUID the modelIdentifier and the guid (FMI 3.0: the instantiation token)
  *   IN.csv   header "time,VAR,..." then one row per communication point t_0 < ... < t_N; VAR is a
  *            type letter (r Real, i Integer, b Boolean) and a value reference, e.g. r12
  *   OUT.csv  run: header "time,status,OUTPUTS", then one row per communication point reached:
  *            the outputs at t_0 after initialisation and at t_k after the step from t_(k-1);
- *            status is the worst fmi2Status of the calls that led to the row. A row whose status
+ *            status is the worst status of the calls that led to the row. A row whose status
  *            is above fmi2Warning is the last (outputs read after fmi2Discard, else nan).
  *            bench: one JSON line (ns per step: best and median of REPEATS fresh instances)
  *   OUTPUTS  comma-separated VARs to write ("-": none)
@@ -40,6 +43,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "fmi3Functions.h"
 
 #define MAX_VARS 512
 #define TIMING_NS 2e7 /* ns: the length of one timing, about */
@@ -57,11 +61,18 @@ typedef struct { /* variables by type (0 Real, 1 Integer, 2 Boolean): value refs
 #define FMI_FUNCTIONS(X)                                                                                  \
     X(Instantiate) X(FreeInstance) X(SetupExperiment) X(EnterInitializationMode) X(ExitInitializationMode) \
     X(Terminate) X(DoStep) X(SetReal) X(SetInteger) X(SetBoolean) X(GetReal) X(GetInteger) X(GetBoolean)
+#define FMI3_FUNCTIONS(X)                                                                                      \
+    X(InstantiateCoSimulation) X(FreeInstance) X(EnterInitializationMode) X(ExitInitializationMode) X(Terminate) \
+    X(DoStep) X(SetFloat64) X(SetInt32) X(SetBoolean) X(GetFloat64) X(GetInt32) X(GetBoolean)
 #define DECLARE(name) fmi2##name##TYPE *name;
+#define DECLARE3(name) fmi3##name##TYPE *name;
 typedef struct { FMI_FUNCTIONS(DECLARE) } Api;
+typedef struct { FMI3_FUNCTIONS(DECLARE3) } Api3;
 
 typedef struct {
     Api api;
+    Api3 api3;
+    int fmi3; /* 1: an FMI 3.0 FMU (api3), else FMI 2.0 (api) */
     const char *uri, *id, *guid;
     double step, *rows, *params; /* rows: n rows of [time, inputs...] */
     size_t n, width, n_out;
@@ -91,6 +102,12 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
 }
 
 static const fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+
+static void logger3(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category, fmi3String message)
+{
+    (void)env;
+    fprintf(stderr, "[fmi3] status %d %s: %s\n", (int)status, category ? category : "", message ? message : "");
+}
 
 static void *load(const char *path, int global)
 {
@@ -154,51 +171,98 @@ static int add_var(Vars *v, const char *tok, size_t col)
     return *end == '\0' || *end == '=';
 }
 
-static fmi2Status set_vars(const Api *a, fmi2Component c, const Vars *v, const double *x)
+/* Statuses: FMI 2.0's and 3.0's OK, Warning, Discard, Error, Fatal are 0..4 alike (fmi2Status). */
+static fmi2Status set_vars(const Run *run, void *c, const Vars *v, const double *x)
 {
     fmi2Real r[MAX_VARS];
     fmi2Integer i[MAX_VARS];
     fmi2Boolean b[MAX_VARS];
+    fmi3Boolean b3[MAX_VARS];
     fmi2Status s = fmi2OK;
+    const Api *a = &run->api;
+    const Api3 *a3 = &run->api3;
     for (size_t k = 0; k < v->n[0]; k++) r[k] = x[v->col[0][k]];
     for (size_t k = 0; k < v->n[1]; k++) i[k] = isfinite(x[v->col[1][k]]) ? (fmi2Integer)x[v->col[1][k]] : 0;
-    for (size_t k = 0; k < v->n[2]; k++) b[k] = x[v->col[2][k]] != 0.0;
+    for (size_t k = 0; k < v->n[2]; k++) b[k] = x[v->col[2][k]] != 0.0, b3[k] = b[k] != 0;
+    if (run->fmi3) {
+        if (v->n[0]) WORSE(s, (fmi2Status)a3->SetFloat64(c, v->vr[0], v->n[0], r, v->n[0]));
+        if (v->n[1]) WORSE(s, (fmi2Status)a3->SetInt32(c, v->vr[1], v->n[1], i, v->n[1]));
+        if (v->n[2]) WORSE(s, (fmi2Status)a3->SetBoolean(c, v->vr[2], v->n[2], b3, v->n[2]));
+        return s;
+    }
     if (v->n[0]) WORSE(s, a->SetReal(c, v->vr[0], v->n[0], r));
     if (v->n[1]) WORSE(s, a->SetInteger(c, v->vr[1], v->n[1], i));
     if (v->n[2]) WORSE(s, a->SetBoolean(c, v->vr[2], v->n[2], b));
     return s;
 }
 
-static fmi2Status get_vars(const Api *a, fmi2Component c, const Vars *v, double *y)
+static fmi2Status get_vars(const Run *run, void *c, const Vars *v, double *y)
 {
     fmi2Real r[MAX_VARS];
     fmi2Integer i[MAX_VARS];
     fmi2Boolean b[MAX_VARS];
+    fmi3Boolean b3[MAX_VARS];
     fmi2Status s = fmi2OK;
-    if (v->n[0]) WORSE(s, a->GetReal(c, v->vr[0], v->n[0], r));
-    if (v->n[1]) WORSE(s, a->GetInteger(c, v->vr[1], v->n[1], i));
-    if (v->n[2]) WORSE(s, a->GetBoolean(c, v->vr[2], v->n[2], b));
+    const Api *a = &run->api;
+    const Api3 *a3 = &run->api3;
+    if (run->fmi3) {
+        if (v->n[0]) WORSE(s, (fmi2Status)a3->GetFloat64(c, v->vr[0], v->n[0], r, v->n[0]));
+        if (v->n[1]) WORSE(s, (fmi2Status)a3->GetInt32(c, v->vr[1], v->n[1], i, v->n[1]));
+        if (v->n[2]) WORSE(s, (fmi2Status)a3->GetBoolean(c, v->vr[2], v->n[2], b3, v->n[2]));
+        for (size_t k = 0; k < v->n[2]; k++) b[k] = b3[k] ? fmi2True : fmi2False;
+    } else {
+        if (v->n[0]) WORSE(s, a->GetReal(c, v->vr[0], v->n[0], r));
+        if (v->n[1]) WORSE(s, a->GetInteger(c, v->vr[1], v->n[1], i));
+        if (v->n[2]) WORSE(s, a->GetBoolean(c, v->vr[2], v->n[2], b));
+    }
     for (size_t k = 0; k < v->n[0]; k++) y[v->col[0][k]] = r[k];
     for (size_t k = 0; k < v->n[1]; k++) y[v->col[1][k]] = (double)i[k];
     for (size_t k = 0; k < v->n[2]; k++) y[v->col[2][k]] = b[k] ? 1.0 : 0.0;
     return s;
 }
 
-static fmi2Component start(const Run *r, fmi2Status *s)
+static fmi2Status do_step(const Run *r, void *c, double t, double h)
+{
+    if (!r->fmi3) return r->api.DoStep(c, t, h, fmi2True);
+    fmi3Boolean event = fmi3False, terminate = fmi3False, early = fmi3False;
+    fmi3Float64 last = t;
+    fmi2Status s = (fmi2Status)r->api3.DoStep(c, t, h, fmi3True, &event, &terminate, &early, &last);
+    return terminate && s < fmi2Error ? fmi2Error : s; /* asked to terminate: no further step */
+}
+
+static void *start(const Run *r, fmi2Status *s)
 {
     const Api *a = &r->api;
-    fmi2Component c = a->Instantiate(r->id, fmi2CoSimulation, r->guid, r->uri, &callbacks, fmi2False, fmi2True);
+    const Api3 *a3 = &r->api3;
+    double t0 = r->rows[0], t1 = r->rows[(r->n - 1) * r->width];
+    void *c;
+    if (r->fmi3) {
+        c = a3->InstantiateCoSimulation(r->id, r->guid, r->uri, fmi3False, fmi3True, fmi3False, fmi3False, NULL, 0,
+                                        NULL, logger3, NULL);
+        if (c == NULL) die(1, "fmi3InstantiateCoSimulation returned NULL");
+        *s = set_vars(r, c, &r->par, r->params);
+        if (*s <= fmi2Warning) WORSE(*s, (fmi2Status)a3->EnterInitializationMode(c, fmi3False, 0.0, t0, fmi3True, t1));
+        if (*s <= fmi2Warning) WORSE(*s, set_vars(r, c, &r->in, r->rows));
+        if (*s <= fmi2Warning) WORSE(*s, (fmi2Status)a3->ExitInitializationMode(c));
+        return c;
+    }
+    c = a->Instantiate(r->id, fmi2CoSimulation, r->guid, r->uri, &callbacks, fmi2False, fmi2True);
     if (c == NULL) die(1, "fmi2Instantiate returned NULL");
-    *s = a->SetupExperiment(c, fmi2False, 0.0, r->rows[0], fmi2True, r->rows[(r->n - 1) * r->width]);
-    if (*s <= fmi2Warning) WORSE(*s, set_vars(a, c, &r->par, r->params));
+    *s = a->SetupExperiment(c, fmi2False, 0.0, t0, fmi2True, t1);
+    if (*s <= fmi2Warning) WORSE(*s, set_vars(r, c, &r->par, r->params));
     if (*s <= fmi2Warning) WORSE(*s, a->EnterInitializationMode(c));
-    if (*s <= fmi2Warning) WORSE(*s, set_vars(a, c, &r->in, r->rows));
+    if (*s <= fmi2Warning) WORSE(*s, set_vars(r, c, &r->in, r->rows));
     if (*s <= fmi2Warning) WORSE(*s, a->ExitInitializationMode(c));
     return c;
 }
 
-static void stop(const Run *r, fmi2Component c, fmi2Status s)
+static void stop(const Run *r, void *c, fmi2Status s)
 {
+    if (r->fmi3) {
+        if (s <= fmi2Warning) r->api3.Terminate(c);
+        if (s < fmi2Fatal) r->api3.FreeInstance(c);
+        return;
+    }
     if (s <= fmi2Warning) r->api.Terminate(c);
     if (s < fmi2Fatal) r->api.FreeInstance(c);
 }
@@ -212,21 +276,20 @@ static void put(FILE *f, double x)
 
 static void run(const Run *r, FILE *f)
 {
-    const Api *a = &r->api;
     double y[MAX_VARS];
     fmi2Status s;
-    fmi2Component c = start(r, &s);
+    void *c = start(r, &s);
     for (size_t k = 0;; k++) {
         const double *row = r->rows + k * r->width;
         for (size_t j = 0; j < r->n_out; j++) y[j] = NAN;
-        if (s <= fmi2Discard) WORSE(s, get_vars(a, c, &r->out, y));
+        if (s <= fmi2Discard) WORSE(s, get_vars(r, c, &r->out, y));
         put(f, row[0]);
         fprintf(f, ",%d", (int)s);
         for (size_t j = 0; j < r->n_out; j++) fputc(',', f), put(f, y[j]);
         fputc('\n', f);
         if (s > fmi2Warning || k + 1 == r->n) break;
-        s = set_vars(a, c, &r->in, row);
-        if (s <= fmi2Warning) WORSE(s, a->DoStep(c, row[0], r->step > 0 ? r->step : row[r->width] - row[0], fmi2True));
+        s = set_vars(r, c, &r->in, row);
+        if (s <= fmi2Warning) WORSE(s, do_step(r, c, row[0], r->step > 0 ? r->step : row[r->width] - row[0]));
     }
     stop(r, c, s);
 }
@@ -241,18 +304,17 @@ static int by_value(const void *a, const void *b)
  * `passes` times; full: set + step + get, else doStep alone (the last row's inputs held) */
 static void time_steps(const Run *r, int full, size_t passes, int repeats, double *times)
 {
-    const Api *a = &r->api;
     double y[MAX_VARS], h = r->step > 0 ? r->step : r->rows[r->width] - r->rows[0];
     size_t steps = r->n - 1, total = steps * passes;
     for (int rep = 0; rep < repeats; rep++) {
         fmi2Status s;
-        fmi2Component c = start(r, &s);
-        if (!full) WORSE(s, set_vars(a, c, &r->in, r->rows + (steps - 1) * r->width));
+        void *c = start(r, &s);
+        if (!full) WORSE(s, set_vars(r, c, &r->in, r->rows + (steps - 1) * r->width));
         double t0 = now_ns();
         for (size_t k = 0, row = 0; k < total; k++, row = (row + 1 == steps) ? 0 : row + 1) {
-            if (full) WORSE(s, set_vars(a, c, &r->in, r->rows + row * r->width));
-            WORSE(s, a->DoStep(c, r->rows[0] + (double)k * h, h, fmi2True));
-            if (full) WORSE(s, get_vars(a, c, &r->out, y));
+            if (full) WORSE(s, set_vars(r, c, &r->in, r->rows + row * r->width));
+            WORSE(s, do_step(r, c, r->rows[0] + (double)k * h, h));
+            if (full) WORSE(s, get_vars(r, c, &r->out, y));
         }
         times[rep] = (now_ns() - t0) / (double)total;
         stop(r, c, s);
@@ -311,8 +373,11 @@ int main(int argc, char **argv)
     static Run r;
     static double params[MAX_VARS];
     if (argc < 11) die(2, "usage: %s run|bench=N LIBRARY URI ID GUID IN.csv OUT.csv OUTPUTS STEP PRELOAD [VAR=VALUE...]", argv[0]);
-    int repeats = strncmp(argv[1], "bench=", 6) == 0 ? atoi(argv[1] + 6) : 0;
-    if (strcmp(argv[1], "run") != 0 && repeats < 1) die(2, "MODE: run or bench=REPEATS (REPEATS > 0)");
+    const char *mode = argv[1];
+    r.fmi3 = strncmp(mode, "fmi3:", 5) == 0;
+    mode += r.fmi3 ? 5 : 0;
+    int repeats = strncmp(mode, "bench=", 6) == 0 ? atoi(mode + 6) : 0;
+    if (strcmp(mode, "run") != 0 && repeats < 1) die(2, "MODE: [fmi3:]run or [fmi3:]bench=REPEATS (REPEATS > 0)");
     r.uri = argv[3];
     r.id = argv[4];
     r.guid = argv[5];
@@ -334,8 +399,14 @@ int main(int argc, char **argv)
     void *lib = load(argv[2], 0);
     if (lib == NULL) die(1, "cannot load the FMU's library %s", argv[2]);
     Api *a = &r.api;
+    Api3 *a3 = &r.api3;
 #define LOAD(name) sym(lib, "fmi2" #name, &a->name);
-    FMI_FUNCTIONS(LOAD)
+#define LOAD3(name) sym(lib, "fmi3" #name, &a3->name);
+    if (r.fmi3) {
+        FMI3_FUNCTIONS(LOAD3)
+    } else {
+        FMI_FUNCTIONS(LOAD)
+    }
     FILE *f = fopen(argv[7], "w");
     if (f == NULL) die(2, "cannot write %s", argv[7]);
     if (repeats) {

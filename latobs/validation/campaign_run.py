@@ -38,12 +38,14 @@ def declared_variables(path: str | os.PathLike) -> dict[str, Declared]:
     variable or, when it has none, from its declared type."""
     from fmpy import read_model_description
 
+    from .instance import fmi_type
+
     def num(x):
         return None if x in (None, "") else float(x)
 
     out = {}
     for v in read_model_description(str(path)).modelVariables:
-        if v.type not in ("Real", "Integer"):
+        if fmi_type(v) not in ("Real", "Integer"):
             continue
         t = v.declaredType
         lo = v.min if v.min not in (None, "") else getattr(t, "min", None)

@@ -1,5 +1,11 @@
-"""One FMI 2.0 co-simulation FMU loaded through fmpy: extraction, model description, value
-references, instantiation and initialisation, typed get/set, logging, unloading.
+"""One FMI 2.0 or FMI 3.0 co-simulation FMU loaded through fmpy: extraction, model description,
+value references, instantiation and initialisation, typed get/set, logging, unloading.
+
+Both versions are driven alike: a variable's FMI 3.0 type is read as its FMI 2.0 call family
+(Float64 as Real, Int32 as Integer; :func:`fmi_type`), the calls are the version's own
+(``fmi3SetFloat64`` with its ``nValues``, ``fmi3DoStep`` with its event flags, ...). An FMI 3.0
+FMU's array variables and variables of other types are not driven (none is an input or output of
+a latobs FMU; an FMU with such an input is refused naming it).
 
 The FMU's Python internals (if any) are never imported: everything goes through the FMI calls of
 the binary fmpy loads, so a pythonfmu FMU and a native C FMU are driven the same way. Also reads
@@ -30,6 +36,10 @@ from fmpy.fmi2 import (
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 MAX_LOG_MESSAGES = 10_000  # per FMU; further messages are counted, not stored
 FMI_TYPES = ("Real", "Integer", "Boolean")   # how values cross the FMI 2 boundary (Enumeration as Integer)
+#: FMI 3.0 type -> the FMI 2.0 call family it is driven as (the types of the harness's signals)
+FMI3_FAMILY = {"Float64": "Real", "Int32": "Integer", "Enumeration": "Integer"}
+#: FMI 2.0 call family -> the FMI 3.0 functions' type name
+FMI3_CALL = {"Real": "Float64", "Integer": "Int32"}
 
 
 class WiringError(ValueError):
@@ -41,8 +51,16 @@ class CoSimulationError(RuntimeError):
 
 
 def fmi_type(v) -> str:
-    """The FMI 2 call family of a model variable: "Real", "Integer" (also Enumeration) or "Boolean"."""
-    return "Integer" if v.type == "Enumeration" else v.type
+    """The FMI 2 call family of a model variable: "Real", "Integer" (also Enumeration) or "Boolean";
+    an FMI 3.0 scalar Float64 "Real", Int32 or Enumeration "Integer", anything else its own type."""
+    if getattr(v, "dimensions", None):
+        return "array"
+    return FMI3_FAMILY.get(v.type) or ("Integer" if v.type == "Enumeration" else v.type)
+
+
+def fmi_version(md) -> int:
+    """2 or 3: the major FMI version of a model description read by fmpy."""
+    return 3 if str(md.fmiVersion).startswith("3") else 2
 
 
 def _unit_of(v) -> str | None:
@@ -85,17 +103,20 @@ class FmuInstance:
             raise WiringError(f"FMU {label!r} ({path}): cannot read its modelDescription.xml: {exc}") from exc
         if self.md.coSimulation is None:
             raise WiringError(f"FMU {label!r} ({path.name}) has no co-simulation interface")
+        self.fmi = fmi_version(self.md)
+        driven = FMI_TYPES if self.fmi == 2 else tuple(FMI3_CALL)
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.inputs = [v for v in self.md.modelVariables if v.causality == "input"]
-        self.outputs = [v for v in self.md.modelVariables
-                        if v.causality == "output" and v.type in ("Real", "Integer", "Boolean", "Enumeration")]
+        self.outputs = [v for v in self.md.modelVariables if v.causality == "output" and fmi_type(v) in driven]
         for v in self.inputs:
-            if v.type not in ("Real", "Integer", "Boolean", "Enumeration"):
-                raise WiringError(f"FMU {label!r} ({path.name}): input {v.name!r} has type {v.type}, "
-                                  "which the harness cannot drive (Real, Integer, Boolean only)")
+            if fmi_type(v) not in driven:
+                raise WiringError(f"FMU {label!r} ({path.name}): input {v.name!r} has type {v.type}"
+                                  f"{' (an array)' if fmi_type(v) == 'array' else ''}, which the harness cannot "
+                                  f"drive ({'Real, Integer, Boolean' if self.fmi == 2 else 'scalar Float64, Int32'}"
+                                  " only)")
         self.logs: list[str] = []
         self.dropped_logs = 0
-        self.slave: FMU2Slave | None = None
+        self.slave = None   # fmpy's FMU2Slave or FMU3Slave
         self.instantiated = False
         self.initialized = False
 
@@ -120,6 +141,8 @@ class FmuInstance:
             pass
 
     def instantiate(self):
+        if self.fmi == 3:
+            return self._instantiate3()
         self.callbacks = fmi2CallbackFunctions()
         # fmpy's native logger proxy (it formats the printf-style variadic messages) keeps ONE
         # process-wide pointer to the last logger registered: every FMU's messages reach the
@@ -143,6 +166,29 @@ class FmuInstance:
         self.slave.instantiate(callbacks=self.callbacks, loggingOn=True)
         self.instantiated = True
 
+    def _instantiate3(self):
+        """FMI 3.0: fmpy's FMU3Slave with a logger of this instance (FMI 3.0's logger takes no
+        variadic arguments: fmpy keeps one callback per instance, no process-wide proxy needed)."""
+        from fmpy.fmi3 import FMU3Slave
+
+        def log(env, status, category, message):
+            self._log(env, None, status, category, message)
+
+        self.slave = FMU3Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.label)
+        self.slave.instantiate(loggingOn=True, logMessage=log)
+        self.instantiated = True
+
+    def do_step(self, t: float, h: float) -> None:
+        """One communication step from ``t`` of ``h`` seconds (fmi2DoStep or fmi3DoStep); fmpy
+        raises for an error status. An FMI 3.0 FMU that asks to terminate is an error here."""
+        if self.fmi == 2:
+            self.slave.doStep(t, h)
+            return
+        _, terminate, _, _ = self.slave.doStep(t, h)
+        if terminate:
+            raise RuntimeError(f"{self.describe()}: fmi3DoStep at t = {t:.6g} s asked to terminate the simulation")
+
     def start(self, inputs: Mapping[str, float] | None = None, parameters: Mapping[str, Any] | None = None,
               start_time: float = 0.0, stop_time: float | None = None) -> dict[str, float]:
         """Instantiate and initialise, as every latobs host does: prebuilt I/O for all inputs,
@@ -153,12 +199,16 @@ class FmuInstance:
         try:
             self.instantiate()
             self.prepare_io([v.name for v in self.inputs])
-            stage = "setupExperiment"
-            self.slave.setupExperiment(startTime=start_time, stopTime=stop_time)
+            if self.fmi == 2:
+                stage = "setupExperiment"
+                self.slave.setupExperiment(startTime=start_time, stopTime=stop_time)
             stage = "setting parameters"
             self.set_parameters(parameters or {})
             stage = "enterInitializationMode"
-            self.slave.enterInitializationMode()
+            if self.fmi == 2:
+                self.slave.enterInitializationMode()
+            else:
+                self.slave.enterInitializationMode(startTime=start_time, stopTime=stop_time)
             self.initialized = True
             stage = "setting inputs"
             if inputs:
@@ -175,6 +225,13 @@ class FmuInstance:
         """Group inputs and outputs by type with ctypes arrays built once."""
         self.in_groups = _groups([self.vars[n] for n in input_names])
         self.out_groups = _groups(self.outputs)
+        s = self.slave
+        if self.fmi == 2:
+            self._setter = {t: getattr(s, "fmi2Set" + t) for t in FMI_TYPES}
+            self._getter = {t: getattr(s, "fmi2Get" + t) for t in FMI_TYPES}
+        else:   # (component, vr, n, values, nValues = n): every driven variable is a scalar
+            self._setter = {t: _with_n(getattr(s, "fmi3Set" + c)) for t, c in FMI3_CALL.items()}
+            self._getter = {t: _with_n(getattr(s, "fmi3Get" + c)) for t, c in FMI3_CALL.items()}
 
     def set_inputs(self, values: Mapping[str, float]):
         """Set the prepared inputs from ``values`` {name: value}. A prepared input absent from
@@ -189,7 +246,7 @@ class FmuInstance:
                 names, vr, buf = self._subset(typ, names, vr, values)
                 if not names:
                     continue
-            getattr(s, "fmi2Set" + typ)(s.component, vr, len(names), buf)
+            self._setter[typ](s.component, vr, len(names), buf)
 
     @staticmethod
     def _subset(typ, names, vr, values):
@@ -204,7 +261,7 @@ class FmuInstance:
         s = self.slave
         out = {}
         for typ, (names, vr, buf) in self.out_groups.items():
-            getattr(s, "fmi2Get" + typ)(s.component, vr, len(names), buf)
+            self._getter[typ](s.component, vr, len(names), buf)
             out.update(zip(names, buf))
         return out
 
@@ -220,7 +277,14 @@ class FmuInstance:
         self.check_parameters(params)
         for name, value in params.items():
             v = self.vars[name]
-            if v.type == "Real":
+            if self.fmi == 3:
+                typ = fmi_type(v)
+                if typ not in FMI3_CALL:
+                    raise WiringError(f"{self.describe()}: parameter {name!r} has type {v.type}, which the "
+                                      "harness does not set (scalar Float64, Int32 only)")
+                getattr(self.slave, "set" + FMI3_CALL[typ])([v.valueReference],
+                                                           [float(value) if typ == "Real" else int(value)])
+            elif v.type == "Real":
                 self.slave.setReal([v.valueReference], [float(value)])
             elif v.type in ("Integer", "Enumeration"):
                 self.slave.setInteger([v.valueReference], [int(value)])
@@ -263,6 +327,8 @@ class FmuInstance:
         fmpy's ``FMU2Slave`` wrappers (argument conversion, status check), the reference of the
         direct calls. Either way a call returns its fmi2Status."""
         s = self.slave
+        if self.fmi == 3:
+            return self._row_calls3(checked)
         if not checked:
             dll = s.dll
             return RowCalls(s.component, {t: _ROW(("fmi2Set" + t, dll)) for t in FMI_TYPES},
@@ -272,9 +338,48 @@ class FmuInstance:
                         _checked_step(s.fmi2DoStep))
 
 
+    def _row_calls3(self, checked: bool) -> "RowCalls":
+        """:meth:`row_calls` of an FMI 3.0 FMU: the same signatures, nValues = n added and
+        fmi3DoStep's event flags taken (a request to terminate is an error status)."""
+        s = self.slave
+        if checked:
+            sets = {t: _checked(_with_n(getattr(s, "fmi3Set" + c)), _CTYPE[t]) for t, c in FMI3_CALL.items()}
+            gets = {t: _checked(_with_n(getattr(s, "fmi3Get" + c)), _CTYPE[t]) for t, c in FMI3_CALL.items()}
+
+            def step(c, t, h, no_prior):
+                try:
+                    self.do_step(t, h)
+                    return 0
+                except Exception as exc:
+                    return _status(exc)
+            return RowCalls(s.component, sets, gets, step)
+        dll = s.dll
+        raw_set = {t: _ROW3(("fmi3Set" + c, dll)) for t, c in FMI3_CALL.items()}
+        raw_get = {t: _ROW3(("fmi3Get" + c, dll)) for t, c in FMI3_CALL.items()}
+        raw_step = _DOSTEP3(("fmi3DoStep", dll))
+        flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
+        refs = [ctypes.byref(x) for x in flags]
+
+        def step_fast(c, t, h, no_prior):
+            status = raw_step(c, t, h, no_prior, *refs)
+            return status if status > 1 or not flags[1].value else 3   # terminateSimulation: an error here
+        return RowCalls(s.component, {t: (lambda f: lambda c, vr, n, v: f(c, vr, n, v, n))(f) for t, f in raw_set.items()},
+                        {t: (lambda f: lambda c, vr, n, v: f(c, vr, n, v, n))(f) for t, f in raw_get.items()},
+                        step_fast)
+
+
+def _with_n(fn):
+    """An FMI 3.0 get/set function called as its FMI 2.0 form: (c, vr, n, values) -> fn(..., n)."""
+    return lambda c, vr, n, values: fn(c, vr, n, values, n)
+
+
 _CTYPE = {"Real": fmi2Real, "Integer": fmi2Integer, "Boolean": fmi2Boolean}
 _ROW = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
 _DOSTEP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
+_ROW3 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p,
+                         ctypes.c_size_t)
+_DOSTEP3 = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_bool,
+                            ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p)
 
 
 class RowCalls(NamedTuple):

@@ -409,7 +409,7 @@ class CoSimulation:
         for (lab, f), o in zip(observers.items(), ports[1:]):
             cols = o.columns(o.outputs)
             obs_rec[lab] = {v.name: o.outputs[cols[v.name][0]][2][:, cols[v.name][1]].astype(
-                float if v.type == "Real" else np.int64) for v in f.outputs}
+                float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
 
         logs = {}
         for f in [plant, *observers.values()]:

@@ -177,6 +177,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
     input; see the module docstring for the timing). ``source`` names the data in errors.
     ``unzipdir``: the folder the FMU is already extracted to (kept), else a temporary one."""
     from .harness import FmuInstance, WiringError, _unit_of, observer_design
+    from .instance import fmi_type
 
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
@@ -198,7 +199,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
         check_record(data, [InputSpec(v.name, _unit_of(v), v.min, v.max) for v in f.inputs], source, f.describe())
         units = {v.name: u for v in f.md.modelVariables if (u := _unit_of(v)) and v.causality in ("input", "output")}
         n = t.size
-        rec = {v.name: np.zeros(n, dtype=float if v.type == "Real" else np.int64) for v in f.outputs}
+        rec = {v.name: np.zeros(n, dtype=float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
         rows = [dict(zip(in_names, r)) for r in zip(*(cols[x].tolist() for x in in_names))] if in_names \
             else [{} for _ in range(n)]
 
@@ -214,7 +215,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
                 rec[name][k] = val
 
         record(0, call("initialisation", 0, f.start, rows[0], None, float(t[0]), float(t[-1])))
-        set_inputs, do_step, get_outputs = f.set_inputs, f.slave.doStep, f.get_outputs
+        set_inputs, do_step, get_outputs = f.set_inputs, f.do_step, f.get_outputs
         tl = t.tolist()
         for k in range(n - 1):
             what = "setting inputs"
