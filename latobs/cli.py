@@ -98,9 +98,11 @@ def _cmd_build(args) -> int:
     if args.platforms is not None and args.backend == "python":
         raise CliError("--platforms chooses the native FMUs' platforms; the pythonfmu backend (--backend python) "
                        "ships pythonfmu's binaries")
+    if 3 in args.fmi and args.backend == "python":
+        raise CliError("--fmi 3 makes native FMUs; the pythonfmu backend (--backend python) makes FMI 2.0 FMUs only")
     # with the summary on stdout, the progress lines go to stderr so that stdout is the JSON alone
     with contextlib.redirect_stdout(sys.stderr) if to_stdout else contextlib.nullcontext():
-        built = build(args.names, args.vehicle, Path(args.out), args.backend, platforms=args.platforms)
+        built = build(args.names, args.vehicle, Path(args.out), args.backend, platforms=args.platforms, fmi=args.fmi)
     if args.json is not None:
         from .atomic import locked_folder
 
@@ -322,7 +324,19 @@ def _vehicle(text: str) -> str:
 
 
 PLATFORMS_HELP = ("comma-separated FMI platform folders, `host`, or `all`{default}: linux64, win64, darwin64 "
-                  "(x86-64 + arm64), aarch64-linux")
+                  "(x86-64 + arm64), aarch64-linux (FMI 3.0 spellings too: x86_64-linux, x86_64-windows, "
+                  "x86_64-darwin, aarch64-darwin)")
+
+
+def _fmi_versions(text: str) -> list[int]:
+    """``--fmi``: "2", "3" or "2,3"."""
+    try:
+        out = sorted({int(t) for t in text.split(",") if t.strip()})
+    except ValueError:
+        out = []
+    if not out or any(v not in (2, 3) for v in out):
+        raise argparse.ArgumentTypeError(f"--fmi takes 2, 3 or 2,3 (got {text!r})")
+    return out
 
 
 def _platforms(text: str) -> list[str]:
@@ -429,6 +443,10 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--platforms", type=_platforms, default=None, metavar="LIST",
                    help="the native FMUs' binaries: " + PLATFORMS_HELP.format(default=" (default)")
                         + ". Not with --backend python (pythonfmu ships its own binaries)")
+    b.add_argument("--fmi", type=_fmi_versions, default=[2], metavar="2|3|2,3",
+                   help="the FMI version(s) of the FMUs (default 2): FMI 3.0 FMUs (native C, co-simulation and "
+                        "model exchange) go to DIR/fmi3 under the same names, with their design files. Not 3 with "
+                        "--backend python (pythonfmu makes FMI 2.0 FMUs only)")
     b.set_defaults(func=_cmd_build)
     v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
     v.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")

@@ -74,6 +74,7 @@ class _Artefact:
     fmu: Path
     platforms: list[str] | None = None   # native FMUs: the platform folders it holds binaries for
     reference: str = ""         # identity of its reference results (:func:`reference_identity`)
+    fmi: int = 2                # the FMI version (3: native only)
 
     @property
     def design_path(self) -> Path | None:
@@ -91,7 +92,7 @@ class _Artefact:
 
         if not self.fmu.is_file():
             return False, f"building {self.fmu.name}"
-        expected = identity.of_fmu(self.base, self.backend, self.platforms)
+        expected = identity.of_fmu(self.base, self.backend, self.platforms, self.fmi)
         found = identity.read_fmu(self.fmu)
         if found is None or found.sha256 != expected.sha256:
             return False, f"rebuilding {self.fmu.name}: {expected.changes(found)}"
@@ -114,7 +115,7 @@ class _Artefact:
 
 
 def _plan(names: list[str], vehicle, out: Path, backend: str, platforms: list[str] | None = None,
-          host_suffices: bool = False) -> list[_Artefact]:
+          host_suffices: bool = False, fmi: int = 2) -> list[_Artefact]:
     """The artefacts of a build: names checked, identities known, backends and platforms chosen.
     "auto" keeps the backend of an FMU already in ``out`` (when it can be built here); an explicit
     backend that differs from an existing FMU's is refused (a folder never mixes two backends' FMUs
@@ -149,8 +150,11 @@ def _plan(names: list[str], vehicle, out: Path, backend: str, platforms: list[st
             held = _platforms_held(fmu) if host_suffices and existing == "c" else None
             if held and toolchain.host_platform() in held:
                 planned = held
+        if fmi != 2 and chosen != "c":
+            raise PipelineError(f"{name}: FMI {fmi}.0 FMUs are native (the C backend), and "
+                                + (why or "the pythonfmu backend was asked for") + " (pythonfmu makes FMI 2.0 FMUs only)")
         plans.append(_Artefact(name, artefact, vehicle, base, chosen, why, fmu, planned,
-                               reference_identity(name, vehicle, chosen)))
+                               reference_identity(name, vehicle, chosen, fmi), fmi))
     if conflicts:
         raise PipelineError(f"{'; '.join(conflicts)}: refusing to replace {'it' if len(conflicts) == 1 else 'them'} "
                             f"with {BACKEND_LABEL[backend]} FMUs of the same name; build into another --out "
@@ -168,15 +172,28 @@ def _platforms_held(fmu: Path) -> list[str] | None:
 
 
 def current(name: str, vehicle: str | None, out: Path, backend: str = "auto",
-            platforms: list[str] | None = None, host_suffices: bool = False) -> bool:
-    """Whether ``out`` holds the FMU ``name`` (catalogue design or plant) for ``vehicle`` as
-    :func:`build` would make it now (and would reuse it)."""
-    plan = _plan([name], vehicle, Path(out), backend, platforms, host_suffices)[0]
+            platforms: list[str] | None = None, host_suffices: bool = False, fmi: int = 2) -> bool:
+    """Whether ``out`` (for FMI 3.0: ``out/fmi3``) holds the FMU ``name`` (catalogue design or
+    plant) for ``vehicle`` as :func:`build` would make it now (and would reuse it)."""
+    plan = _plan([name], vehicle, fmi_folder(Path(out), fmi), backend, platforms, host_suffices, fmi)[0]
     return plan.current(design_file_needed=False)[0]
 
 
+#: where the FMUs of each FMI version go in a build's ``out``: FMI 2.0 in ``out`` itself, FMI 3.0 in
+#: ``out/fmi3`` (the same names: an FMI 3.0 FMU never overwrites its FMI 2.0 twin)
+FMI_FOLDER = {2: "", 3: "fmi3"}
+
+
+def fmi_folder(out: Path, fmi: int) -> Path:
+    """The folder of ``out`` holding the FMI ``fmi`` FMUs (:data:`FMI_FOLDER`)."""
+    if fmi not in FMI_FOLDER:
+        raise PipelineError(f"unknown FMI version {fmi!r} (known: {', '.join(map(str, FMI_FOLDER))})")
+    return Path(out) / FMI_FOLDER[fmi] if FMI_FOLDER[fmi] else Path(out)
+
+
 def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str = "auto",
-          design_files: bool = True, platforms: list[str] | None = None, host_suffices: bool = False) -> list[Path]:
+          design_files: bool = True, platforms: list[str] | None = None, host_suffices: bool = False,
+          fmi: int | list[int] = 2) -> list[Path]:
     """Design + package the named FMUs (default: every observer and plant) with ``backend``:
     "c" (native, ``latobs.cbackend``), "python" (pythonfmu) or "auto" (the backend of the FMU
     already there, else C where a C compiler is present and the runtime has a C model, else
@@ -192,7 +209,28 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
     is absent: an FMU carries its design); otherwise it is rebuilt, saying what changed. A
     design file whose identity matches is packaged without solving again. The folder is locked
     while anything is written (``latobs.atomic.locked_folder``); each design file and its FMU
-    are written as one unit (``latobs.packaging.install``)."""
+    are written as one unit (``latobs.packaging.install``).
+
+    ``fmi``: the FMI version(s) to build, 2 (default) and/or 3 (native only: "auto" is the C
+    backend then, "python" is refused): the FMI 3.0 FMUs and their design files go to ``out/fmi3``
+    (:func:`fmi_folder`), each made and reused as above; returns the FMI 2.0 FMUs, then the FMI 3.0
+    ones."""
+    versions = sorted(set([fmi] if isinstance(fmi, int) else fmi))
+    if not versions or any(v not in FMI_FOLDER for v in versions):
+        raise PipelineError(f"unknown FMI version(s) {fmi!r} (known: {', '.join(map(str, FMI_FOLDER))})")
+    if 3 in versions and backend == "python":
+        raise PipelineError("FMI 3.0 FMUs are native (--backend c): pythonfmu makes FMI 2.0 FMUs only")
+    out = Path(out)
+    built = []
+    for v in versions:
+        built += _build(names, vehicle, fmi_folder(out, v), backend if v == 2 else "c", design_files, platforms,
+                        host_suffices, v)
+    return built
+
+
+def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str, design_files: bool,
+           platforms: list[str] | None, host_suffices: bool, fmi: int) -> list[Path]:
+    """:func:`build` of one FMI version into ``out``."""
     from . import packaging
     from .atomic import locked_folder
 
@@ -214,14 +252,14 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
         except cbackend.NativeBuildError as exc:
             raise PipelineError(str(exc)) from exc
     out = Path(out)
-    plans = _plan(names, vehicle, out, backend, platforms, host_suffices)
+    plans = _plan(names, vehicle, out, backend, platforms, host_suffices, fmi)
     if all(p.current(design_files)[0] for p in plans):       # nothing to write: no lock to wait for
         for p in plans:
             print(f"reusing {p.fmu.name} (identical inputs)")
         return [p.fmu for p in plans]
     built = {}
     with locked_folder(out, "build"), _ReferencePlants(out) as plants:
-        plans = _plan(names, vehicle, out, backend, platforms, host_suffices)   # again: another build may have written
+        plans = _plan(names, vehicle, out, backend, platforms, host_suffices, fmi)   # again: another build may have written
         # plants first: an observer's reference experiment runs beside the plant built here
         for p in sorted(plans, key=lambda p: p.design_path is not None):
             ok, what = p.current(design_files)
@@ -233,12 +271,12 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
             if p.design_path is None:
-                path = package_plant(p.model, p.vehicle, out, p.backend, plants, platforms=p.platforms)
+                path = package_plant(p.model, p.vehicle, out, p.backend, plants, platforms=p.platforms, fmi=fmi)
             else:
                 data = _current_design(p) or solve(p.model, p.vehicle)
                 path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
-                                           origin=str(p.design_path), plants=plants, platforms=p.platforms)
-            print(f"built {path} ({BACKEND_LABEL[p.backend]}"
+                                           origin=str(p.design_path), plants=plants, platforms=p.platforms, fmi=fmi)
+            print(f"built {path} ({BACKEND_LABEL[p.backend]}{', FMI 3.0' if fmi == 3 else ''}"
                   f"{': ' + ', '.join(p.platforms) if p.platforms else ''})")
             built[p.name] = path
     return [built[p.name] for p in plans]
@@ -286,9 +324,10 @@ def reference_plant(model: str, vehicle) -> tuple[str, object] | None:
     return plant, given
 
 
-def reference_identity(model: str, vehicle, backend: str) -> str:
+def reference_identity(model: str, vehicle, backend: str, fmi: int = 2) -> str:
     """What the reference results of ``model``'s FMU for ``vehicle`` are made from besides the FMU
-    itself: the experiment, the plant FMU's identity (observers) and the code that runs them."""
+    itself: the experiment, the plant FMU's identity (observers: the plant of the same FMI
+    version) and the code that runs them."""
     from . import check, identity, packaging, reference
     from .cbackend.toolchain import host_platform
     from .validation import harness, scenarios
@@ -297,7 +336,7 @@ def reference_identity(model: str, vehicle, backend: str) -> str:
     plant = None
     if beside is not None:            # the plant's binary that runs here
         _, _, _, base = packaging.plant_artefact(*beside)
-        plant = identity.of_fmu(base, backend, [host_platform()] if backend == "c" else None).sha256
+        plant = identity.of_fmu(base, backend, [host_platform()] if backend == "c" else None, fmi).sha256
     code = reference.code_hash(*(Path(m.__file__) for m in (check, reference, harness, scenarios)))
     return identity.sha256_json({"experiment": _reference_spec(model), "plant": plant, "code": code})
 
@@ -318,15 +357,15 @@ class _ReferencePlants:
         if self._tmp is not None:
             self._tmp.cleanup()
 
-    def get(self, plant: str, vehicle, backend: str) -> Path:
+    def get(self, plant: str, vehicle, backend: str, fmi: int = 2) -> Path:
         import tempfile
 
         from .cbackend.toolchain import host_platform
 
-        key = (plant, str(vehicle), backend)
+        key = (plant, str(vehicle), backend, fmi)
         if key not in self._made:
             try:                          # any platforms, so long as this machine's is among them
-                p, = _plan([plant], vehicle, self.out, backend, host_suffices=True)
+                p, = _plan([plant], vehicle, self.out, backend, host_suffices=True, fmi=fmi)
                 here = p.current(design_file_needed=False)[0]
             except PipelineError:         # e.g. an FMU of the other backend there
                 here = False
@@ -338,18 +377,20 @@ class _ReferencePlants:
                 print(f"{plant}: building it for the observers' reference experiments")
                 host = [host_platform()] if backend == "c" else None    # the reference runs here
                 self._made[key], = build([plant], vehicle, Path(self._tmp.name) / backend, backend,
-                                         design_files=False, platforms=host)
+                                         design_files=False, platforms=host, fmi=fmi)
         return self._made[key]
 
 
-def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _ReferencePlants):
+def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _ReferencePlants, fmi: int = 2):
     """``finish`` of ``packaging.install`` for ``model``'s FMU: runs the sealed FMU on its
-    reference experiment (:data:`REFERENCE_EXPERIMENTS`) and returns its FMI-LS-REF members."""
+    reference experiment (:data:`REFERENCE_EXPERIMENTS`) and returns its FMI-LS-REF members; an
+    observer beside the plant FMU of its own FMI version ``fmi``."""
 
     def finish(fmu: Path) -> dict[str, bytes]:
         from fmpy import read_model_description
 
         from . import packaging, reference
+        from .cbackend.fmi3 import host_folder
         from .cbackend.toolchain import host_platform
         from .check import run_host
         from .synthesis.params import load_vehicle
@@ -370,15 +411,16 @@ def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _Ref
         else:                             # an observer: its plant's signals in the scenario
             plant, pveh = beside
             veh = load_vehicle(pveh or packaging.PLANTS[plant].default_vehicle)
-            run = cosimulate(sc, plants.get(plant, pveh, backend), {"observer": fmu}, dt=h, vehicle=veh)
+            run = cosimulate(sc, plants.get(plant, pveh, backend, fmi), {"observer": fmu}, dt=h, vehicle=veh)
             t = run.time
             inputs = {n: run.measured[n] for n in run.inputs["observer"]}
             source = f"the signals of {plant} (vehicle {veh.name}) at the communication points"
         what = (f"scenario {spec.scenario}, first {spec.seconds:g} s" + (f" ({spec.note})" if spec.note else "")
                 + f": inputs {source}; outputs this FMU's own, on them.")
-        probe = reference.Experiment(spec.scenario, what, t, h, inputs, {}, host_platform() or "")
+        host = (host_platform() if fmi == 2 else host_folder()) or ""
+        probe = reference.Experiment(spec.scenario, what, t, h, inputs, {}, host)
         outputs = run_host(fmu, probe)
-        e = reference.Experiment(spec.scenario, what, t, h, inputs, outputs, host_platform() or "")
+        e = reference.Experiment(spec.scenario, what, t, h, inputs, outputs, host)
         return reference.files([e], model_identifier(fmu), ident)
 
     return finish
@@ -386,7 +428,7 @@ def reference_finish(model: str, vehicle, backend: str, ident: str, plants: _Ref
 
 def package_design_data(data: dict, out: Path, backend: str, vehicle=None, write_design: bool = False,
                         origin: str | None = None, plants: _ReferencePlants | None = None,
-                        platforms: list[str] | None = None) -> Path:
+                        platforms: list[str] | None = None, fmi: int = 2) -> Path:
     """``packaging.package_design_data`` with the FMU's reference experiment inside it (the
     observer designed for ``vehicle``, None: its default); the plant it runs beside comes from
     ``plants`` (default: ``out`` if current there, else built into a scratch folder)."""
@@ -399,21 +441,21 @@ def package_design_data(data: dict, out: Path, backend: str, vehicle=None, write
         raise PipelineError(f"{origin or data.get('name')}: no catalogue design {model!r} (known: "
                             f"{', '.join(designs.DESIGNS)})")
     with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
-        finish = reference_finish(model, vehicle, backend, reference_identity(model, vehicle, backend), pl)
+        finish = reference_finish(model, vehicle, backend, reference_identity(model, vehicle, backend, fmi), pl, fmi)
         return packaging.package_design_data(data, out, backend, write_design=write_design, origin=origin,
-                                             platforms=platforms, finish=finish)
+                                             platforms=platforms, finish=finish, fmi=fmi)
 
 
 def package_plant(name: str, vehicle, out: Path, backend: str, plants: _ReferencePlants | None = None,
-                  platforms: list[str] | None = None) -> Path:
+                  platforms: list[str] | None = None, fmi: int = 2) -> Path:
     """``packaging.package_plant`` with the FMU's reference experiment inside it."""
     from contextlib import nullcontext
 
     from . import packaging
 
     with nullcontext(plants) if plants else _ReferencePlants(out) as pl:
-        finish = reference_finish(name, vehicle, backend, reference_identity(name, vehicle, backend), pl)
-        return packaging.package_plant(name, vehicle, out, backend, platforms=platforms, finish=finish)
+        finish = reference_finish(name, vehicle, backend, reference_identity(name, vehicle, backend, fmi), pl, fmi)
+        return packaging.package_plant(name, vehicle, out, backend, platforms=platforms, finish=finish, fmi=fmi)
 
 
 def model_identifier(path: Path) -> str:
@@ -424,17 +466,23 @@ def model_identifier(path: Path) -> str:
 
 
 def _current_design(p: _Artefact) -> dict | None:
-    """The design file beside ``p``'s FMU if it was made from the same inputs (not solved again)."""
+    """The design file beside ``p``'s FMU if it was made from the same inputs (not solved again);
+    for an FMI 3.0 FMU, else the one beside its FMI 2.0 twin (the same design either way)."""
     from .synthesis import design_file
 
-    try:
-        data = design_file.read(p.design_path)
-    except ValueError:
-        return None
-    if (data.get("identity") or {}).get("sha256") != p.base.sha256 or not data.get("certified"):
-        return None
-    print(f"{p.name}: {p.design_path.name} was made from the same inputs: packaged without solving again")
-    return data
+    paths = [p.design_path]
+    if p.fmi != 2:
+        paths.append(p.fmu.parent.parent / p.design_path.name)
+    for path in paths:
+        try:
+            data = design_file.read(path)
+        except ValueError:
+            continue
+        if (data.get("identity") or {}).get("sha256") != p.base.sha256 or not data.get("certified"):
+            continue
+        print(f"{p.name}: {path} was made from the same inputs: packaged without solving again")
+        return data
+    return None
 
 
 #: ``schema`` of :func:`build_summary`'s document (``latobs build --json``).
@@ -448,10 +496,11 @@ def build_summary(fmus: list[Path]) -> dict:
             "name": FMU name (NAME or NAME_V), "kind": "observer" | "plant",
             "model": catalogue design or plant name, "paper": "000".."003" | null (plants),
             "vehicle": vehicle set name, "path": str, "sha256": hex of the .fmu, "size": bytes,
-            "backend": "c" (native) | "python" (pythonfmu),
+            "backend": "c" (native) | "python" (pythonfmu), "fmi": "2.0" | "3.0",
             "platforms": [FMI platform folders the FMU has binaries for: "linux64", "win64",
                           "darwin64", "aarch64-linux" (native FMUs: those built; pythonfmu FMUs:
-                          pythonfmu's)],
+                          pythonfmu's); FMI 3.0: "x86_64-linux", "x86_64-windows", "x86_64-darwin",
+                          "aarch64-darwin", "aarch64-linux"],
             # observers (null for plants), read from NAME.design.json beside the FMU:
             "design_file": str, "design_sha256": hex of that file, "gamma": the design's "gamma",
             "model_error_gamma": its "model_error"."gamma" (paper 000's default designs) | null,
@@ -465,6 +514,7 @@ def build_summary(fmus: list[Path]) -> dict:
     import zipfile
 
     from . import __version__
+    from .cbackend.fmi3 import FOLDERS
     from .cbackend.toolchain import PLATFORMS
     from .packaging import PLANTS
     from .synthesis.design_file import reproducible
@@ -480,10 +530,12 @@ def build_summary(fmus: list[Path]) -> dict:
             members = {n: z.read(n) for n in names
                        if n.startswith("resources/") and n.endswith((".design.json", ".plant.json"))
                        and n.count("/") == 1}
+            fmi = "3.0" if b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000] else "2.0"
         held = {n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") == 2}
+        order = list(PLATFORMS) if fmi == "2.0" else [f for fs in FOLDERS.values() for f in fs]
         entry = {"name": fmu.stem, "path": str(fmu), "sha256": sha(raw), "size": len(raw),
-                 "backend": "python" if "resources/slavemodule.txt" in names else "c",
-                 "platforms": [p for p in PLATFORMS if p in held] + sorted(held - set(PLATFORMS))}
+                 "backend": "python" if "resources/slavemodule.txt" in names else "c", "fmi": fmi,
+                 "platforms": [p for p in order if p in held] + sorted(held - set(order))}
         inner = members.get(f"resources/{fmu.stem}.design.json")
         if inner is not None:
             design_path = fmu.with_name(f"{fmu.stem}.design.json")
@@ -512,7 +564,7 @@ def build_summary(fmus: list[Path]) -> dict:
                           if fmu.stem == k or fmu.stem.startswith(k + "_")), None)
             entry.update(kind="plant", model=model, paper=None, vehicle=veh.get("name"), design_file=None,
                          design_sha256=None, gamma=None, model_error_gamma=None, certificate=None)
-        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "platforms",
+        order = ("name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "fmi", "platforms",
                  "design_file", "design_sha256", "gamma", "model_error_gamma", "certificate")
         entries.append({k: entry[k] for k in order})
     return {"schema": BUILD_SUMMARY_SCHEMA, "latobs_version": __version__, "fmus": entries}
@@ -534,15 +586,56 @@ def ensure_fmus(names: list[str], fmu_dir: Path, platforms: list[str] | None = N
             print(f"using {n}.fmu as found (not a catalogue design: its inputs cannot be checked)")
             out[n] = fmu_dir / f"{n}.fmu"
             continue
-        out[n], = build([design], vehicle, fmu_dir, design_files=False, platforms=platforms, host_suffices=True)
+        out[n], = _build_in(fmu_dir, [design], vehicle, platforms)
     return out
+
+
+def folder_fmi(fmu_dir: Path, fmu: Path | None = None) -> int:
+    """The FMI version of the FMUs of ``fmu_dir`` a command builds when missing or stale: that of
+    ``fmu`` when it is there (its identity, else its model description), else 3 in a folder named
+    ``fmi3`` (:data:`FMI_FOLDER`), else 2."""
+    import zipfile
+
+    from . import identity
+
+    if fmu is not None and fmu.is_file():
+        found = identity.read_fmu(fmu)
+        if found is not None:
+            return int(found.parts.get("fmi", 2))
+        try:
+            with zipfile.ZipFile(fmu) as z:
+                return 3 if b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000] else 2
+        except (OSError, KeyError, zipfile.BadZipFile):
+            pass
+    return 3 if Path(fmu_dir).name == FMI_FOLDER[3] else 2
+
+
+def _build_in(fmu_dir: Path, names: list[str], vehicle, platforms) -> list[Path]:
+    """:func:`build` of ``names`` in ``fmu_dir`` itself (no design files, this machine's binaries
+    suffice), in the FMI version of the FMU already there (:func:`folder_fmi`)."""
+    from . import packaging
+
+    name = names[0]
+    if name in designs.DESIGNS:
+        artefact = designs.fmu_name(name, None if vehicle is None else _vehicle_name(vehicle),
+                                    designs.DESIGNS[name].default_vehicle)
+    else:
+        artefact = packaging.plant_artefact(name, vehicle)[2]
+    fmi = folder_fmi(fmu_dir, Path(fmu_dir) / f"{artefact}.fmu")
+    return _build(names, vehicle, Path(fmu_dir), "auto" if fmi == 2 else "c", False, platforms, True, fmi)
+
+
+def _vehicle_name(vehicle) -> str:
+    from .synthesis.params import load_vehicle
+
+    return load_vehicle(vehicle).name
 
 
 def ensure_plant(plant: str, vehicle: str | None, fmu_dir: Path, platforms: list[str] | None = None) -> Path:
     """Path of the plant FMU ``plant`` for ``vehicle`` (a name or a TOML file; None: the plant's
     default vehicle) in ``fmu_dir``: ``PLANT.fmu`` for the default vehicle, ``PLANT_VEHICLE.fmu``
     otherwise (VEHICLE the set's ``name``), reused if current, else built (as :func:`ensure_fmus`)."""
-    path, = build([plant], vehicle, fmu_dir, design_files=False, platforms=platforms, host_suffices=True)
+    path, = _build_in(fmu_dir, [plant], vehicle, platforms)
     return path
 
 

@@ -49,6 +49,7 @@ class SessionBuild:
     ``all()``         {name: path} of every FMU in :data:`FMU_NAMES`
     ``c_path(name)``  the same FMU built by the native C backend into ``out/c`` (skips the test
                       when this machine cannot build it: no C compiler, or no C model yet)
+    ``c3_path(name)`` its FMI 3.0 twin, ``latobs build --fmi 3`` into ``out/c`` (so ``out/c/fmi3``)
     """
 
     def __init__(self, out: Path):
@@ -56,6 +57,7 @@ class SessionBuild:
         self._designs: dict[str, dict] = {}
         self._paths: dict[str, Path] = {}
         self._c_paths: dict[str, Path] = {}
+        self._c3_paths: dict[str, Path] = {}
 
     def design(self, name: str) -> dict:
         if name not in packaging.OBSERVERS:
@@ -70,20 +72,20 @@ class SessionBuild:
             self._paths[name] = self._build(name, "python", self.out)
         return self._paths[name]
 
-    def _build(self, name: str, backend: str, out: Path) -> Path:
-        """``latobs build NAME --backend BACKEND --out OUT``, the design solved once per session."""
+    def _build(self, name: str, backend: str, out: Path, fmi: int = 2) -> Path:
+        """``latobs build NAME --backend BACKEND --out OUT [--fmi 3]``, the design solved once per session."""
         from latobs import pipeline
         from latobs.synthesis import design_file
 
         if name in packaging.OBSERVERS:
             beside = pipeline.reference_plant(name, None)
             if beside is not None and beside[1] is None:    # its reference runs beside this session's plant
-                self.get(beside[0], backend)
+                self.c3_path(beside[0]) if fmi == 3 else self.get(beside[0], backend)
             design_file.write(self.design(name), out)
         elif name not in packaging.PLANTS:
             raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
-        path, = pipeline.build([name], None, out, backend)
-        assert path == out / f"{name}.fmu", path
+        path, = pipeline.build([name], None, out, backend, fmi=fmi)
+        assert path == pipeline.fmi_folder(out, fmi) / f"{name}.fmu", path
         return path
 
     def all(self) -> dict[str, Path]:
@@ -105,6 +107,12 @@ class SessionBuild:
                 pytest.skip(f"{name}: no native C FMU here: {why}")
             self._c_paths[name] = self._build(name, "c", self.out / "c")
         return self._c_paths[name]
+
+    def c3_path(self, name: str) -> Path:
+        if name not in self._c3_paths:
+            self.c_path(name)          # (skips when there is no native FMU here)
+            self._c3_paths[name] = self._build(name, "c", self.out / "c", fmi=3)
+        return self._c3_paths[name]
 
 
 @pytest.fixture(scope="session")

@@ -45,9 +45,16 @@ class ToolchainError(RuntimeError):
     pass
 
 
+#: FMI 3.0 platform folders -> the platform of :data:`PLATFORMS` that builds them (``--platforms``
+#: takes either spelling; a darwin one builds the universal library both darwin folders are cut from)
+FMI3_ALIASES = {"x86_64-linux": "linux64", "x86_64-windows": "win64", "x86_64-darwin": "darwin64",
+                "aarch64-darwin": "darwin64"}
+
+
 def parse_platforms(text: str) -> list[str]:
-    """``"all"``, ``"host"`` or a comma-separated list of platform folders -> the folders, in the
-    order of :data:`PLATFORMS`. ValueError naming an unknown platform."""
+    """``"all"``, ``"host"`` or a comma-separated list of platform folders (FMI 2.0 names, or FMI
+    3.0 names: :data:`FMI3_ALIASES`) -> the folders, in the order of :data:`PLATFORMS`. ValueError
+    naming an unknown platform."""
     names = [t.strip() for t in text.split(",") if t.strip()]
     if not names:
         raise ValueError("no platform given (all, host, or some of: " + ", ".join(PLATFORMS) + ")")
@@ -61,8 +68,8 @@ def parse_platforms(text: str) -> list[str]:
                 raise ValueError(f"this machine ({sys.platform} {_platform.machine()}) is none of the FMU "
                                  "platforms " + ", ".join(PLATFORMS))
             out.add(host)
-        elif n in PLATFORMS:
-            out.add(n)
+        elif n in PLATFORMS or n in FMI3_ALIASES:
+            out.add(FMI3_ALIASES.get(n, n))
         else:
             raise ValueError(f"unknown platform {n!r} (all, host, or some of: " + ", ".join(PLATFORMS) + ")")
     return [p for p in PLATFORMS if p in out]
