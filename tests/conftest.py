@@ -1,4 +1,4 @@
-"""Shared fixtures: designs are solved once per session, FMUs built once per session.
+"""Shared fixtures: designs are solved once per test run, FMUs built once per test run (shared by the workers).
 
 ``built_fmus`` is THE session build: every FMU that ``latobs build`` makes (the observers of
 ``latobs.packaging.OBSERVERS``, designed by ``designs.run`` as ``latobs.pipeline.build`` does, and
@@ -9,6 +9,7 @@ take them from there instead of designing again (the scheduled paper-002 estimat
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from pathlib import Path
@@ -63,8 +64,17 @@ class SessionBuild:
         if name not in packaging.OBSERVERS:
             raise KeyError(f"{name!r} is not an observer of latobs.packaging.OBSERVERS")
         if name not in self._designs:
-            # as `latobs design` writes it (pipeline.solve): what only running the runtime decides included
-            self._designs[name] = packaging.complete_runtime_data(designs.run(name))
+            # as `latobs design` writes it (pipeline.solve): what only running the runtime decides
+            # included; solved by the first worker that needs it, read back from its file by all
+            from latobs.atomic import atomic_write_text, locked_folder
+            from latobs.synthesis import design_file
+
+            folder = self.out / "designs"
+            with locked_folder(folder, "design"):
+                path = folder / f"{name}.json"
+                if not path.is_file():
+                    atomic_write_text(path, design_file.dumps(packaging.complete_runtime_data(designs.run(name))))
+                self._designs[name] = json.loads(path.read_text(encoding="utf-8"))
         return self._designs[name]
 
     def path(self, name: str) -> Path:
@@ -117,7 +127,15 @@ class SessionBuild:
 
 @pytest.fixture(scope="session")
 def built_fmus(tmp_path_factory) -> SessionBuild:
-    return SessionBuild(tmp_path_factory.mktemp("fmus"))
+    """One build for the whole test run: with pytest-xdist every worker builds into the same folder
+    (the run's temporary folder, not a worker's), so that a design is solved and an FMU built once
+    per run, not once per worker: ``latobs build`` locks the folder while it writes and reuses an
+    FMU another worker built from identical inputs."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    out = shared / "session-fmus"
+    out.mkdir(exist_ok=True)
+    return SessionBuild(out)
 
 
 @pytest.fixture(scope="session")

@@ -11,7 +11,7 @@ import pytest
 from latobs.cli import main
 from latobs.native_guard import find_compiler
 
-KEYS = ["name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "platforms", "design_file",
+KEYS = ["name", "kind", "model", "paper", "vehicle", "path", "sha256", "size", "backend", "fmi", "platforms", "design_file",
         "design_sha256", "gamma", "model_error_gamma", "certificate"]
 
 
@@ -33,6 +33,7 @@ def test_build_json_file(tmp_path, capsys):
             folders = {n.split("/")[1] for n in z.namelist() if n.startswith("binaries/") and n.count("/") == 2}
         assert e["backend"] == ("c" if native else "python")
         assert sorted(e["platforms"]) == sorted(folders)
+        assert e["fmi"] == "2.0"
         if native:                                        # every platform by default
             assert e["platforms"] == ["linux64", "win64", "darwin64", "aarch64-linux"]
         assert e["backend"] == ("c" if find_compiler() else "python")
@@ -81,3 +82,27 @@ def test_build_json_user_errors_exit_2_and_write_nothing(tmp_path, capsys):
     assert main(["build", "--out", str(tmp_path), "--json", "CarPlant"]) == 2
     assert "put the FMU names before --json" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_build_fmi3_beside_fmi2_and_refusals(tmp_path, capsys):
+    """``--fmi 2,3``: each FMU in both versions, the FMI 3.0 one under the same name in DIR/fmi3, the
+    summary naming each version and its FMI 3.0 platform folders; again: both reused; ``--fmi 3``
+    with the pythonfmu backend, or an unknown version: exit 2 naming it."""
+    from latobs.cbackend import fmi3
+
+    if not find_compiler() or fmi3.host_folder() is None:
+        pytest.skip("FMI 3.0 FMUs are native: no C compiler here, or an unknown platform")
+    out = tmp_path / "fmus"
+    argv = ["build", "CarPlant", "--out", str(out), "--fmi", "2,3", "--platforms", "host", "--json", "-"]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert [(Path(e["path"]), e["fmi"], e["platforms"]) for e in s["fmus"]] == [
+        (out / "CarPlant.fmu", "2.0", ["linux64"]), (out / "fmi3" / "CarPlant.fmu", "3.0", [fmi3.host_folder()])]
+    assert main(argv[:-2]) == 0
+    assert capsys.readouterr().out.count("reusing CarPlant.fmu (identical inputs)") == 2
+    assert main(["build", "CarPlant", "--out", str(out), "--fmi", "3", "--backend", "python"]) == 2
+    assert "pythonfmu" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["build", "CarPlant", "--out", str(out), "--fmi", "4"])
+    assert exc.value.code == 2 and "--fmi takes 2, 3 or 2,3" in capsys.readouterr().err
+
