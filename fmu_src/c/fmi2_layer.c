@@ -1,10 +1,11 @@
 /*
- * fmi2_layer.c - the one FMI 2.0 layer of every latobs native FMU (CoSimulation and ModelExchange).
+ * fmi2_layer.c - the FMI 2.0 layer of every latobs native FMU (CoSimulation and ModelExchange).
  *
- * Hand-written, shared by every model file (model.h); no maths here. It holds the instance, the
- * variables by value reference, the FMI state machine, logging and the statuses. A model file
- * (<runtime>.c) gives the maths through model.h; the build generates fmu_config.h (identifiers,
- * guid, variable table) for each FMU.
+ * Hand-written, shared by every model file (model.h); no maths here. It maps the FMI 2.0 calls,
+ * types and statuses onto the instance, state machine, logging and checks that both FMI layers
+ * share (layer.h); fmi3_layer.c is its FMI 3.0 counterpart. A model file (<runtime>.c) gives the
+ * maths through model.h; the build generates fmu_config.h (identifiers, guid, variable table) for
+ * each FMU.
  *
  * Value references (the same as the pythonfmu backend's, latobs.fmu_src.framework.variable_table,
  * extended): parameters, inputs, Real outputs, Integer outputs, then the ModelExchange states and
@@ -31,8 +32,6 @@
  *   - warnings of the model (clamps, excursions): fmi2Warning for that call.
  * fmi2GetFMUstate/fmi2SetFMUstate and their serialisation copy the whole instance state (the
  * model holds no pointers).
- * Over ~600 lines: the whole FMI 2.0 API (co-simulation and model exchange, states, serialisation,
- * every refusal of a bad call) for every C model; one layer, one file.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -42,68 +41,21 @@
 
 #include "fmi2Functions.h"
 
-#define FMU_CONFIG_TABLES /* the variable tables of fmu_config.h: this file only */
+#define FMU_CONFIG_TABLES /* the variable tables of fmu_config.h: the layer's only */
 #include "model.h"
 #include "model_util.h"
 
-/* signed, so that a group of none (e.g. no parameters) compares without warnings */
-#define VR_PAR0 0L
-#define VR_IN0 (VR_PAR0 + N_PARAMETERS)
-#define VR_OUT0 (VR_IN0 + N_INPUTS)
-#define VR_INT0 (VR_OUT0 + N_OUTPUTS)
-#define VR_STATE0 (VR_INT0 + N_INT_OUTPUTS)
-#define VR_DER0 (VR_STATE0 + N_STATES)
-#define N_VR (VR_DER0 + N_STATES)
+#define LAYER_PREFIX "fmi2"
+#define LAYER_MAGIC 0x4c41544fu /* "LATO": marks a live instance of this library */
+#define LAYER_HOST fmi2CallbackFunctions cb;
+#define N_VR VR_ME_END
+#include "layer.h"
 
-#define MAGIC 0x4c41544fu /* "LATO": marks a live instance of this library */
-#define MSG_MAX 1024
-
-typedef enum {
-    PHASE_INSTANTIATED, /* after fmi2Instantiate / fmi2Reset */
-    PHASE_INIT,         /* between fmi2EnterInitializationMode and fmi2ExitInitializationMode */
-    PHASE_STEP,         /* co-simulation: ready for fmi2DoStep */
-    PHASE_EVENT,        /* model exchange: event mode */
-    PHASE_CONTINUOUS,   /* model exchange: continuous-time mode */
-    PHASE_TERMINATED,
-    PHASE_FAILED        /* initialisation failed: only reset, terminate, free, get */
-} Phase;
-
-struct Log {
-    struct Instance *inst;
-    int worst;   /* highest level logged during the current call */
-    double time; /* s, the time of the model call in progress (layer_time) */
-};
-
-/* Everything fmi2GetFMUstate copies; the model's bytes follow it in the state blob. */
-typedef struct {
-    Phase phase;
-    int ready; /* model_setup succeeded: the model's state exists */
-    double time;
-    double p[N_PARAMETERS + 1];
-    double u[N_INPUTS + 1];
-    double y[N_OUTPUTS + 1];
-    int yi[N_INT_OUTPUTS + 1];
-} Values;
-
-typedef struct Instance {
-    unsigned magic;
-    char name[256];
-    fmi2Type type;
-    fmi2CallbackFunctions cb;
-    int logging_on;
-    Values v;
-    Log log;
-    Model *model;
-} Instance;
-
-/* ------------------------------------------------------------------ logging */
-static void emit(Instance *inst, int level, const char *text)
+static void host_log(const Instance *inst, int level, const char *text)
 {
     static const char *const category[] = {"logAll", "logStatusWarning", "logAll", "logStatusError"};
     char escaped[2 * MSG_MAX];
     size_t k = 0;
-    if (level > inst->log.worst) inst->log.worst = level;
-    if (level == LOG_INFO && !inst->logging_on) return;
     if (inst->cb.logger == NULL) return;
     /* the message is a format string for the host: double every '%' */
     for (const char *s = text; *s && k + 2 < sizeof escaped; s++) {
@@ -116,156 +68,15 @@ static void emit(Instance *inst, int level, const char *text)
                     category[level == LOG_ERROR ? 3 : level == LOG_WARNING ? 1 : 0], escaped);
 }
 
-double layer_time(const Log *log)
+static const char *var_name(long r, char buf[64])
 {
-    return log->time;
+    (void)buf;
+    return r >= 0 && r < N_VR ? VAR_NAMES[r] : "?";
 }
 
-void log_event(const Log *log, int level, const char *fmt, ...)
+static fmi2Status status(int level)
 {
-    char text[MSG_MAX];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(text, sizeof text, fmt, ap);
-    va_end(ap);
-    emit(log->inst, level, text);
-}
-
-static void say(Instance *inst, int level, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 3, 4)))
-#endif
-    ;
-
-static void say(Instance *inst, int level, const char *fmt, ...)
-{
-    char text[MSG_MAX];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(text, sizeof text, fmt, ap);
-    va_end(ap);
-    emit(inst, level, text);
-}
-
-/* the status of a call: the worst level logged since begin() */
-static Instance *begin(fmi2Component c)
-{
-    Instance *inst = (Instance *)c;
-    if (inst == NULL || inst->magic != MAGIC) return NULL;
-    inst->log.worst = LOG_INFO;
-    return inst;
-}
-
-static fmi2Status status_of(const Instance *inst)
-{
-    return inst->log.worst >= LOG_ERROR ? fmi2Error : inst->log.worst >= LOG_WARNING ? fmi2Warning : fmi2OK;
-}
-
-/* ------------------------------------------------------------------ variables */
-static const char *var_name(fmi2ValueReference vr)
-{
-    return vr < N_VR ? VAR_NAMES[vr] : "?";
-}
-
-static int is_real(fmi2ValueReference vr)
-{
-    return vr < VR_INT0 || (vr >= VR_STATE0 && vr < N_VR);
-}
-
-static int all_finite(const double *x, int n)
-{
-    for (int i = 0; i < n; i++)
-        if (!isfinite(x[i])) return 0;
-    return 1;
-}
-
-/* 1 if every input is inside its declared [IN_MIN, IN_MAX] (so finite) */
-static int inputs_valid(const double *u)
-{
-    for (int i = 0; i < N_INPUTS; i++)
-        if (!(u[i] >= IN_MIN[i] && u[i] <= IN_MAX[i])) return 0;
-    return 1;
-}
-
-/* the inputs outside their range, "name = value, ..." in `list`: the non-finite ones if any
- * (returns 1), else those outside their range with it (returns 0); the framework's _bad_inputs */
-static int bad_inputs(const double *u, char *list, size_t size)
-{
-    char a[32], b[32], c[32];
-    size_t len = 0;
-    int nonfinite = 0;
-    list[0] = '\0';
-    for (int i = 0; i < N_INPUTS; i++) nonfinite |= !isfinite(u[i]);
-    for (int i = 0; i < N_INPUTS; i++) {
-        if (u[i] >= IN_MIN[i] && u[i] <= IN_MAX[i]) continue;
-        if (nonfinite && isfinite(u[i])) continue;
-        if (len + 160 > size) break;
-        len += (size_t)snprintf(list + len, size - len, "%s%s = %s", len ? ", " : "",
-                                var_name((fmi2ValueReference)(VR_IN0 + i)), py_repr(u[i], a));
-        if (!nonfinite)
-            len += (size_t)snprintf(list + len, size - len, " (declared range [%s, %s])", py_repr(IN_MIN[i], b),
-                                    py_repr(IN_MAX[i], c));
-    }
-    return nonfinite;
-}
-
-/* 1 if the inputs are inside their declared ranges; else an error naming them, for the call `what` */
-static int inputs_ok(Instance *inst, const char *what)
-{
-    if (inputs_valid(inst->v.u)) return 1;
-    char list[MSG_MAX / 2], t[32];
-    if (bad_inputs(inst->v.u, list, sizeof list))
-        say(inst, LOG_ERROR, "%s refused at t = %s: non-finite input(s) %s; state held", what,
-            py_repr(inst->v.time, t), list);
-    else
-        say(inst, LOG_ERROR, "%s refused at t = %s: input(s) outside the declared range: %s; state held", what,
-            py_repr(inst->v.time, t), list);
-    return 0;
-}
-
-static const char *phase_name(Phase p)
-{
-    static const char *const names[] = {"instantiated", "initialization mode", "step mode", "event mode",
-                                        "continuous-time mode", "terminated", "failed initialisation"};
-    return names[p];
-}
-
-static int require(Instance *inst, const char *what, int ok)
-{
-    if (!ok) say(inst, LOG_ERROR, "%s called in %s: not allowed there", what, phase_name(inst->v.phase));
-    return ok;
-}
-
-static int require_type(Instance *inst, const char *what, fmi2Type type)
-{
-    if (inst->type == type) return 1;
-    say(inst, LOG_ERROR, "%s is a %s function; this instance is %s", what,
-        type == fmi2ModelExchange ? "ModelExchange" : "CoSimulation",
-        inst->type == fmi2ModelExchange ? "ModelExchange" : "CoSimulation");
-    return 0;
-}
-
-static void reset_values(Instance *inst)
-{
-    memset(&inst->v, 0, sizeof inst->v);
-    for (int i = 0; i < N_PARAMETERS; i++) inst->v.p[i] = PAR_START[i];
-    for (int i = 0; i < N_INPUTS; i++) inst->v.u[i] = IN_START[i];
-    for (int i = 0; i < N_OUTPUTS; i++) inst->v.y[i] = OUT_START[i];
-    for (int i = 0; i < N_INT_OUTPUTS; i++) inst->v.yi[i] = INT_START[i];
-    memset(inst->model, 0, model_size());
-    inst->v.phase = PHASE_INSTANTIATED;
-}
-
-/* the model exchange outputs are functions of the states and inputs: refresh before a get */
-static void refresh_outputs(Instance *inst)
-{
-#if N_STATES > 0
-    if (inst->type == fmi2ModelExchange && (inst->v.phase == PHASE_EVENT || inst->v.phase == PHASE_CONTINUOUS) &&
-        inputs_valid(inst->v.u))
-        model_me_outputs(inst->model, inst->v.u, inst->v.y, inst->v.yi);
-#else
-    (void)inst;
-#endif
+    return level >= LOG_ERROR ? fmi2Error : level >= LOG_WARNING ? fmi2Warning : fmi2OK;
 }
 
 /* ------------------------------------------------------------------ common functions */
@@ -299,112 +110,40 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)visible;
     if (functions == NULL || functions->logger == NULL) return NULL; /* nobody to tell */
     memset(&probe, 0, sizeof probe);
-    probe.magic = MAGIC;
+    probe.magic = LAYER_MAGIC;
     probe.cb = *functions;
-    snprintf(probe.name, sizeof probe.name, "%s", instanceName ? instanceName : "?");
-    if (instanceName == NULL || instanceName[0] == '\0') {
-        say(&probe, LOG_ERROR, "fmi2Instantiate: missing instance name");
-        return NULL;
-    }
-    if (fmuGUID == NULL || strcmp(fmuGUID, INSTANTIATION_TOKEN) != 0) {
-        say(&probe, LOG_ERROR, "fmi2Instantiate: guid %s is not this FMU's (%s): refusing another FMU's "
-            "model description", fmuGUID ? fmuGUID : "(NULL)", INSTANTIATION_TOKEN);
-        return NULL;
-    }
+    snprintf(probe.name, sizeof probe.name, "%s", instanceName ? instanceName : "");
     if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
         say(&probe, LOG_ERROR, "fmi2Instantiate: unknown interface type %d", (int)fmuType);
         return NULL;
     }
-    if (fmuType == fmi2ModelExchange && N_STATES == 0) {
-        say(&probe, LOG_ERROR, "fmi2Instantiate: %s has no ModelExchange interface (co-simulation only)",
-            MODEL_IDENTIFIER);
-        return NULL;
-    }
-    Instance *inst = (Instance *)calloc(1, sizeof(Instance));
-    Model *model = (Model *)calloc(1, model_size());
-    if (inst == NULL || model == NULL) {
-        free(inst);
-        free(model);
-        say(&probe, LOG_ERROR, "fmi2Instantiate: out of memory");
-        return NULL;
-    }
-    *inst = probe;
-    inst->type = fmuType;
-    inst->logging_on = loggingOn ? 1 : 0;
-    inst->model = model;
-    inst->log.inst = inst;
-    reset_values(inst);
-    return inst;
+    return instantiate(&probe, "fmi2Instantiate", "guid", fmuGUID, fmuType == fmi2ModelExchange ? IF_ME : IF_CS,
+                       loggingOn ? 1 : 0);
 }
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    Instance *inst = begin(c);
-    if (inst == NULL) return;
-    inst->magic = 0;
-    free(inst->model);
-    free(inst);
+    free_instance(c);
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
     Instance *inst = begin(c);
-    (void)toleranceDefined;
-    (void)tolerance;
-    (void)stopTimeDefined;
-    (void)stopTime;
-    if (inst == NULL) return fmi2Error;
-    if (!require(inst, "fmi2SetupExperiment", inst->v.phase == PHASE_INSTANTIATED)) return fmi2Error;
-    if (!isfinite(startTime)) {
-        say(inst, LOG_ERROR, "fmi2SetupExperiment: start time %g is not finite", startTime);
-        return fmi2Error;
-    }
-    inst->v.time = startTime;
-    return fmi2OK;
+    (void)toleranceDefined, (void)tolerance, (void)stopTimeDefined, (void)stopTime;
+    return inst == NULL ? fmi2Error : status(set_start_time(inst, "fmi2SetupExperiment", startTime));
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (!require(inst, "fmi2EnterInitializationMode", inst->v.phase == PHASE_INSTANTIATED)) return fmi2Error;
-    inst->v.phase = PHASE_INIT;
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(enter_initialization(inst));
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (!require(inst, "fmi2ExitInitializationMode", inst->v.phase == PHASE_INIT)) return fmi2Error;
-    for (int i = 0; i < N_PARAMETERS; i++) {
-        double x = inst->v.p[i];
-        if (!isfinite(x) || x < PAR_MIN[i] || x > PAR_MAX[i]) {
-            say(inst, LOG_ERROR, "parameter %s = %g is outside its declared range [%g, %g]",
-                var_name((fmi2ValueReference)(VR_PAR0 + i)), x, PAR_MIN[i], PAR_MAX[i]);
-            inst->v.phase = PHASE_FAILED;
-            return fmi2Error;
-        }
-    }
-    inst->log.time = inst->v.time;
-    if (model_setup(inst->model, inst->v.p, &inst->log) != 0) {
-        say(inst, LOG_ERROR, "initialisation failed: the model refused its parameters");
-        inst->v.phase = PHASE_FAILED;
-        return fmi2Error;
-    }
-    inst->v.ready = 1;
-    char list[MSG_MAX / 2];
-    if (inputs_valid(inst->v.u))
-        model_initialize(inst->model, inst->v.u, &inst->log);
-    else if (bad_inputs(inst->v.u, list, sizeof list))
-        say(inst, LOG_WARNING, "non-finite inputs at initialisation: the model starts from the first step");
-    else
-        say(inst, LOG_WARNING, "input(s) outside the declared range at initialisation: %s; the model starts from "
-            "the first step", list);
-    model_outputs(inst->model, inst->v.y, inst->v.yi);
-    inst->v.phase = inst->type == fmi2CoSimulation ? PHASE_STEP : PHASE_EVENT;
-    return status_of(inst);
+    return inst == NULL ? fmi2Error : status(exit_initialization(inst));
 }
 
 fmi2Status fmi2Terminate(fmi2Component c)
@@ -424,62 +163,16 @@ fmi2Status fmi2Reset(fmi2Component c)
 }
 
 /* ------------------------------------------------------------------ get / set */
-static int check_array(Instance *inst, const char *what, const void *vr, size_t nvr, const void *value)
-{
-    if (nvr > 0 && (vr == NULL || value == NULL)) {
-        say(inst, LOG_ERROR, "%s: NULL array for %zu value references", what, nvr);
-        return 0;
-    }
-    return 1;
-}
-
-static void unknown_ref(Instance *inst, const char *what, fmi2ValueReference vr, const char *type)
-{
-    if (vr < N_VR)
-        say(inst, LOG_ERROR, "%s: value reference %u (%s) is not a%s %s variable", what, vr, var_name(vr),
-            type[0] == 'I' ? "n" : "", type);
-    else
-        say(inst, LOG_ERROR, "%s: value reference %u is not a variable of %s (references 0..%u)", what, vr,
-            MODEL_IDENTIFIER, (unsigned)N_VR - 1u);
-}
-
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
     Instance *inst = begin(c);
+    GetCache cache = {{0}, {0}, 0, 0};
     if (inst == NULL) return fmi2Error;
     if (!check_array(inst, "fmi2GetReal", vr, nvr, value)) return fmi2Error;
     refresh_outputs(inst);
-#if N_STATES > 0
-    double x[N_STATES], dx[N_STATES];
-    int have_x = 0, have_dx = 0;
-#endif
-    for (size_t i = 0; i < nvr; i++) {
-        long r = (long)vr[i];
-        value[i] = 0.0;
-        if (r < VR_IN0) value[i] = inst->v.p[r - VR_PAR0];
-        else if (r < VR_OUT0) value[i] = inst->v.u[r - VR_IN0];
-        else if (r < VR_INT0) value[i] = inst->v.y[r - VR_OUT0];
-#if N_STATES > 0
-        else if (r >= VR_STATE0 && r < N_VR && !inst->v.ready) {
-            value[i] = 0.0; /* not set up yet: the states are computed at fmi2ExitInitializationMode */
-        } else if (r >= VR_STATE0 && r < VR_DER0) {
-            if (!have_x) model_me_get_states(inst->model, x), have_x = 1;
-            value[i] = x[r - VR_STATE0];
-        } else if (r >= VR_DER0 && r < N_VR) {
-            if (!have_dx) {
-                if (!inputs_valid(inst->v.u)) {
-                    say(inst, LOG_ERROR, "fmi2GetReal: derivative %s needs inputs inside their declared range",
-                        var_name(vr[i]));
-                    continue;
-                }
-                model_me_derivatives(inst->model, inst->v.u, dx), have_dx = 1;
-            }
-            value[i] = dx[r - VR_DER0];
-        }
-#endif
-        else unknown_ref(inst, "fmi2GetReal", vr[i], "Real");
-    }
-    return status_of(inst);
+    for (size_t i = 0; i < nvr; i++)
+        if (!get_real(inst, "fmi2GetReal", (long)vr[i], &value[i], &cache)) unknown_ref(inst, "fmi2GetReal", vr[i], "Real");
+    return status(inst->log.worst);
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
@@ -490,34 +183,33 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     refresh_outputs(inst);
     for (size_t i = 0; i < nvr; i++) {
         value[i] = 0;
-        if (vr[i] >= VR_INT0 && vr[i] < VR_STATE0) value[i] = inst->v.yi[vr[i] - VR_INT0];
+        if ((long)vr[i] >= VR_INT0 && (long)vr[i] < VR_STATE0) value[i] = inst->v.yi[vr[i] - VR_INT0];
         else unknown_ref(inst, "fmi2GetInteger", vr[i], "Integer");
     }
-    return status_of(inst);
+    return status(inst->log.worst);
+}
+
+/* the types this FMU has no variable of (a get) */
+static fmi2Status no_such_type(fmi2Component c, const char *what, const char *type, const fmi2ValueReference vr[],
+                               size_t nvr, const void *value)
+{
+    Instance *inst = begin(c);
+    if (inst == NULL) return fmi2Error;
+    if (!check_array(inst, what, vr, nvr, value)) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) unknown_ref(inst, what, vr[i], type);
+    return status(inst->log.worst);
 }
 
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
 {
-    Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (!check_array(inst, "fmi2GetBoolean", vr, nvr, value)) return fmi2Error;
-    for (size_t i = 0; i < nvr; i++) {
-        value[i] = fmi2False;
-        unknown_ref(inst, "fmi2GetBoolean", vr[i], "Boolean");
-    }
-    return status_of(inst);
+    for (size_t i = 0; value != NULL && i < nvr; i++) value[i] = fmi2False;
+    return no_such_type(c, "fmi2GetBoolean", "Boolean", vr, nvr, value);
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
 {
-    Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (!check_array(inst, "fmi2GetString", vr, nvr, value)) return fmi2Error;
-    for (size_t i = 0; i < nvr; i++) {
-        value[i] = "";
-        unknown_ref(inst, "fmi2GetString", vr[i], "String");
-    }
-    return status_of(inst);
+    for (size_t i = 0; value != NULL && i < nvr; i++) value[i] = "";
+    return no_such_type(c, "fmi2GetString", "String", vr, nvr, value);
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
@@ -525,37 +217,25 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     Instance *inst = begin(c);
     if (inst == NULL) return fmi2Error;
     if (!check_array(inst, "fmi2SetReal", vr, nvr, value)) return fmi2Error;
-    int before_init = inst->v.phase == PHASE_INSTANTIATED || inst->v.phase == PHASE_INIT;
-    for (size_t i = 0; i < nvr; i++) {
-        long r = (long)vr[i];
-        if (r >= VR_IN0 && r < VR_OUT0) {
-            inst->v.u[r - VR_IN0] = value[i]; /* checked (finite) where it is used */
-        } else if (r < VR_IN0) {
-            if (before_init) inst->v.p[r - VR_PAR0] = value[i];
-            else say(inst, LOG_WARNING, "parameter %s set after initialisation: ignored", var_name(vr[i]));
-        } else if (is_real(vr[i])) {
-            say(inst, LOG_ERROR, "fmi2SetReal: value reference %u (%s) is not an input or a parameter; ignored",
-                vr[i], var_name(vr[i]));
-        } else {
-            unknown_ref(inst, "fmi2SetReal", vr[i], "Real");
-        }
-    }
-    return status_of(inst);
+    for (size_t i = 0; i < nvr; i++)
+        if (!set_real(inst, "fmi2SetReal", (long)vr[i], value[i])) unknown_ref(inst, "fmi2SetReal", vr[i], "Real");
+    return status(inst->log.worst);
 }
 
 static fmi2Status refuse_set(fmi2Component c, const char *what, const char *type, const fmi2ValueReference vr[],
                              size_t nvr, const void *value)
 {
     Instance *inst = begin(c);
+    char n[64];
     if (inst == NULL) return fmi2Error;
     if (!check_array(inst, what, vr, nvr, value)) return fmi2Error;
     for (size_t i = 0; i < nvr; i++) {
-        if (type[0] == 'I' && vr[i] >= VR_INT0 && vr[i] < VR_STATE0)
-            say(inst, LOG_ERROR, "%s: value reference %u (%s) is an output; ignored", what, vr[i], var_name(vr[i]));
+        if (type[0] == 'I' && (long)vr[i] >= VR_INT0 && (long)vr[i] < VR_STATE0)
+            say(inst, LOG_ERROR, "%s: value reference %u (%s) is an output; ignored", what, vr[i], var_name(vr[i], n));
         else
             unknown_ref(inst, what, vr[i], type);
     }
-    return status_of(inst);
+    return status(inst->log.worst);
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
@@ -574,112 +254,45 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 }
 
 /* ------------------------------------------------------------------ FMU state */
-typedef struct {
-    unsigned magic;
-    Values v;
-} StateHeader;
-
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (state == NULL) {
-        say(inst, LOG_ERROR, "fmi2GetFMUstate: NULL state pointer");
-        return fmi2Error;
-    }
-    StateHeader *blob = (StateHeader *)*state;
-    if (blob == NULL) blob = (StateHeader *)malloc(sizeof(StateHeader) + model_size());
-    if (blob == NULL) {
-        say(inst, LOG_ERROR, "fmi2GetFMUstate: out of memory");
-        return fmi2Error;
-    }
-    blob->magic = MAGIC;
-    blob->v = inst->v;
-    memcpy(blob + 1, inst->model, model_size());
-    *state = blob;
-    return fmi2OK;
-}
-
-static int valid_state(Instance *inst, const char *what, const StateHeader *blob)
-{
-    if (blob == NULL || blob->magic != MAGIC) {
-        say(inst, LOG_ERROR, "%s: not a state of this FMU", what);
-        return 0;
-    }
-    return 1;
+    return inst == NULL ? fmi2Error : status(get_state(inst, "fmi2GetFMUstate", state));
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    const StateHeader *blob = (const StateHeader *)state;
-    if (!valid_state(inst, "fmi2SetFMUstate", blob)) return fmi2Error;
-    inst->v = blob->v;
-    memcpy(inst->model, blob + 1, model_size());
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(set_state(inst, "fmi2SetFMUstate", state));
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (state != NULL) {
-        free(*state);
-        *state = NULL;
-    }
+    if (begin(c) == NULL) return fmi2Error;
+    free_state(state);
     return fmi2OK;
-}
-
-/* serialised: the guid, then the state blob */
-static size_t serialized_size(void)
-{
-    return sizeof INSTANTIATION_TOKEN + sizeof(StateHeader) + model_size();
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (!valid_state(inst, "fmi2SerializedFMUstateSize", (const StateHeader *)state) || size == NULL)
-        return fmi2Error;
-    *size = serialized_size();
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(state_size(inst, "fmi2SerializedFMUstateSize", state, size));
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (!valid_state(inst, "fmi2SerializeFMUstate", (const StateHeader *)state)) return fmi2Error;
-    if (bytes == NULL || size < serialized_size()) {
-        say(inst, LOG_ERROR, "fmi2SerializeFMUstate: buffer of %zu bytes, %zu needed", size, serialized_size());
-        return fmi2Error;
-    }
-    memcpy(bytes, INSTANTIATION_TOKEN, sizeof INSTANTIATION_TOKEN);
-    memcpy(bytes + sizeof INSTANTIATION_TOKEN, state, sizeof(StateHeader) + model_size());
-    return fmi2OK;
+    return inst == NULL ? fmi2Error
+                        : status(serialize(inst, "fmi2SerializeFMUstate", state, (unsigned char *)bytes, size));
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *state)
 {
     Instance *inst = begin(c);
-    if (inst == NULL) return fmi2Error;
-    if (serializedState == NULL || state == NULL || size != serialized_size() ||
-        memcmp(serializedState, INSTANTIATION_TOKEN, sizeof INSTANTIATION_TOKEN) != 0) {
-        say(inst, LOG_ERROR, "fmi2DeSerializeFMUstate: not a serialised state of this FMU (guid %s, %zu bytes)",
-            INSTANTIATION_TOKEN, serialized_size());
-        return fmi2Error;
-    }
-    void *blob = realloc(*state, sizeof(StateHeader) + model_size());
-    if (blob == NULL) {
-        say(inst, LOG_ERROR, "fmi2DeSerializeFMUstate: out of memory");
-        return fmi2Error;
-    }
-    memcpy(blob, serializedState + sizeof INSTANTIATION_TOKEN, sizeof(StateHeader) + model_size());
-    *state = blob;
-    return fmi2OK;
+    return inst == NULL ? fmi2Error
+                        : status(deserialize(inst, "fmi2DeSerializeFMUstate", "guid",
+                                             (const unsigned char *)serializedState, size, state));
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
@@ -719,34 +332,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
 {
     Instance *inst = begin(c);
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (inst == NULL) return fmi2Error;
-    if (!require_type(inst, "fmi2DoStep", fmi2CoSimulation)) return fmi2Error;
-    if (inst->v.phase != PHASE_STEP) {
-        say(inst, LOG_ERROR, "step refused at t = %g: fmi2DoStep called in %s (call fmi2ExitInitializationMode "
-            "first%s)", currentCommunicationPoint, phase_name(inst->v.phase),
-            inst->v.phase == PHASE_FAILED ? "; initialisation failed, see the earlier error" : "");
-        return fmi2Error;
-    }
-    if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
-        say(inst, LOG_ERROR, "step refused: communication step %g must be finite and > 0 s", communicationStepSize);
-        return fmi2Error;
-    }
-    if (communicationStepSize > MAX_STEP_REFUSED_ABOVE) {
-        char t[32], h[32], m[32];
-        say(inst, LOG_ERROR, "step refused at t = %s: communication step %s s exceeds this FMU's longest step %s s "
-            "(declared in its model description); state held", py_repr(currentCommunicationPoint, t),
-            py_repr(communicationStepSize, h), py_repr(MAX_STEP, m));
-        return fmi2Error;
-    }
-    if (!inputs_ok(inst, "step")) return fmi2Error;
-    inst->log.time = currentCommunicationPoint;
-    if (model_do_step(inst->model, communicationStepSize, inst->v.u, &inst->log) == 0) {
-        inst->v.time = currentCommunicationPoint + communicationStepSize;
-        model_outputs(inst->model, inst->v.y, inst->v.yi);
-    } else if (inst->log.worst < LOG_ERROR) {
-        say(inst, LOG_ERROR, "step refused at t = %g by the model", currentCommunicationPoint);
-    }
-    return status_of(inst);
+    return inst == NULL ? fmi2Error : status(do_step(inst, currentCommunicationPoint, communicationStepSize));
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)
@@ -800,36 +386,6 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
 }
 
 /* ------------------------------------------------------------------ model exchange */
-#define IN_EVENT (1 << PHASE_EVENT)
-#define IN_CONT (1 << PHASE_CONTINUOUS)
-#define IN_INIT ((1 << PHASE_INSTANTIATED) | (1 << PHASE_INIT))
-#define IN_RUN (IN_EVENT | IN_CONT | (1 << PHASE_TERMINATED)) /* the model is set up */
-
-static Instance *me_begin(fmi2Component c, const char *what, int phases)
-{
-    Instance *inst = begin(c);
-    if (inst == NULL) return NULL;
-    if (!require_type(inst, what, fmi2ModelExchange)) return NULL;
-    if (!require(inst, what, (phases >> inst->v.phase) & 1)) return NULL;
-    if (phases == IN_RUN && !inst->v.ready) {
-        say(inst, LOG_ERROR, "%s: the model was never initialised (fmi2ExitInitializationMode failed or was "
-            "not called)", what);
-        return NULL;
-    }
-    return inst;
-}
-
-
-static int count_ok(Instance *inst, const char *what, const void *array, size_t n, size_t expected)
-{
-    if (array == NULL || n != expected) {
-        say(inst, LOG_ERROR, "%s: %zu values (array %s) given, this FMU has %zu", what, n,
-            array ? "set" : "NULL", expected);
-        return 0;
-    }
-    return 1;
-}
-
 fmi2Status fmi2EnterEventMode(fmi2Component c)
 {
     Instance *inst = me_begin(c, "fmi2EnterEventMode", IN_EVENT | IN_CONT);
@@ -841,14 +397,12 @@ fmi2Status fmi2EnterEventMode(fmi2Component c)
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
     Instance *inst = me_begin(c, "fmi2NewDiscreteStates", IN_EVENT);
+    int changed;
     if (inst == NULL || eventInfo == NULL) return fmi2Error;
     memset(eventInfo, 0, sizeof *eventInfo);
-#if N_STATES > 0
-    if (!inputs_ok(inst, "fmi2NewDiscreteStates")) return fmi2Error;
-    eventInfo->valuesOfContinuousStatesChanged =
-        model_me_event_update(inst->model, inst->v.time, inst->v.u, &inst->log) ? fmi2True : fmi2False;
-#endif
-    return status_of(inst);
+    fmi2Status s = status(event_update(inst, "fmi2NewDiscreteStates", &changed));
+    eventInfo->valuesOfContinuousStatesChanged = changed ? fmi2True : fmi2False;
+    return s;
 }
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
@@ -873,70 +427,37 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
 {
     Instance *inst = me_begin(c, "fmi2SetTime", IN_EVENT | IN_CONT | IN_INIT);
-    if (inst == NULL) return fmi2Error;
-    if (!isfinite(time)) {
-        say(inst, LOG_ERROR, "fmi2SetTime: time %g is not finite", time);
-        return fmi2Error;
-    }
-    inst->v.time = time;
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(set_time(inst, "fmi2SetTime", time));
 }
 
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
 {
     Instance *inst = me_begin(c, "fmi2SetContinuousStates", IN_EVENT | IN_CONT);
-    if (inst == NULL || !count_ok(inst, "fmi2SetContinuousStates", x, nx, N_STATES)) return fmi2Error;
-#if N_STATES > 0
-    if (!all_finite(x, N_STATES)) {
-        say(inst, LOG_ERROR, "fmi2SetContinuousStates: non-finite state refused");
-        return fmi2Error;
-    }
-    model_me_set_states(inst->model, x);
-#endif
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(set_states(inst, "fmi2SetContinuousStates", x, nx));
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
     Instance *inst = me_begin(c, "fmi2GetDerivatives", IN_RUN);
-    if (inst == NULL || !count_ok(inst, "fmi2GetDerivatives", derivatives, nx, N_STATES)) return fmi2Error;
-#if N_STATES > 0
-    if (!inputs_ok(inst, "fmi2GetDerivatives")) return fmi2Error;
-    model_me_derivatives(inst->model, inst->v.u, derivatives);
-#endif
-    return status_of(inst);
+    return inst == NULL ? fmi2Error : status(get_derivatives(inst, "fmi2GetDerivatives", derivatives, nx));
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
 {
     Instance *inst = me_begin(c, "fmi2GetEventIndicators", IN_RUN);
     if (inst == NULL) return fmi2Error;
-    if (ni == 0) return fmi2OK;
-    if (!count_ok(inst, "fmi2GetEventIndicators", eventIndicators, ni, N_EVENT_INDICATORS)) return fmi2Error;
-#if N_STATES > 0 && N_EVENT_INDICATORS > 0
-    if (!inputs_ok(inst, "fmi2GetEventIndicators")) return fmi2Error;
-    model_me_event_indicators(inst->model, inst->v.u, eventIndicators);
-#endif
-    return status_of(inst);
+    if (ni == 0) return fmi2OK; /* (FMI 2.0 hosts ask for none when they use none) */
+    return status(get_event_indicators(inst, "fmi2GetEventIndicators", eventIndicators, ni));
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
 {
     Instance *inst = me_begin(c, "fmi2GetContinuousStates", IN_RUN);
-    if (inst == NULL || !count_ok(inst, "fmi2GetContinuousStates", x, nx, N_STATES)) return fmi2Error;
-#if N_STATES > 0
-    model_me_get_states(inst->model, x);
-#endif
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(get_states(inst, "fmi2GetContinuousStates", x, nx, 0));
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
 {
     Instance *inst = me_begin(c, "fmi2GetNominalsOfContinuousStates", IN_RUN);
-    if (inst == NULL || !count_ok(inst, "fmi2GetNominalsOfContinuousStates", x_nominal, nx, N_STATES))
-        return fmi2Error;
-#if N_STATES > 0
-    model_me_nominals(inst->model, x_nominal);
-#endif
-    return fmi2OK;
+    return inst == NULL ? fmi2Error : status(get_states(inst, "fmi2GetNominalsOfContinuousStates", x_nominal, nx, 1));
 }

@@ -1,4 +1,4 @@
-"""The native C backend: FMI 2.0 FMUs with no Python inside (``latobs build --backend c``).
+"""The native C backend: FMI 2.0 and FMI 3.0 FMUs with no Python inside (``latobs build --backend c``).
 
 For one FMU (an observer's design file or a plant's data file) the generator writes C sources and
 compiles them at build time for every platform asked (``latobs.cbackend.toolchain``: zig cc, the
@@ -10,8 +10,9 @@ system C compiler for this machine's platform when there is one):
   precomputed for the default communication step, tables;
 * ``fmu_config.h``: identifiers, the guid, the variable table (the value references of the
   pythonfmu backend, then the ModelExchange states and derivatives);
-* compiled with the hand-written sources of ``fmu_src/c``: ``fmi2_layer.c`` (the one FMI layer:
-  state machine, variables, logging, statuses; CoSimulation and ModelExchange), ``model.h`` (its
+* compiled with the hand-written sources of ``fmu_src/c``: ``fmi2_layer.c`` (the FMI 2.0 layer;
+  ``fmi3_layer.c`` with ``--fmi 3``) over ``layer.h`` (what both layers share: instance, state
+  machine, variables, logging, checks; CoSimulation and ModelExchange), ``model.h`` (the layers'
   interface to the model files), ``<runtime>.c`` (the maths), shared helpers (``linalg.h``),
   ``fp_contract.h`` (no FMA contraction, stated in the sources for every compiler that rebuilds
   them; included by ``model.h``) and ``glibc_compat.h`` (the old-glibc baseline, below).
@@ -41,7 +42,7 @@ from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
 from .emit import CModel, c_array, c_define, c_string
 
 C_SRC = Path(_framework.__file__).resolve().parent / "c"
-LAYER = ("fmi2_layer.c", "model.h", "fp_contract.h", "glibc_compat.h")
+LAYER = ("fmi2_layer.c", "layer.h", "model.h", "fp_contract.h", "glibc_compat.h")
 SHARED_HEADERS = ("linalg.h", "model_util.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 #: the FMI versions the native backend builds (``latobs build --fmi``)
