@@ -515,40 +515,9 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     bounds = all_bounds(spec, data)
     mv = SubElement(root, "ModelVariables")
     for vr, typ, caus, v in table:
-        attrs = {"name": v.name, "valueReference": str(vr),
-                 "description": f"{v.documentation} [{v.unit}]" if v.unit != "1" else v.documentation,
-                 "causality": caus}
-        if caus == "parameter":
-            attrs.update(variability="fixed", initial="exact")
-        elif caus == "input":
-            attrs["variability"] = "continuous"
-        elif caus in ("state", "derivative"):
-            attrs.update(causality="local", variability="continuous", initial="calculated")
-            if caus == "derivative":
-                attrs.update(name=f"der({v.name})", description=f"time derivative of {v.name}")
-        else:
-            attrs.update(variability="continuous" if typ == "Real" else "discrete", initial="calculated")
-        sv = SubElement(mv, "ScalarVariable", attrs)
-        tattrs = {}
-        lo, hi = bounds.get(v.name, (v.min, v.max))
-        if typ == "Real":
-            if v.unit in BASE_UNITS:
-                tattrs["unit"] = v.unit
-                if v.unit in DISPLAY_UNITS:
-                    tattrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
-        if lo is not None:
-            tattrs["min"] = _num(lo) if typ == "Real" else str(int(lo))
-        if hi is not None:
-            tattrs["max"] = _num(hi) if typ == "Real" else str(int(hi))
-        if caus == "parameter":
-            tattrs["start"] = repr(starts[v.name])
-        elif caus == "input":
-            tattrs["start"] = _num(in_starts[v.name])
-        elif caus == "derivative":
-            tattrs = {"derivative": str(vr - len(states) + 1)}     # the state's 1-based index
-            if v.unit in DERIVATIVE_UNITS:
-                tattrs["unit"] = DERIVATIVE_UNITS[v.unit]
-        SubElement(sv, typ, tattrs)
+        sv = SubElement(mv, "ScalarVariable", variable_attributes(typ, caus, v, vr))
+        # a derivative names its state by its 1-based index in ModelVariables
+        SubElement(sv, typ, value_attributes(typ, caus, v, bounds, starts, in_starts, str(vr - len(states) + 1)))
     ms = SubElement(root, "ModelStructure")
     outputs = [vr for vr, _, caus, _ in table if caus == "output"]
     derivatives = [vr for vr, _, caus, _ in table if caus == "derivative"]
@@ -570,6 +539,53 @@ def model_description(spec: ModelSpec, data: dict, model_identifier: str, guid: 
     _indent(root)
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="unicode") + "\n").encode("utf-8")
 
+
+
+def variable_attributes(typ: str, caus: str, v, vr: int) -> dict:
+    """The attributes of a variable of :func:`full_table` (``typ`` "Real"/"Integer", ``caus`` its
+    causality there) that both FMI versions declare on the variable element itself: name, value
+    reference, description, causality, variability, initial."""
+    attrs = {"name": v.name, "valueReference": str(vr),
+             "description": f"{v.documentation} [{v.unit}]" if v.unit != "1" else v.documentation,
+             "causality": caus}
+    if caus == "parameter":
+        attrs.update(variability="fixed", initial="exact")
+    elif caus == "input":
+        attrs["variability"] = "continuous"
+    elif caus in ("state", "derivative"):
+        attrs.update(causality="local", variability="continuous", initial="calculated")
+        if caus == "derivative":
+            attrs.update(name=f"der({v.name})", description=f"time derivative of {v.name}")
+    else:
+        attrs.update(variability="continuous" if typ == "Real" else "discrete", initial="calculated")
+    return attrs
+
+
+def value_attributes(typ: str, caus: str, v, bounds: dict, starts: dict, in_starts: dict, state_ref: str) -> dict:
+    """The attributes of a variable's values (FMI 2.0: on its type element; FMI 3.0: on the
+    variable): unit and display unit, min, max, start; a derivative's ``derivative`` (``state_ref``:
+    its state as the version refers to it) and unit. ``bounds``, ``starts``, ``in_starts``: of
+    :func:`all_bounds`, :func:`start_values`, ``spec.input_starts``."""
+    if caus == "derivative":
+        attrs = {"derivative": state_ref}
+        if v.unit in DERIVATIVE_UNITS:
+            attrs["unit"] = DERIVATIVE_UNITS[v.unit]
+        return attrs
+    attrs = {}
+    lo, hi = bounds.get(v.name, (v.min, v.max))
+    if typ == "Real" and v.unit in BASE_UNITS:
+        attrs["unit"] = v.unit
+        if v.unit in DISPLAY_UNITS:
+            attrs["displayUnit"] = DISPLAY_UNITS[v.unit][0]
+    if lo is not None:
+        attrs["min"] = _num(lo) if typ == "Real" else str(int(lo))
+    if hi is not None:
+        attrs["max"] = _num(hi) if typ == "Real" else str(int(hi))
+    if caus == "parameter":
+        attrs["start"] = repr(starts[v.name])
+    elif caus == "input":
+        attrs["start"] = _num(in_starts[v.name])
+    return attrs
 
 def full_table(spec: ModelSpec, states=()) -> list[tuple[int, str, str, object]]:
     """:func:`variable_table` with the ModelExchange ``states`` (causality "state") and their

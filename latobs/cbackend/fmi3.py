@@ -211,39 +211,10 @@ def model_description(spec, data: dict, model_identifier: str, token: str, *, na
     starts, in_starts, bounds = fw.start_values(spec, data), input_starts(spec, data), fw.all_bounds(spec, data)
     mv = SubElement(root, "ModelVariables")
     state_vr = {v.name: vr for vr, _, caus, v in table if caus == "state"}
-    for vr, typ, caus, v in table:
-        attrs = {"name": v.name, "valueReference": str(vr),
-                 "description": f"{v.documentation} [{v.unit}]" if v.unit != "1" else v.documentation,
-                 "causality": caus}
-        if caus == "parameter":
-            attrs.update(variability="fixed", initial="exact")
-        elif caus == "input":
-            attrs["variability"] = "continuous"
-        elif caus in ("state", "derivative"):
-            attrs.update(causality="local", variability="continuous", initial="calculated")
-            if caus == "derivative":
-                attrs.update(name=f"der({v.name})", description=f"time derivative of {v.name}")
-        else:
-            attrs.update(variability="continuous" if typ == "Real" else "discrete", initial="calculated")
-        lo, hi = bounds.get(v.name, (v.min, v.max))
-        if caus == "derivative":
-            attrs["derivative"] = str(state_vr[v.name])
-            if v.unit in fw.DERIVATIVE_UNITS:
-                attrs["unit"] = fw.DERIVATIVE_UNITS[v.unit]
-        else:
-            if typ == "Real" and v.unit in fw.BASE_UNITS:
-                attrs["unit"] = v.unit
-                if v.unit in fw.DISPLAY_UNITS:
-                    attrs["displayUnit"] = fw.DISPLAY_UNITS[v.unit][0]
-            if lo is not None:
-                attrs["min"] = fw._num(lo) if typ == "Real" else str(int(lo))
-            if hi is not None:
-                attrs["max"] = fw._num(hi) if typ == "Real" else str(int(hi))
-            if caus == "parameter":
-                attrs["start"] = repr(starts[v.name])
-            elif caus == "input":
-                attrs["start"] = fw._num(in_starts[v.name])
-        SubElement(mv, "Float64" if typ == "Real" else "Int32", attrs)
+    for vr, typ, caus, v in table:      # a derivative names its state by its value reference
+        SubElement(mv, "Float64" if typ == "Real" else "Int32", {
+            **fw.variable_attributes(typ, caus, v, vr),
+            **fw.value_attributes(typ, caus, v, bounds, starts, in_starts, str(state_vr.get(v.name, "")))})
     first_indicator = len(table)
     indicators = list(range(first_indicator, first_indicator + (native.event_indicators if states else 0)))
     for k, vr in enumerate(indicators):
