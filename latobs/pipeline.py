@@ -233,6 +233,7 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
     """:func:`build` of one FMI version into ``out``."""
     from . import packaging
     from .atomic import locked_folder
+    from .cbackend.fmi3 import folders as fmi3_folders
 
     if backend not in ("auto", *packaging.BACKENDS):
         raise PipelineError(f"unknown backend {backend!r}; known: auto, {', '.join(packaging.BACKENDS)}")
@@ -276,8 +277,9 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
                 data = _current_design(p) or solve(p.model, p.vehicle)
                 path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
                                            origin=str(p.design_path), plants=plants, platforms=p.platforms, fmi=fmi)
+            folders = (p.platforms if fmi == 2 else fmi3_folders(p.platforms)) if p.platforms else []
             print(f"built {path} ({BACKEND_LABEL[p.backend]}{', FMI 3.0' if fmi == 3 else ''}"
-                  f"{': ' + ', '.join(p.platforms) if p.platforms else ''})")
+                  f"{': ' + ', '.join(folders) if folders else ''})")
             built[p.name] = path
     return [built[p.name] for p in plans]
 

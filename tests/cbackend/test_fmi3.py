@@ -210,6 +210,22 @@ def test_the_binaries_of_every_platform_give_their_fmi2_twins_outputs_in_a_plain
         assert [k for k in e.outputs if _bits(runs[1][k]) != _bits(e.outputs[k])] == []
 
 
+def test_latobs_check_runs_every_platform_it_can_here(built_fmus):
+    """``latobs check --platform all`` on an FMI 3.0 FMU: its x86_64-linux binary bit for bit (fmpy),
+    x86_64-windows (Wine) and aarch64-linux (qemu) in the C host within the reference tolerance; the
+    darwin folders skipped, saying why."""
+    from test_cross_run import _need
+
+    from latobs.check import check
+
+    for platform in CROSS:
+        _need(platform)
+    results, skipped = check(built_fmus.c3_path("CarPlant"), "all")
+    assert [r.platform for r in results] == ["x86_64-linux", "x86_64-windows", "aarch64-linux"]
+    assert all(r.passed for r in results) and results[0].comparison.exact, [r.line() for r in results]
+    assert [p for p, _ in skipped] == ["x86_64-darwin", "aarch64-darwin"]
+
+
 # ---------------------------------------------------------------------------------------------
 # misuse: the FMI 2.0 layer's contract (test_c_backend.py) in both FMI 3.0 interfaces
 # ---------------------------------------------------------------------------------------------
