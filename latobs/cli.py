@@ -151,6 +151,71 @@ def _cmd_replay(args) -> int:
     return 0
 
 
+def _cmd_identify(args) -> int:
+    """``latobs identify``: Cf, Cr of the car of a record, written as a vehicle file."""
+    import tomli_w
+
+    from . import __version__
+    from .atomic import atomic_write_text
+    from .data.records import load_csv
+    from .synthesis import identification
+    from .synthesis.params import load_vehicle
+    from .validation.replay import MBDS_ALIAS, default_split, resolve_csv
+
+    path = resolve_csv(args.record)
+    if not path.is_file():
+        raise CliError(f"{args.record}: no such file (a .csv or .csv.gz with a header row, or 'mbds')")
+    base_name = args.vehicle or ("mbds_250lm" if args.record == MBDS_ALIAS else None)
+    if base_name is None:
+        raise CliError("--vehicle BASE is needed: the mass, geometry and yaw inertia the record cannot reveal "
+                       "(a shipped set's name or a vehicle .toml file)")
+    base = load_vehicle(base_name)
+    out = Path(args.out)
+    if out.suffix != ".toml":
+        raise CliError(f"--out takes a vehicle file ending in .toml, got {args.out!r}")
+    name = args.name or out.stem
+    from .synthesis.designs import ArtefactNameError, check_vehicle_name
+
+    try:
+        check_vehicle_name(name)
+    except ArtefactNameError as exc:
+        raise CliError(f"--name / the file name: {exc}") from None
+    try:
+        cols = load_csv(path)
+    except (OSError, ValueError) as exc:
+        raise CliError(f"{args.record}: {exc}") from None
+    t = cols.get("t")
+    if args.tune_until is not None:
+        tune_until, what = args.tune_until, f"t < {args.tune_until:g} s"
+    elif args.tune_fraction is not None or default_split(path) is None:
+        f = args.tune_fraction if args.tune_fraction is not None else 0.6
+        if not 0.0 < f <= 1.0:
+            raise CliError(f"--tune-fraction must be in (0, 1], got {f:g}")
+        if t is None or len(t) < 2:
+            raise CliError(f"{args.record}: no time column 't'")
+        tune_until = float(t[0] + f * (t[-1] - t[0]))
+        what = f"the first {100 * f:g} % (t < {tune_until:.6g} s)"
+    else:
+        tune_until = default_split(path)
+        what = f"t < {tune_until:g} s (the record's tuning part; t >= {tune_until:g} s is held out)"
+    try:
+        result = identification.identify(cols, base, tune_until, use_beta=not args.without_beta,
+                                         source=str(args.record))
+    except identification.IdentificationError as exc:
+        raise CliError(str(exc)) from None
+    doc = identification.vehicle_document(result, base, name, path.name if args.record != MBDS_ALIAS else "mbds",
+                                          what, __version__)
+    atomic_write_text(out, "# Written by latobs identify; see [identification] for how.\n" + tomli_w.dumps(doc))
+    print(f"identified on {what}, {result.samples} samples, fitting {', '.join(result.signals)}:")
+    for k, v, (lo, hi) in (("Cf", result.Cf, result.Cf_interval), ("Cr", result.Cr, result.Cr_interval)):
+        print(f"  {k} = {v:.0f} N/rad (95 % interval {lo:.0f} ... {hi:.0f}; {base.name}: {base.value(k):.0f})")
+    for k in result.signals:
+        print(f"  residual RMS {k}: {result.rms[k]:.4g} (with {base.name}'s Cf, Cr: {result.rms_base[k]:.4g})")
+    print(f"wrote {out}; next: latobs build NAME --vehicle {out}, latobs replay {args.record} --vehicle {out} "
+          "--observer NAME")
+    return 0
+
+
 def _split(text: str):
     """--split: a time in s, 'none', or 'auto' (the file's default: 425 s for the MBDS record)."""
     if text.lower() in ("auto", "none"):
@@ -480,6 +545,24 @@ def parser() -> argparse.ArgumentParser:
                         "MBDS record, whose t >= 425 s is a held-out test, none for other files)")
     r.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
     r.set_defaults(func=_cmd_replay)
+    idf = sub.add_parser("identify", help="identify a car's cornering stiffnesses from a recorded drive into a "
+                                          "vehicle file (then build and replay with --vehicle FILE)")
+    idf.add_argument("record", metavar="RECORD", help="a .csv or .csv.gz file as `latobs replay` reads it (t, delta "
+                                                    "(road-wheel angle), vx, yaw_rate, ay; beta when present), or "
+                                                    "'mbds' for the bundled MBDS record")
+    idf.add_argument("--vehicle", type=_vehicle, default=None, metavar="BASE",
+                     help="the base vehicle: mass, geometry, yaw inertia, everything the record does not identify "
+                          "(a shipped set or a .toml; default for 'mbds': mbds_250lm; needed otherwise)")
+    tune = idf.add_mutually_exclusive_group()
+    tune.add_argument("--tune-until", type=float, default=None, metavar="T",
+                      help="fit on t < T s only (default: 425 s for the MBDS record, else --tune-fraction 0.6)")
+    tune.add_argument("--tune-fraction", type=float, default=None, metavar="F",
+                      help="fit on the first fraction F of the record (0 < F <= 1)")
+    idf.add_argument("--without-beta", action="store_true",
+                     help="do not fit the record's reference sideslip 'beta' (only yaw rate and ay)")
+    idf.add_argument("--name", default=None, help="the identified vehicle's name (default: the file name's stem)")
+    idf.add_argument("--out", required=True, metavar="FILE.toml", help="the vehicle file written")
+    idf.set_defaults(func=_cmd_identify)
     bn = sub.add_parser("bench", help="µs per step of the built FMUs and the coupled run, beside references",
                         add_help=False)
     bn.add_argument("bench_args", nargs=argparse.REMAINDER, help="see `latobs bench --help`")

@@ -1,0 +1,346 @@
+"""Identify a car's cornering stiffnesses from a recorded drive (``latobs identify``).
+
+The model is paper 001's design model, the single-track (bicycle) model with first-order tire
+relaxation (``synthesis.relaxation_model``, eq. 9: states vy, r at the CG, ay = sum Fy / m and the
+yaw acceleration; input the road-wheel angle delta; the relaxation length sigma from the base
+vehicle), or, for a base vehicle without sigma, the bicycle model of paper 002's Kalman peer
+(``synthesis.sideslip_kalman_filter.model``). It is discretised exactly per sample at the recorded
+speed (zero-order hold). The front and rear axle stiffnesses Cf, Cr are the output-error
+least-squares fit (``scipy.optimize.least_squares``) of the simulated yaw rate and lateral
+acceleration, and of the sideslip when the record has a reference ``beta``, to the record's tuning
+part (t < tune_until); each signal's residual is divided by the signal's spread, and the unknowns
+are the scale factors of the base vehicle's values (numbers near 1).
+
+Uncertainty: a moving-block bootstrap over segments of the tuning part, linearised at the fit
+(one Gauss-Newton step per resample from the segments' Jacobians and residuals: the spread that
+re-fitting each resample would show, without simulating again). The 2.5 and 97.5 percentiles are
+the interval written to the vehicle file's ``[ranges]``: the stiffness box of papers 001 and 002.
+
+What the record cannot reveal is taken from the base vehicle and marked so: mass, geometry, yaw
+inertia, relaxation length, roll (none of them identified here); the steering ratio needs a
+steering-wheel angle, which latobs's records do not carry (``delta`` is the road-wheel angle).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+import scipy.linalg
+
+from .params import Vehicle
+from .relaxation_model import coefficients
+from .sideslip_kalman_filter import model as bicycle
+from .sideslip_kalman_filter import vehicle_dict
+
+#: the record's columns the fit needs (SI: s, rad, m/s, rad/s, m/s^2); ``beta`` (rad) is used when present
+REQUIRED = ("t", "delta", "vx", "yaw_rate", "ay")
+MIN_TUNING_SECONDS = 10.0     # s, the shortest tuning part accepted
+MIN_SPEED = 5.0               # m/s, samples below are not fitted (the model is singular at vx = 0)
+MIN_MOVING_FRACTION = 0.5     # of the tuning part above MIN_SPEED
+MIN_STEER_RMS = math.radians(0.1)   # rad, the least steering excitation (RMS of delta about its mean)
+SEGMENT_SECONDS = 10.0        # s, the bootstrap's blocks
+BOOTSTRAP = 400               # resamples
+SCALE_BOUNDS = (0.2, 5.0)     # the stiffness scales searched, x the base vehicle's
+
+
+class IdentificationError(ValueError):
+    """A record that cannot identify what was asked: the message names the culprit and why."""
+
+
+@dataclass
+class Identified:
+    """The result of :func:`identify` (SI units)."""
+    Cf: float
+    Cr: float
+    Cf_interval: tuple[float, float]       # 95 % (bootstrap), N/rad
+    Cr_interval: tuple[float, float]
+    base: str                              # the base vehicle's name
+    record_sha256: str
+    tune_until: float                      # s: the tuning part is t < tune_until
+    samples: int                           # fitted samples (moving, tuning part)
+    rms: dict[str, float]                  # {signal: RMS of its residual at the fit, SI}
+    rms_base: dict[str, float]             # the same with the base vehicle's Cf, Cr
+    signals: list[str]                     # the fitted signals
+    nfev: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+def _uniform_time(t: np.ndarray, source: str) -> float:
+    if t.ndim != 1 or len(t) < 3 or not np.all(np.isfinite(t)):
+        raise IdentificationError(f"{source}: column 't' must hold at least 3 finite times")
+    dt = np.diff(t)
+    h = float(np.median(dt))
+    if not h > 0 or np.any(np.abs(dt - h) > 1e-6 * max(h, 1e-9) + 1e-9):
+        k = int(np.argmax(np.abs(dt - h)))
+        raise IdentificationError(f"{source}: the time column is not uniform (step {dt[k]:.6g} s at t = {t[k]:.6g} s, "
+                                  f"median {h:.6g} s): resample the record to a fixed step first")
+    return h
+
+
+def check_record(cols: Mapping[str, np.ndarray], tune_until: float, source: str = "the record") -> np.ndarray:
+    """The mask of the samples to fit (tuning part, moving), after checking the record: the columns
+    of :data:`REQUIRED` present and finite there, a uniform time step, a tuning part of at least
+    :data:`MIN_TUNING_SECONDS` mostly above :data:`MIN_SPEED`, steering that excites the yaw
+    dynamics. IdentificationError naming the culprit otherwise."""
+    missing = [c for c in REQUIRED if c not in cols]
+    if missing:
+        raise IdentificationError(f"{source}: missing column(s) {', '.join(missing)} (needs {', '.join(REQUIRED)}; "
+                                  "delta is the road-wheel angle, rad)")
+    t = np.asarray(cols["t"], dtype=float)
+    _uniform_time(t, source)
+    tune = t < tune_until
+    if t[tune].size < 2 or t[tune][-1] - t[0] < MIN_TUNING_SECONDS:
+        raise IdentificationError(f"{source}: the tuning part (t < {tune_until:g} s) lasts "
+                                  f"{(t[tune][-1] - t[0]) if t[tune].size else 0.0:.3g} s; at least "
+                                  f"{MIN_TUNING_SECONDS:g} s are needed")
+    for c in REQUIRED[1:]:
+        bad = ~np.isfinite(np.asarray(cols[c], dtype=float)[tune])
+        if bad.any():
+            raise IdentificationError(f"{source}: column {c!r} has {int(bad.sum())} non-finite value(s) in the tuning "
+                                      f"part, the first at t = {t[tune][bad][0]:.6g} s")
+    vx = np.asarray(cols["vx"], dtype=float)
+    moving = tune & (vx > MIN_SPEED)
+    if moving.sum() < MIN_MOVING_FRACTION * tune.sum():
+        raise IdentificationError(f"{source}: only {100 * moving.sum() / tune.sum():.0f} % of the tuning part is above "
+                                  f"{MIN_SPEED:g} m/s: too little driving to identify the cornering stiffnesses")
+    delta = np.asarray(cols["delta"], dtype=float)[moving]
+    steer = float(np.sqrt(np.mean((delta - delta.mean()) ** 2)))
+    if steer < MIN_STEER_RMS:
+        raise IdentificationError(f"{source}: the steering barely moves in the tuning part (RMS "
+                                  f"{math.degrees(steer):.3g} deg about its mean, at least "
+                                  f"{math.degrees(MIN_STEER_RMS):.2g} deg needed): Cf and Cr are not excited")
+    return moving
+
+
+ROLL = ("Ix", "hr", "Kr", "br")    # a base vehicle with these: paper 000's roll model
+
+
+def model_kind(vals: Mapping[str, float]) -> str:
+    """The identification model of a base vehicle's values: "roll+relaxation" (paper 000's bicycle
+    model with roll, eq. 1, its axle forces relaxed as in paper 001's eq. 9), "relaxation" (paper
+    001's model), "roll" (paper 000's model) or "bicycle"."""
+    roll = all(k in vals for k in ROLL)
+    relax = float(vals.get("sigma", 0.0) or 0.0) > 0
+    return {(True, True): "roll+relaxation", (False, True): "relaxation", (True, False): "roll",
+            (False, False): "bicycle"}[(roll, relax)]
+
+
+def _roll_model(vals: Mapping[str, float], vx: np.ndarray, relax: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) per sample of paper 000's model (states beta, r, phi, phi'; ``synthesis.bicycle_roll_model``),
+    with relaxed axle forces Ff, Fr appended as states when ``relax``: sigma/vx F' + F = C alpha.
+    Paper 000's model is linear in Cf and Cr, so an axle force's column g (the model's response to
+    1 N of it) is the model's B at Cf + 1 N/rad minus at Cf: x' = A_0 x + g_f Ff + g_r Fr, with
+    Ff = Cf alpha_f, alpha_f = delta - beta - lf r / vx, Fr = Cr alpha_r, alpha_r = -beta + lr r / vx
+    (the slip angles of paper 000's eq. 1) without relaxation."""
+    from .bicycle_roll_model import lpv_coefficients
+    from .params import Parameter, Vehicle as _V
+
+    names = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr")
+    veh = _V("identification", "car", "", "", {k: Parameter(k, float(vals[k]), "", "", "", "positive") for k in names}, {})
+    cf, cr = float(vals["Cf"]), float(vals["Cr"])
+    base = lpv_coefficients(veh)
+    unit_f = lpv_coefficients(veh, cf + 1.0, cr)
+    unit_r = lpv_coefficients(veh, cf, cr + 1.0)
+    inv = 1.0 / vx
+    at = lambda co, key: sum(M[None] * inv[:, None, None] ** k for k, M in enumerate(co[key]))  # noqa: E731
+    A, B = at(base, "A"), at(base, "B")[:, :, 0]
+    gf = at(unit_f, "B")[:, :, 0] - B                     # the response to 1 N of front axle force
+    Ar = at(unit_r, "A") - A                              # = g_r alpha_r's coefficients (1 N/rad more)
+    lf, lr = float(vals["lf"]), float(vals["lr"])
+    gr = -Ar[:, :, 0]                                     # alpha_r = -beta + ...: its beta column is -g_r
+    if not relax:
+        return A, B
+    n = len(vx)
+    # without the tire forces: A minus their parts (Cf alpha_f's, Cr alpha_r's), B minus Cf g_f
+    alpha_f = np.stack([-np.ones(n), -lf * inv, np.zeros(n), np.zeros(n)], axis=1)
+    alpha_r = np.stack([-np.ones(n), lr * inv, np.zeros(n), np.zeros(n)], axis=1)
+    A0 = A - cf * gf[:, :, None] * alpha_f[:, None, :] - cr * gr[:, :, None] * alpha_r[:, None, :]
+    rate = vx / float(vals["sigma"])
+    Ax = np.zeros((n, 6, 6))
+    Ax[:, :4, :4] = A0
+    Ax[:, :4, 4], Ax[:, :4, 5] = gf, gr
+    Ax[:, 4, :4] = rate[:, None] * cf * alpha_f
+    Ax[:, 5, :4] = rate[:, None] * cr * alpha_r
+    Ax[:, 4, 4] = Ax[:, 5, 5] = -rate
+    Bx = np.zeros((n, 6))
+    Bx[:, 4] = rate * cf
+    return Ax, Bx
+
+
+def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tuple[float, float] = (0.0, 0.0)
+             ) -> dict[str, np.ndarray]:
+    """The model of ``vals`` (:func:`model_kind`) driven by the record's delta at its speed (below
+    :data:`MIN_SPEED` held at it), from sideslip and yaw rate ``x0`` = (beta rad, r rad/s) and the
+    rest at rest: {"beta" (at the CG), "yaw_rate", "ay"} at every sample (ay = the sum of the tire
+    forces / m, as a road-plane accelerometer at the CG reads it)."""
+    t = np.asarray(cols["t"], dtype=float)
+    h = np.diff(t, append=t[-1] + (t[-1] - t[-2]))
+    vx = np.maximum(np.asarray(cols["vx"], dtype=float), MIN_SPEED)
+    delta = np.asarray(cols["delta"], dtype=float)
+    kind = model_kind(vals)
+    if kind.startswith("roll"):
+        A, B = _roll_model(vals, vx, relax=kind == "roll+relaxation")
+    elif kind == "relaxation":               # paper 001 (states vy, r, ay, r'); B = vx B1
+        A0, A1, B1 = coefficients(vals["m"], vals["Iz"], vals["lf"], vals["lr"], vals["sigma"], vals["Cf"], vals["Cr"])
+        A, B = A0[None] + vx[:, None, None] * A1[None], vx[:, None] * B1[None]
+    else:                                    # paper 002's Kalman peer (states vy, r)
+        A, B, _, _ = bicycle(vals, vx)
+    n, k = len(t), A.shape[1]
+    M = np.zeros((n, k + 1, k + 1))          # Van Loan: exp([[A, B], [0, 0]] h) = [[Phi, Gam], [0, 1]]
+    M[:, :k, :k] = A * h[:, None, None]
+    M[:, :k, k] = B * h[:, None]
+    E = scipy.linalg.expm(M)
+    Phi, Gam = E[:, :k, :k], E[:, :k, k]
+    x = np.empty((n, k))
+    xk = np.zeros(k)
+    xk[0] = x0[0] if kind.startswith("roll") else x0[0] * vx[0]      # beta, or vy = beta vx
+    xk[1] = x0[1]
+    for i in range(n):                      # x_{i+1} = Phi_i x_i + Gam_i delta_i
+        x[i] = xk
+        xk = Phi[i] @ xk + Gam[i] * delta[i]
+    m, lf, lr, cf, cr = (float(vals[q]) for q in ("m", "lf", "lr", "Cf", "Cr"))
+    if kind.startswith("roll"):      # paper 000's beta is the roll axis point's; the CG's: vy_cg = vy - hr phi'
+        beta = x[:, 0] - float(vals["hr"]) * x[:, 3] / vx
+        ay = ((x[:, 4] + x[:, 5]) / m if kind == "roll+relaxation" else
+              (cf * (delta - x[:, 0] - lf * x[:, 1] / vx) + cr * (-x[:, 0] + lr * x[:, 1] / vx)) / m)
+    elif kind == "relaxation":
+        ay, beta = x[:, 2], np.arctan2(x[:, 0], vx)
+    else:
+        ay = A[:, 0, 0] * x[:, 0] + (A[:, 0, 1] + vx) * x[:, 1] + B[:, 0] * delta    # vy' + vx r
+        beta = np.arctan2(x[:, 0], vx)
+    return {"beta": beta, "yaw_rate": x[:, 1], "ay": ay}
+
+
+def record_sha256(cols: Mapping[str, np.ndarray]) -> str:
+    """A hash of the record's columns (names and float64 bytes), for the provenance."""
+    h = hashlib.sha256()
+    for k in sorted(cols):
+        h.update(k.encode() + b"\0" + np.ascontiguousarray(np.asarray(cols[k], dtype=float)).tobytes())
+    return h.hexdigest()
+
+
+def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, use_beta: bool = True,
+             source: str = "the record", seed: int = 0) -> Identified:
+    """Cf and Cr of the car that drove ``cols`` (:func:`check_record`; ``use_beta``: fit the
+    record's ``beta`` too when it has one), the rest of the model from ``base``; see the module."""
+    from scipy.optimize import least_squares
+
+    fit = check_record(cols, tune_until, source)
+    vals0 = vehicle_dict(base)
+    vals0.update({k: base.value(k) for k in ("sigma", *ROLL) if k in base.parameters})
+    signals = ["yaw_rate", "ay"] + (["beta"] if use_beta and "beta" in cols else [])
+    meas = {s: np.asarray(cols[s], dtype=float) for s in signals}
+    if "beta" in signals and not np.all(np.isfinite(meas["beta"][fit])):
+        raise IdentificationError(f"{source}: column 'beta' has non-finite values in the tuning part (or identify "
+                                  "without it)")
+    spread = {s: float(np.std(meas[s][fit])) or 1.0 for s in signals}
+    x0 = (float(meas["beta"][0]) if "beta" in signals and np.isfinite(meas["beta"][0]) else 0.0,
+          float(cols["yaw_rate"][0]))
+
+    def values(s: np.ndarray) -> dict:
+        return {**vals0, "Cf": vals0["Cf"] * s[0], "Cr": vals0["Cr"] * s[1]}
+
+    def residual_parts(s: np.ndarray) -> dict[str, np.ndarray]:
+        sim = simulate(cols, values(s), x0)
+        return {k: (sim[k][fit] - meas[k][fit]) / spread[k] for k in signals}
+
+    def residuals(s: np.ndarray) -> np.ndarray:
+        r = np.concatenate(list(residual_parts(s).values()))
+        return r / math.sqrt(len(r))
+
+    sol = least_squares(residuals, x0=np.ones(2), bounds=SCALE_BOUNDS, x_scale=np.ones(2), method="trf",
+                        diff_step=1e-4)
+    s_hat = sol.x
+    if np.any(np.isclose(s_hat, SCALE_BOUNDS[0], rtol=1e-3)) or np.any(np.isclose(s_hat, SCALE_BOUNDS[1], rtol=1e-3)):
+        raise IdentificationError(f"{source}: the fit ran to the edge of the search ({SCALE_BOUNDS[0]:g}..."
+                                  f"{SCALE_BOUNDS[1]:g} x the base vehicle's Cf, Cr): the record does not fit the "
+                                  "bicycle model with this base vehicle (check the units: delta is the road-wheel "
+                                  "angle in rad, ay in m/s^2)")
+    interval = _bootstrap(cols, fit, signals, residual_parts, s_hat, seed)
+    parts = residual_parts(s_hat)
+    parts_base = residual_parts(np.ones(2))
+    t = np.asarray(cols["t"], dtype=float)
+    return Identified(
+        Cf=float(vals0["Cf"] * s_hat[0]), Cr=float(vals0["Cr"] * s_hat[1]),
+        Cf_interval=(float(vals0["Cf"] * interval[0][0]), float(vals0["Cf"] * interval[0][1])),
+        Cr_interval=(float(vals0["Cr"] * interval[1][0]), float(vals0["Cr"] * interval[1][1])),
+        base=base.name, record_sha256=record_sha256(cols), tune_until=float(min(tune_until, t[-1] + 1e-9)),
+        samples=int(fit.sum()),
+        rms={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts.items()},
+        rms_base={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts_base.items()},
+        signals=signals, nfev=int(sol.nfev))
+
+
+def _bootstrap(cols, fit: np.ndarray, signals: list[str], residual_parts, s_hat: np.ndarray, seed: int
+               ) -> list[tuple[float, float]]:
+    """The 95 % interval of each scale: moving-block bootstrap over :data:`SEGMENT_SECONDS` blocks of
+    the fitted samples, each resample's estimate one Gauss-Newton step from the fit. It holds the
+    estimation noise, not the model error (a real tire is not linear in its slip)."""
+    t = np.asarray(cols["t"], dtype=float)[fit]
+    block = np.floor((t - t[0]) / SEGMENT_SECONDS).astype(int)
+    nb = int(block.max()) + 1
+    base = residual_parts(s_hat)
+    step = 1e-4
+    jac = []
+    for j in range(2):
+        d = s_hat.copy()
+        d[j] += step * s_hat[j]
+        moved = residual_parts(d)
+        jac.append({k: (moved[k] - base[k]) / (step * s_hat[j]) for k in signals})
+    # per block: J^T J (2x2) and J^T e (2), summed over the signals
+    JtJ = np.zeros((nb, 2, 2))
+    Jte = np.zeros((nb, 2))
+    for k in signals:
+        J = np.stack([jac[0][k], jac[1][k]], axis=1)
+        e = base[k]
+        for i in range(2):
+            Jte[:, i] += np.bincount(block, J[:, i] * e, minlength=nb)
+            for j in range(2):
+                JtJ[:, i, j] += np.bincount(block, J[:, i] * J[:, j], minlength=nb)
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, nb, size=(BOOTSTRAP, nb))
+    est = np.empty((BOOTSTRAP, 2))
+    for b in range(BOOTSTRAP):
+        A = JtJ[draws[b]].sum(axis=0)
+        g = Jte[draws[b]].sum(axis=0)
+        est[b] = s_hat - np.linalg.solve(A, g)
+    lo, hi = np.percentile(est, [2.5, 97.5], axis=0)
+    return [(float(min(lo[i], s_hat[i])), float(max(hi[i], s_hat[i]))) for i in range(2)]
+
+
+def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, tune_until_text: str,
+                     version: str) -> dict:
+    """The vehicle file of the identified car (a ``synthesis.params`` vehicle TOML as a dict): the
+    base vehicle's parameters, Cf and Cr identified (the others marked as given), the stiffness box
+    from the bootstrap interval, and an ``[identification]`` table of provenance."""
+    doc = base.as_dict()
+    doc["name"] = name
+    doc["description"] = f"identified from {record} by latobs identify (base vehicle {base.name})"
+    doc["source"] = f"latobs {version} identify: Cf, Cr fitted to {record} ({tune_until_text}); the rest from {base.name}"
+    for k, p in doc["parameters"].items():
+        p["source"] = f"given: the base vehicle {base.name} ({p.get('source') or base.source})"
+    fitted = " and ".join(result.signals)
+    for k, value, (lo, hi) in (("Cf", result.Cf, result.Cf_interval), ("Cr", result.Cr, result.Cr_interval)):
+        doc["parameters"][k]["value"] = round(value, 1)
+        doc["parameters"][k]["source"] = (f"identified: output-error fit of {fitted} on {tune_until_text}, 95 % "
+                                          f"interval {lo:.0f} ... {hi:.0f} N/rad")
+    ranges = doc.setdefault("ranges", {})
+    for k, (lo, hi) in (("Cf", result.Cf_interval), ("Cr", result.Cr_interval)):
+        ranges[k] = {"min": round(lo, 1), "max": round(hi, 1), "unit": "N/rad",
+                     "description": f"{'front' if k == 'Cf' else 'rear'} axle cornering stiffness box: the 95 % "
+                                    "interval of the identification (block bootstrap)"}
+    doc["identification"] = {
+        "record": record, "record_sha256": result.record_sha256, "tuning": tune_until_text,
+        "tune_until": result.tune_until, "samples": result.samples, "signals": result.signals,
+        "base_vehicle": base.name, "latobs": version, "method": "output-error least squares (scipy), bicycle model "
+        "of synthesis.sideslip_kalman_filter; 95 % intervals by a moving-block bootstrap of 10 s blocks",
+        "residual_rms": {k: round(v, 8) for k, v in result.rms.items()},
+        "residual_rms_base": {k: round(v, 8) for k, v in result.rms_base.items()},
+        "identified": ["Cf", "Cr"],
+        "given": sorted(k for k in doc["parameters"] if k not in ("Cf", "Cr")),
+    }
+    return doc

@@ -1,0 +1,121 @@
+"""``latobs identify`` (``synthesis.identification``): the identification model against its nonlinear
+parent (CarPlant, which shares no code with it), the stiffnesses of a CarPlant drive recovered from
+its noisy sensors, the vehicle file it writes, and bad records refused before any fitting."""
+from __future__ import annotations
+
+import csv
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from latobs import pipeline
+from latobs.cli import main
+from latobs.synthesis import identification as ident
+from latobs.synthesis.params import load_vehicle
+from latobs.validation import get_scenario
+from latobs.validation.harness import run
+
+SEDAN = load_vehicle("sedan")
+SCALES = (0.88, 1.13)          # CarPlant's scale_f, scale_r: the truth to identify (sedan's Cf, Cr x these)
+
+
+def _drive(plant, seconds: float, seed: int, **parameters) -> dict[str, np.ndarray]:
+    """CarPlant on paper 002's band-limited random steering (linear range) at 30 km/h, 100 Hz."""
+    r = run(get_scenario("w1-steer", seed=seed, duration=seconds), plant, {}, dt=0.01, vehicle="sedan",
+            plant_parameters=parameters)
+    return {"t": r.time, "beta": r.bus["beta_cg"], **{s: r.bus[s] for s in ("delta", "vx", "yaw_rate", "ay")}}
+
+
+def _noisy(cols: dict, seed: int) -> dict:
+    """``latobs validate --noise``'s sensors (std, bias) on delta, vx, yaw rate; 0.05 m/s^2 on ay."""
+    noise = {**pipeline.DEFAULT_NOISE, "ay": (0.05, 0.0)}
+    g = np.random.default_rng(seed)
+    return {k: (v + noise[k][1] + noise[k][0] * g.standard_normal(len(v)) if k in noise else v) for k, v in cols.items()}
+
+
+def test_the_identification_model_is_carplants_linear_dynamics(built_fmus):
+    """Paper 000's roll model with relaxed axle forces, as identification simulates it, against
+    CarPlant (two-track, roll, relaxation; its linear tires) on the same steering: the yaw rate,
+    ay and sideslip at the CG within 1 % of their spread."""
+    cols = _drive(built_fmus.c_path("CarPlant"), 20.0, 0, linear_tires=1.0)
+    vals = {k: SEDAN.value(k) for k in ("m", "Iz", "lf", "lr", "Cf", "Cr", "sigma", "Ix", "hr", "Kr", "br")}
+    assert ident.model_kind(vals) == "roll+relaxation"
+    sim = ident.simulate(cols, vals, (float(cols["beta"][0]), float(cols["yaw_rate"][0])))
+    for k in ("yaw_rate", "ay", "beta"):
+        err = float(np.sqrt(np.mean((sim[k] - cols[k]) ** 2)))
+        assert err < 0.01 * float(np.std(cols[k])), (k, err, float(np.std(cols[k])))
+
+
+def _write_csv(path, cols):
+    names = list(cols)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(names)
+        for row in zip(*(cols[n] for n in names)):
+            w.writerow([repr(float(x)) for x in row])
+
+
+@pytest.mark.parametrize("with_beta", [True, False], ids=["beta", "no-beta"])
+def test_a_carplant_drive_gives_its_stiffnesses_within_5_percent(built_fmus, tmp_path, capsys, with_beta):
+    """A 40 s CarPlant drive (Magic Formula tires, stiffnesses scaled by SCALES, noisy sensors):
+    ``latobs identify CSV --vehicle sedan`` on its first 60 % finds Cf and Cr within 5 % of the
+    truth, and writes a vehicle file latobs loads, with the identified values, the box of the
+    interval and its provenance (the record's hash, the split, the residuals)."""
+    cols = _noisy(_drive(built_fmus.c_path("CarPlant"), 40.0, 3, scale_f=SCALES[0], scale_r=SCALES[1]), 7)
+    if not with_beta:
+        cols.pop("beta")
+    record = tmp_path / "drive.csv"
+    _write_csv(record, cols)
+    out = tmp_path / "mycar.toml"
+    assert main(["identify", str(record), "--vehicle", "sedan", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "Cf = " in printed and f"wrote {out}" in printed
+    car = load_vehicle(str(out))
+    doc = tomllib.loads(out.read_text())
+    for k, s in (("Cf", SCALES[0]), ("Cr", SCALES[1])):
+        truth = s * SEDAN.value(k)
+        assert abs(car.value(k) / truth - 1) < 0.05, (k, car.value(k), truth)
+        lo, hi = car.ranges[k].min, car.ranges[k].max
+        assert lo <= car.value(k) <= hi and hi / lo < 1.5
+    assert car.name == "mycar" and car.value("m") == SEDAN.value("m")
+    prov = doc["identification"]
+    assert prov["identified"] == ["Cf", "Cr"] and "m" in prov["given"]
+    assert prov["signals"] == (["yaw_rate", "ay", "beta"] if with_beta else ["yaw_rate", "ay"])
+    assert prov["record_sha256"] == ident.record_sha256({k: np.asarray(v, float) for k, v in cols.items()})
+    assert prov["tune_until"] == pytest.approx(cols["t"][0] + 0.6 * (cols["t"][-1] - cols["t"][0]))
+    assert all(prov["residual_rms"][k] < prov["residual_rms_base"][k] for k in ("yaw_rate", "ay"))
+
+
+def _record(seconds=30.0, h=0.01, vx=20.0, steer=math.radians(1.0)):
+    t = np.arange(0.0, seconds, h)
+    return {"t": t, "delta": steer * np.sin(2 * np.pi * 0.5 * t), "vx": np.full_like(t, vx),
+            "yaw_rate": 0.05 * np.sin(2 * np.pi * 0.5 * t), "ay": np.sin(2 * np.pi * 0.5 * t)}
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda c: c.pop("ay"), "missing column.*ay"),
+    (lambda c: c["t"].__setitem__(slice(100, None), c["t"][100:] + 0.003), "not uniform"),
+    (lambda c: c.update({k: v[:500] for k, v in c.items()}), "lasts 4.99 s; at least 10 s"),
+    (lambda c: c.update(delta=np.zeros_like(c["t"])), "steering barely moves.*Cf and Cr are not excited"),
+    (lambda c: c.update(vx=np.full_like(c["t"], 2.0)), "above 5 m/s: too little driving"),
+    (lambda c: c["yaw_rate"].__setitem__(50, math.nan), "'yaw_rate' has 1 non-finite"),
+])
+def test_a_bad_record_is_refused_before_any_fit_naming_the_culprit(change, match):
+    cols = _record()
+    change(cols)
+    with pytest.raises(ident.IdentificationError, match=match):
+        ident.identify(cols, SEDAN, tune_until=20.0, source="drive.csv")
+
+
+def test_the_command_line_refuses_without_a_base_vehicle_or_a_toml(tmp_path, capsys):
+    record = tmp_path / "drive.csv"
+    _write_csv(record, _record())
+    assert main(["identify", str(record), "--out", str(tmp_path / "car.toml")]) == 2
+    assert "--vehicle BASE is needed" in capsys.readouterr().err
+    assert main(["identify", str(record), "--vehicle", "sedan", "--out", str(tmp_path / "car.txt")]) == 2
+    assert "ending in .toml" in capsys.readouterr().err
+    assert main(["identify", str(record), "--vehicle", "sedan", "--tune-fraction", "1.5",
+                 "--out", str(tmp_path / "car.toml")]) == 2
+    assert not (tmp_path / "car.toml").exists()
