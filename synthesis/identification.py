@@ -137,10 +137,11 @@ def _roll_model(vals: Mapping[str, float], vx: np.ndarray, relax: bool) -> tuple
     Ff = Cf alpha_f, alpha_f = delta - beta - lf r / vx, Fr = Cr alpha_r, alpha_r = -beta + lr r / vx
     (the slip angles of paper 000's eq. 1) without relaxation."""
     from .bicycle_roll_model import lpv_coefficients
-    from .params import Parameter, Vehicle as _V
+    from .params import Parameter
 
     names = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr")
-    veh = _V("identification", "car", "", "", {k: Parameter(k, float(vals[k]), "", "", "", "positive") for k in names}, {})
+    veh = Vehicle("identification", "car", "", "",
+                  {k: Parameter(k, float(vals[k]), "", "", "", "positive") for k in names}, {})
     cf, cr = float(vals["Cf"]), float(vals["Cr"])
     base = lpv_coefficients(veh)
     unit_f = lpv_coefficients(veh, cf + 1.0, cr)
@@ -155,7 +156,7 @@ def _roll_model(vals: Mapping[str, float], vx: np.ndarray, relax: bool) -> tuple
     if not relax:
         return A, B
     n = len(vx)
-    # without the tire forces: A minus their parts (Cf alpha_f's, Cr alpha_r's), B minus Cf g_f
+    # A without the tire forces (minus Cf g_f alpha_f and Cr g_r alpha_r); delta enters through Ff' alone
     alpha_f = np.stack([-np.ones(n), -lf * inv, np.zeros(n), np.zeros(n)], axis=1)
     alpha_r = np.stack([-np.ones(n), lr * inv, np.zeros(n), np.zeros(n)], axis=1)
     A0 = A - cf * gf[:, :, None] * alpha_f[:, None, :] - cr * gr[:, :, None] * alpha_r[:, None, :]
