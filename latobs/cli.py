@@ -207,8 +207,10 @@ def _cmd_identify(args) -> int:
                                           what, __version__)
     atomic_write_text(out, "# Written by latobs identify; see [identification] for how.\n" + tomli_w.dumps(doc))
     print(f"identified on {what}, {result.samples} samples, fitting {', '.join(result.signals)}:")
-    for k, v, (lo, hi) in (("Cf", result.Cf, result.Cf_interval), ("Cr", result.Cr, result.Cr_interval)):
-        print(f"  {k} = {v:.0f} N/rad (95 % interval {lo:.0f} ... {hi:.0f}; {base.name}: {base.value(k):.0f})")
+    for k, v, (lo, hi), kappa in (("Cf", result.Cf, result.Cf_interval, result.tire_ratios[0]),
+                                  ("Cr", result.Cr, result.Cr_interval, result.tire_ratios[1])):
+        slope = f"; the slope at zero slip: fitted / {kappa:.4f} on {base.name}'s tire curve" if kappa != 1.0 else ""
+        print(f"  {k} = {v:.0f} N/rad (95 % interval {lo:.0f} ... {hi:.0f}; {base.name}: {base.value(k):.0f}{slope})")
     for k in result.signals:
         print(f"  residual RMS {k}: {result.rms[k]:.4g} (with {base.name}'s Cf, Cr: {result.rms_base[k]:.4g})")
     print(f"wrote {out}; next: latobs build NAME --vehicle {out}, latobs replay {args.record} --vehicle {out} "

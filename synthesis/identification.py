@@ -66,6 +66,7 @@ class Identified:
     rms_base: dict[str, float]             # the same with the base vehicle's Cf, Cr
     signals: list[str]                     # the fitted signals
     nfev: int = 0
+    tire_ratios: tuple[float, float] = (1.0, 1.0)   # effective / zero-slip stiffness (:func:`_tire_curve_ratios`)
     notes: list[str] = field(default_factory=list)
 
 
@@ -176,8 +177,9 @@ def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tupl
              ) -> dict[str, np.ndarray]:
     """The model of ``vals`` (:func:`model_kind`) driven by the record's delta at its speed (below
     :data:`MIN_SPEED` held at it), from sideslip and yaw rate ``x0`` = (beta rad, r rad/s) and the
-    rest at rest: {"beta" (at the CG), "yaw_rate", "ay"} at every sample (ay = the sum of the tire
-    forces / m, as a road-plane accelerometer at the CG reads it)."""
+    rest at rest: {"beta" (at the CG), "yaw_rate", "ay", "alpha_f", "alpha_r" (the axle slip
+    angles, rad)} at every sample (ay = the sum of the tire forces / m, as a road-plane
+    accelerometer at the CG reads it)."""
     t = np.asarray(cols["t"], dtype=float)
     h = np.diff(t, append=t[-1] + (t[-1] - t[-2]))
     vx = np.maximum(np.asarray(cols["vx"], dtype=float), MIN_SPEED)
@@ -213,7 +215,9 @@ def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tupl
     else:
         ay = A[:, 0, 0] * x[:, 0] + (A[:, 0, 1] + vx) * x[:, 1] + B[:, 0] * delta    # vy' + vx r
         beta = np.arctan2(x[:, 0], vx)
-    return {"beta": beta, "yaw_rate": x[:, 1], "ay": ay}
+    b_axle = x[:, 0] if kind.startswith("roll") else x[:, 0] / vx     # the sideslip the slip angles use
+    return {"beta": beta, "yaw_rate": x[:, 1], "ay": ay,
+            "alpha_f": delta - b_axle - lf * x[:, 1] / vx, "alpha_r": -b_axle + lr * x[:, 1] / vx}
 
 
 def record_sha256(cols: Mapping[str, np.ndarray]) -> str:
@@ -262,18 +266,51 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
                                   "bicycle model with this base vehicle (check the units: delta is the road-wheel "
                                   "angle in rad, ay in m/s^2)")
     interval = _bootstrap(cols, fit, signals, residual_parts, s_hat, seed)
+    kappa = _tire_curve_ratios(base, simulate(cols, values(s_hat), x0), fit, vals0, s_hat)
     parts = residual_parts(s_hat)
     parts_base = residual_parts(np.ones(2))
     t = np.asarray(cols["t"], dtype=float)
+    # the slope at zero slip: the fitted (effective) stiffness over the tire curve's ratio; the box
+    # reaches from the effective stiffness to the zero-slip slope's interval
+    zero = [s_hat[i] / kappa[i] for i in range(2)]
+    box = [(min(interval[i][0] / kappa[i], s_hat[i]), max(interval[i][1] / kappa[i], s_hat[i])) for i in range(2)]
     return Identified(
-        Cf=float(vals0["Cf"] * s_hat[0]), Cr=float(vals0["Cr"] * s_hat[1]),
-        Cf_interval=(float(vals0["Cf"] * interval[0][0]), float(vals0["Cf"] * interval[0][1])),
-        Cr_interval=(float(vals0["Cr"] * interval[1][0]), float(vals0["Cr"] * interval[1][1])),
+        Cf=float(vals0["Cf"] * zero[0]), Cr=float(vals0["Cr"] * zero[1]),
+        Cf_interval=(float(vals0["Cf"] * box[0][0]), float(vals0["Cf"] * box[0][1])),
+        Cr_interval=(float(vals0["Cr"] * box[1][0]), float(vals0["Cr"] * box[1][1])),
         base=base.name, record_sha256=record_sha256(cols), tune_until=float(min(tune_until, t[-1] + 1e-9)),
         samples=int(fit.sum()),
         rms={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts.items()},
         rms_base={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts_base.items()},
-        signals=signals, nfev=int(sol.nfev))
+        signals=signals, nfev=int(sol.nfev), tire_ratios=(float(kappa[0]), float(kappa[1])))
+
+
+def _tire_curve_ratios(base: Vehicle, sim: dict, fit: np.ndarray, vals0: dict, s_hat: np.ndarray
+                       ) -> tuple[float, float]:
+    """(kappa_f, kappa_r): the ratio of the stiffness a linear model fits over the drive's slip
+    angles to the slope at zero slip, for a base vehicle with a tire curve (the Magic Formula of
+    ``synthesis.tire``: mu, mf_C, mf_E); (1, 1) without one. A tire's force is not linear in its
+    slip: over slip angles alpha the least-squares slope of the curve F is sum F(alpha) alpha /
+    sum alpha^2, below F'(0). The curve's own zero-slip slope is the unknown: fixed-point
+    iteration from the fitted stiffness (kappa depends weakly on it)."""
+    from .tire import MF_PARAMS, axle_force
+
+    if not all(k in base.parameters for k in MF_PARAMS):
+        return 1.0, 1.0
+    out = []
+    for i, (axle, key) in enumerate((("f", "Cf"), ("r", "Cr"))):
+        alpha = sim["alpha_" + axle][fit]
+        fitted = vals0[key] * s_hat[i]
+        zero = fitted
+        for _ in range(20):
+            F = axle_force(base.with_values(**{key: zero}), axle, alpha)
+            kappa = float(np.sum(F * alpha) / (zero * np.sum(alpha * alpha)))
+            new = fitted / kappa
+            if abs(new - zero) <= 1e-9 * zero:
+                break
+            zero = new
+        out.append(kappa)
+    return out[0], out[1]
 
 
 def _bootstrap(cols, fit: np.ndarray, signals: list[str], residual_parts, s_hat: np.ndarray, seed: int
@@ -325,10 +362,13 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
     for k, p in doc["parameters"].items():
         p["source"] = f"given: the base vehicle {base.name} ({p.get('source') or base.source})"
     fitted = " and ".join(result.signals)
-    for k, value, (lo, hi) in (("Cf", result.Cf, result.Cf_interval), ("Cr", result.Cr, result.Cr_interval)):
+    for k, value, (lo, hi), kappa in (("Cf", result.Cf, result.Cf_interval, result.tire_ratios[0]),
+                                      ("Cr", result.Cr, result.Cr_interval, result.tire_ratios[1])):
         doc["parameters"][k]["value"] = round(value, 1)
-        doc["parameters"][k]["source"] = (f"identified: output-error fit of {fitted} on {tune_until_text}, 95 % "
-                                          f"interval {lo:.0f} ... {hi:.0f} N/rad")
+        slope = (f", the slope at zero slip of {base.name}'s tire curve (the fitted stiffness / {kappa:.4f})"
+                 if kappa != 1.0 else "")
+        doc["parameters"][k]["source"] = (f"identified: output-error fit of {fitted} on {tune_until_text}{slope}; "
+                                          f"box {lo:.0f} ... {hi:.0f} N/rad")
     ranges = doc.setdefault("ranges", {})
     for k, (lo, hi) in (("Cf", result.Cf_interval), ("Cr", result.Cr_interval)):
         ranges[k] = {"min": round(lo, 1), "max": round(hi, 1), "unit": "N/rad",
@@ -341,6 +381,9 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
         "of synthesis.sideslip_kalman_filter; 95 % intervals by a moving-block bootstrap of 10 s blocks",
         "residual_rms": {k: round(v, 8) for k, v in result.rms.items()},
         "residual_rms_base": {k: round(v, 8) for k, v in result.rms_base.items()},
+        "tire_curve_ratio": {"Cf": round(result.tire_ratios[0], 6), "Cr": round(result.tire_ratios[1], 6),
+                             "meaning": "the stiffness a linear model fits over the drive's slip angles / the "
+                                        "slope at zero slip, on the base vehicle's tire curve (1: none given)"},
         "identified": ["Cf", "Cr"],
         "given": sorted(k for k in doc["parameters"] if k not in ("Cf", "Cr")),
     }

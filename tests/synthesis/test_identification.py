@@ -61,8 +61,9 @@ def _write_csv(path, cols):
 def test_a_carplant_drive_gives_its_stiffnesses_within_5_percent(built_fmus, tmp_path, capsys, with_beta):
     """A 40 s CarPlant drive (Magic Formula tires, stiffnesses scaled by SCALES, noisy sensors):
     ``latobs identify CSV --vehicle sedan`` on its first 60 % finds Cf and Cr within 5 % of the
-    truth, and writes a vehicle file latobs loads, with the identified values, the box of the
-    interval and its provenance (the record's hash, the split, the residuals)."""
+    truth (the slope at zero slip, through sedan's tire curve), the truth inside the box, and writes
+    a vehicle file latobs loads, with the identified values, the box and its provenance (the
+    record's hash, the split, the residuals, the tire-curve ratios)."""
     cols = _noisy(_drive(built_fmus.c_path("CarPlant"), 40.0, 3, scale_f=SCALES[0], scale_r=SCALES[1]), 7)
     if not with_beta:
         cols.pop("beta")
@@ -79,6 +80,7 @@ def test_a_carplant_drive_gives_its_stiffnesses_within_5_percent(built_fmus, tmp
         assert abs(car.value(k) / truth - 1) < 0.05, (k, car.value(k), truth)
         lo, hi = car.ranges[k].min, car.ranges[k].max
         assert lo <= car.value(k) <= hi and hi / lo < 1.5
+        assert lo <= truth <= hi, (k, lo, hi, truth)          # the box holds the truth
     assert car.name == "mycar" and car.value("m") == SEDAN.value("m")
     prov = doc["identification"]
     assert prov["identified"] == ["Cf", "Cr"] and "m" in prov["given"]
@@ -86,6 +88,7 @@ def test_a_carplant_drive_gives_its_stiffnesses_within_5_percent(built_fmus, tmp
     assert prov["record_sha256"] == ident.record_sha256({k: np.asarray(v, float) for k, v in cols.items()})
     assert prov["tune_until"] == pytest.approx(cols["t"][0] + 0.6 * (cols["t"][-1] - cols["t"][0]))
     assert all(prov["residual_rms"][k] < prov["residual_rms_base"][k] for k in ("yaw_rate", "ay"))
+    assert 0.9 < prov["tire_curve_ratio"]["Cf"] < 1.0 and 0.9 < prov["tire_curve_ratio"]["Cr"] < 1.0
 
 
 def _record(seconds=30.0, h=0.01, vx=20.0, steer=math.radians(1.0)):
