@@ -89,11 +89,6 @@ def _runner():
     return runner
 
 
-def _fmi3(fmu: Path) -> bool:
-    with zipfile.ZipFile(fmu) as z:
-        return b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000]
-
-
 def _vocabulary(fmu: Path) -> tuple[list[str], str | None, dict[str, str]]:
     """(the platform folders an FMU of this FMI version may hold, in order; this machine's; {folder:
     the ``toolchain.PLATFORMS`` platform whose binaries the cross-platform runner runs for it}):
@@ -101,7 +96,9 @@ def _vocabulary(fmu: Path) -> tuple[list[str], str | None, dict[str, str]]:
     from .cbackend import fmi3
     from .cbackend.toolchain import PLATFORMS, host_platform
 
-    if _fmi3(fmu):
+    from .identity import fmu_fmi_version
+
+    if fmu_fmi_version(fmu) == 3:
         return ([f for fs in fmi3.FOLDERS.values() for f in fs], fmi3.host_folder(),
                 {fs[0]: p for p, fs in fmi3.FOLDERS.items() if len(fs) == 1})
     return list(PLATFORMS), host_platform(), {p: p for p in PLATFORMS}

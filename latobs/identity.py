@@ -124,3 +124,16 @@ def fmu_backend(path: Path) -> str | None:
             return "python" if "resources/slavemodule.txt" in z.namelist() else "c"
     except (OSError, zipfile.BadZipFile):
         return None
+
+
+def fmu_fmi_version(path: Path) -> int | None:
+    """2 or 3: the FMI version of an existing FMU (its identity, else its model description's
+    ``fmiVersion``); None if it cannot be read."""
+    ident = read_fmu(path)
+    if ident is not None:
+        return int(ident.parts.get("fmi", 2))
+    try:
+        with zipfile.ZipFile(path) as z:
+            return 3 if b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000] else 2
+    except (OSError, KeyError, zipfile.BadZipFile):
+        return None

@@ -518,6 +518,7 @@ def build_summary(fmus: list[Path]) -> dict:
     from . import __version__
     from .cbackend.fmi3 import FOLDERS
     from .cbackend.toolchain import PLATFORMS
+    from .identity import fmu_fmi_version
     from .packaging import PLANTS
     from .synthesis.design_file import reproducible
 
@@ -532,7 +533,7 @@ def build_summary(fmus: list[Path]) -> dict:
             members = {n: z.read(n) for n in names
                        if n.startswith("resources/") and n.endswith((".design.json", ".plant.json"))
                        and n.count("/") == 1}
-            fmi = "3.0" if b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000] else "2.0"
+        fmi = f"{fmu_fmi_version(fmu)}.0"
         held = {n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") == 2}
         order = list(PLATFORMS) if fmi == "2.0" else [f for fs in FOLDERS.values() for f in fs]
         entry = {"name": fmu.stem, "path": str(fmu), "sha256": sha(raw), "size": len(raw),
@@ -596,19 +597,11 @@ def folder_fmi(fmu_dir: Path, fmu: Path | None = None) -> int:
     """The FMI version of the FMUs of ``fmu_dir`` a command builds when missing or stale: that of
     ``fmu`` when it is there (its identity, else its model description), else 3 in a folder named
     ``fmi3`` (:data:`FMI_FOLDER`), else 2."""
-    import zipfile
+    from .identity import fmu_fmi_version
 
-    from . import identity
-
-    if fmu is not None and fmu.is_file():
-        found = identity.read_fmu(fmu)
-        if found is not None:
-            return int(found.parts.get("fmi", 2))
-        try:
-            with zipfile.ZipFile(fmu) as z:
-                return 3 if b'fmiVersion="3.' in z.read("modelDescription.xml")[:2000] else 2
-        except (OSError, KeyError, zipfile.BadZipFile):
-            pass
+    found = fmu_fmi_version(fmu) if fmu is not None and fmu.is_file() else None
+    if found is not None:
+        return found
     return 3 if Path(fmu_dir).name == FMI_FOLDER[3] else 2
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
@@ -67,7 +67,6 @@ class Identified:
     signals: list[str]                     # the fitted signals
     nfev: int = 0
     tire_ratios: tuple[float, float] = (1.0, 1.0)   # effective / zero-slip stiffness (:func:`_tire_curve_ratios`)
-    notes: list[str] = field(default_factory=list)
 
 
 def _uniform_time(t: np.ndarray, source: str) -> float:

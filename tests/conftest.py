@@ -138,6 +138,22 @@ def built_fmus(tmp_path_factory) -> SessionBuild:
     return SessionBuild(out)
 
 
+def bits(x) -> bytes:
+    """The float64 bytes of an array: two are equal only when the values are, bit for bit."""
+    import numpy as np
+
+    return np.ascontiguousarray(np.asarray(x, dtype=float)).tobytes()
+
+
+@pytest.fixture
+def fmi3_host():
+    """Skips a test of FMI 3.0 FMUs on a machine that none of their platform folders runs on."""
+    from latobs.cbackend import fmi3
+
+    if fmi3.host_folder() is None:
+        pytest.skip("this machine is none of the FMI 3.0 platforms")
+
+
 @pytest.fixture(scope="session")
 def design_speed(built_fmus) -> dict:
     return built_fmus.design("SideslipBankObserver")

@@ -21,7 +21,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
-from conftest import C_NAMES
+from conftest import C_NAMES, bits
 from latobs import packaging, reference
 from latobs.cbackend import fmi3, runner, toolchain
 
@@ -45,14 +45,7 @@ DESIGN_GAINS = {
 }
 
 
-@pytest.fixture(autouse=True)
-def _fmi3_host():
-    if fmi3.host_folder() is None:
-        pytest.skip("this machine is none of the FMI 3.0 platforms")
-
-
-def _bits(x) -> bytes:
-    return np.ascontiguousarray(np.asarray(x, dtype=float)).tobytes()
+pytestmark = pytest.mark.usefixtures("fmi3_host")
 
 
 def _members(fmu: Path) -> dict[str, bytes]:
@@ -95,10 +88,10 @@ def test_the_fmi3_fmu_is_its_fmi2_twin_in_fmi3(built_fmus, name):
     assert b"FMI 3.0" in m3["documentation/index.html"] and b"fmi3Error" in m3["documentation/index.html"]
     (e2,), (e3,) = reference.read(f2), reference.read(f3)
     assert e3.platform == fmi3.host_folder() and e2.platform == toolchain.host_platform()
-    assert _bits(e3.time) == _bits(e2.time)
-    assert all(_bits(e3.inputs[k]) == _bits(e2.inputs[k]) for k in e2.inputs) and e3.inputs.keys() == e2.inputs.keys()
+    assert bits(e3.time) == bits(e2.time)
+    assert all(bits(e3.inputs[k]) == bits(e2.inputs[k]) for k in e2.inputs) and e3.inputs.keys() == e2.inputs.keys()
     assert e3.outputs.keys() == e2.outputs.keys()
-    assert [k for k in e2.outputs if _bits(e3.outputs[k]) != _bits(e2.outputs[k])] == []
+    assert [k for k in e2.outputs if bits(e3.outputs[k]) != bits(e2.outputs[k])] == []
     results, _ = check(f3, "host")
     assert results and all(r.passed and r.comparison.exact for r in results), [r.line() for r in results]
 
@@ -184,7 +177,7 @@ def test_model_exchange_is_the_fmi2_twins_bit_for_bit(built_fmus, name):
                          input=_signals(e, stop), output=outputs, fmi_type="ModelExchange", validate=False)
             for f in (f2, f3)]
     assert len(runs[0]) == len(runs[1]) > 100
-    assert [n for n in outputs if _bits(runs[0][n]) != _bits(runs[1][n])] == []
+    assert [n for n in outputs if bits(runs[0][n]) != bits(runs[1][n])] == []
 
 
 @pytest.mark.slow
@@ -205,9 +198,9 @@ def test_the_binaries_of_every_platform_give_their_fmi2_twins_outputs_in_a_plain
     e, = reference.read(f3)
     runs = [runner.run(f, platform, e.time, e.inputs, list(e.outputs), step=e.step) for f in (f2, f3)]
     assert all(r.ok for r in runs), [r.failure() for r in runs]
-    assert [k for k in e.outputs if _bits(runs[0][k]) != _bits(runs[1][k])] == []
+    assert [k for k in e.outputs if bits(runs[0][k]) != bits(runs[1][k])] == []
     if platform == "linux64":
-        assert [k for k in e.outputs if _bits(runs[1][k]) != _bits(e.outputs[k])] == []
+        assert [k for k in e.outputs if bits(runs[1][k]) != bits(e.outputs[k])] == []
 
 
 def test_latobs_check_runs_every_platform_it_can_here(built_fmus):

@@ -7,23 +7,15 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
+from conftest import bits
 from latobs import pipeline
-from latobs.cbackend import fmi3
 from latobs.validation import get_scenario
 from latobs.validation.harness import run
 
 
-@pytest.fixture(autouse=True)
-def _fmi3_host():
-    if fmi3.host_folder() is None:
-        pytest.skip("this machine is none of the FMI 3.0 platforms")
-
-
-def _bits(x) -> bytes:
-    return np.ascontiguousarray(np.asarray(x, dtype=float)).tobytes()
+pytestmark = pytest.mark.usefixtures("fmi3_host")
 
 
 @pytest.mark.parametrize("fast", [True, False], ids=["direct", "fmpy-checked"])
@@ -35,10 +27,10 @@ def test_the_master_runs_fmi3_fmus_beside_fmi2_ones_bit_for_bit(built_fmus, fast
     want = run(sc, plant2, obs2, dt=0.005, fast=fast)
     for plant, observers in ((plant2, obs3), (plant3, obs3), (plant3, obs2)):
         got = run(sc, plant, observers, dt=0.005, fast=fast)
-        assert [k for k in want.bus if _bits(got.bus[k]) != _bits(want.bus[k])] == []
+        assert [k for k in want.bus if bits(got.bus[k]) != bits(want.bus[k])] == []
         for lab in obs2:
             assert want.observers[lab].keys() == got.observers[lab].keys()
-            assert [k for k in want.observers[lab] if _bits(got.observers[lab][k]) != _bits(want.observers[lab][k])] \
+            assert [k for k in want.observers[lab] if bits(got.observers[lab][k]) != bits(want.observers[lab][k])] \
                 == [], lab
 
 
@@ -54,7 +46,7 @@ def test_replay_of_the_recorded_drive_and_a_folder_kept_in_fmi3(built_fmus, tmp_
     data = {k: v[keep] for k, v in data.items()}
     r2, r3 = drive(built_fmus.c_path(name), data), drive(built_fmus.c3_path(name), data)
     assert r2.outputs.keys() == r3.outputs.keys() and len(r3.time) > 1000
-    assert [k for k in r2.outputs if _bits(r2.outputs[k]) != _bits(r3.outputs[k])] == []
+    assert [k for k in r2.outputs if bits(r2.outputs[k]) != bits(r3.outputs[k])] == []
     folder = tmp_path / "fmi3"
     folder.mkdir()
     shutil.copy2(built_fmus.c3_path(name), folder / f"{name}.fmu")
