@@ -26,6 +26,11 @@ _R = range(_N)
 _INF = math.inf
 _NO_XI = (-_INF,) * _N + (_INF,) * _N   # no xi bounds (after a restart or a mode switch)
 MEAS, UNMEAS = (1, 2), (0, 3)   # measured states (r, ay) and the others (vy, x4)
+NU_PARAMETERS = ("yaw_rate_error_bound", "ay_error_bound")      # nu of the measured rows, in MEAS order
+NU_UNITS = {"yaw_rate_error_bound": "rad/s", "ay_error_bound": "m/s2"}
+# the probes of the longest communication step: never frozen, exact measurements (the width map at
+# zero inputs is then positively homogeneous; ``_probe_data``), so the step does not depend on nu
+PROBE_PARAMETERS = {"vx_hold": 0.0, "yaw_rate_error_bound": 0.0, "ay_error_bound": 0.0}
 STIFF_ROWS = (2, 3)             # rows of the stiffness part (x3', x4'), eq. (9)
 CACHE_SIZE = 64                 # step maps kept per instance, per kind
 
@@ -119,7 +124,9 @@ class IntervalObserver:
     (floats) and ``mode`` (1-based), ``consistent`` (0 on a step whose measurement lay outside the
     bounds). ``box`` holds the current bounds [xl, xu] of x."""
 
-    PARAMETERS = {"vx_hold": 1.0}    # m/s: below this speed the observer is frozen
+    # vx_hold (m/s): below this speed the observer is frozen; the bounds of |measured - true| of the
+    # yaw rate (rad/s) and ay (m/s^2), the nu of the measured rows (not in the paper: its y is exact)
+    PARAMETERS = {"vx_hold": 1.0, "yaw_rate_error_bound": 0.0, "ay_error_bound": 0.0}
     # the largest communication step when the design file does not state it: the widths of vy and
     # x4 must decay at >= DECAY (1/s) between PROBE/2 and PROBE s, on a RESOLUTION grid up to CEILING
     MAX_COMM_STEP_DECAY = 1.0
@@ -135,7 +142,7 @@ class IntervalObserver:
         self._data, self.tables = data, tb
         md, sk, tu = tb["model"], tb["stiffness"], tb["tuning"]
         self.model, self.modes, self.edges = md, tb["modes"], tb["edges"]
-        self.nu, self.w0 = tb["nu"], tb["x0_halfwidth"]
+        self.w0 = tb["x0_halfwidth"]
         self.meas, self.unmeas = list(MEAS), list(UNMEAS)
         self._sk, self._tu = sk, tu
         self._damped = [i in tb["damped"] for i in _R]
@@ -147,6 +154,10 @@ class IntervalObserver:
         self.vx_hold = float(params.get("vx_hold", tb["vx_hold"]))
         if not (math.isfinite(self.vx_hold) and self.vx_hold >= 0):
             raise ValueError(f"parameter vx_hold must be finite and >= 0 m/s, got {self.vx_hold}")
+        self.nu = [float(params.get(k, nu)) for k, nu in zip(NU_PARAMETERS, tb["nu"])]
+        for k, nu in zip(NU_PARAMETERS, self.nu):
+            if not (math.isfinite(nu) and nu >= 0):
+                raise ValueError(f"parameter {k} ({NU_UNITS[k]}) must be finite and >= 0, got {nu}")
         self._max_comm_step = tb["max_communication_step"]
         self._cores: dict = {}
         self._sampled: dict = {}
@@ -163,7 +174,11 @@ class IntervalObserver:
 
     @classmethod
     def parameter_defaults(cls, data: dict) -> dict:
-        return {"vx_hold": float(data.get("runtime", {}).get("vx_hold", cls.PARAMETERS["vx_hold"]))}
+        """vx_hold and the measurement-error bounds of the design file (runtime.y_error_bound)."""
+        rt = data.get("runtime", {})
+        nu = rt.get("y_error_bound", [0.0, 0.0])
+        return {"vx_hold": float(rt.get("vx_hold", cls.PARAMETERS["vx_hold"])),
+                **{k: float(x) for k, x in zip(NU_PARAMETERS, nu)}}
 
     # -- the model's right-hand side ------------------------------------------------------------
     def _stiffness(self, l, u, vd, lo, hi):
@@ -678,7 +693,7 @@ class IntervalObserver:
         (the slower of the two, between MAX_COMM_STEP_PROBE/2 and MAX_COMM_STEP_PROBE; -inf if they do not
         stay finite or the bounds restart). ``probe``: an instance of this design to run (reset)."""
         if probe is None:
-            probe = type(self)(self._probe_data(), {"vx_hold": 0.0})
+            probe = type(self)(self._probe_data(), PROBE_PARAMETERS)
         probe.events.clear()
         probe._holding = probe._outside = probe._inconsistent = probe._fallback_episode = False
         u = {"delta": 0.0, "vx": vx, "yaw_rate": 0.0, "ay": 0.0}
@@ -701,10 +716,11 @@ class IntervalObserver:
         return rate
 
     def _probe_data(self) -> dict:
-        """The design without its disturbance bound (w = 0, the tables' "probe_smooth" rows): the
-        probes of ``decay_rate`` measure how fast an initial error is forgotten, which the width map
-        at zero inputs shows when it is positively homogeneous; a disturbance bound adds a constant
-        floor that a fast correction reaches within the probe (then no decay is left to measure)."""
+        """The design without its disturbance bound (w = 0, the tables' "probe_smooth" rows; run
+        with nu = 0, PROBE_PARAMETERS): the probes of ``decay_rate`` measure how fast an initial
+        error is forgotten, which the width map at zero inputs shows when it is positively
+        homogeneous; a disturbance or measurement-error bound adds a constant floor that a fast
+        correction reaches within the probe (then no decay is left to measure)."""
         tb = dict(self.tables)
         tb["model"] = {**tb["model"], "w": [0.0] * _N}
         tb["smooth"] = tb["probe_smooth"]
@@ -713,7 +729,7 @@ class IntervalObserver:
     def _find_max_communication_step(self) -> float:
         res = self.MAX_COMM_STEP_RESOLUTION
         speeds = self._probe_speeds()
-        probe = type(self)(self._probe_data(), {"vx_hold": 0.0})
+        probe = type(self)(self._probe_data(), PROBE_PARAMETERS)
 
         def ok(k: int) -> bool:
             for i, v in enumerate(speeds):

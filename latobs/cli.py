@@ -213,6 +213,9 @@ def _cmd_identify(args) -> int:
         print(f"  {k} = {v:.0f} N/rad (95 % interval {lo:.0f} ... {hi:.0f}; {base.name}: {base.value(k):.0f}{slope})")
     for k in result.signals:
         print(f"  residual RMS {k}: {result.rms[k]:.4g} (with {base.name}'s Cf, Cr: {result.rms_base[k]:.4g})")
+    for k, (bound, rms) in result.error_bounds.items():
+        print(f"  {identification.NOISE_SIGNALS[k]} = {bound:.4g} {'rad/s' if k == 'yaw_rate' else 'm/s^2'} "
+              f"(measurement noise RMS {rms:.4g}; the interval observer's bound)")
     print(f"wrote {out}; next: latobs build NAME --vehicle {out}, latobs replay {args.record} --vehicle {out} "
           "--observer NAME")
     return 0

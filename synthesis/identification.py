@@ -16,6 +16,9 @@ Uncertainty: a moving-block bootstrap over segments of the tuning part, linearis
 re-fitting each resample would show, without simulating again). The 2.5 and 97.5 percentiles are
 the interval written to the vehicle file's ``[ranges]``: the stiffness box of papers 001 and 002.
 
+The sensors' measurement-error bounds (:func:`measurement_error_bounds`: paper 001's interval
+observer needs them) come from each sensor's residual about its zero-phase low-pass.
+
 What the record cannot reveal is taken from the base vehicle and marked so: mass, geometry, yaw
 inertia, relaxation length, roll (none of them identified here); the steering ratio needs a
 steering-wheel angle, which latobs's records do not carry (``delta`` is the road-wheel angle).
@@ -24,7 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
@@ -67,6 +70,35 @@ class Identified:
     signals: list[str]                     # the fitted signals
     nfev: int = 0
     tire_ratios: tuple[float, float] = (1.0, 1.0)   # effective / zero-slip stiffness (:func:`_tire_curve_ratios`)
+    # {signal: (bound, RMS)} of the measurement error, SI (:func:`measurement_error_bounds`)
+    error_bounds: dict = field(default_factory=dict)
+
+
+#: the measurement-error bounds: the residual of each sensor about its zero-phase low-pass
+#: (2nd-order Butterworth, forward and backward) at NOISE_CUTOFF_HZ, above a car's lateral dynamics
+#: (about 1-2 Hz) and below the vibration, at the NOISE_QUANTILE of its magnitude over the tuning part
+NOISE_SIGNALS = {"yaw_rate": "yaw_rate_error_bound", "ay": "ay_error_bound"}
+NOISE_CUTOFF_HZ = 5.0
+NOISE_QUANTILE = 0.9999
+
+
+def measurement_error_bounds(cols: Mapping[str, np.ndarray], fit: np.ndarray) -> dict[str, tuple[float, float]]:
+    """{signal: (bound, RMS)} of the yaw rate's (rad/s) and ay's (m/s^2) measurement error on the
+    samples ``fit``: the NOISE_QUANTILE of |y - lowpass(y)| (see NOISE_CUTOFF_HZ; at most 0.4 x the
+    Nyquist frequency of a slower record). A bound, not a model: the sensor's noise, vibration and
+    quantisation as the record shows them; a bias common to the whole drive is not visible here."""
+    from scipy.signal import butter, filtfilt
+
+    t = np.asarray(cols["t"], dtype=float)
+    dt = float(np.median(np.diff(t)))
+    wn = min(NOISE_CUTOFF_HZ * 2.0 * dt, 0.4)           # of the Nyquist frequency
+    b, a = butter(2, wn)
+    out = {}
+    for k in NOISE_SIGNALS:
+        y = np.asarray(cols[k], dtype=float)
+        e = np.abs(y - filtfilt(b, a, y))[fit]
+        out[k] = (float(np.quantile(e, NOISE_QUANTILE)), float(np.sqrt(np.mean(e ** 2))))
+    return out
 
 
 def _uniform_time(t: np.ndarray, source: str) -> float:
@@ -281,7 +313,8 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
         samples=int(fit.sum()),
         rms={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts.items()},
         rms_base={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts_base.items()},
-        signals=signals, nfev=int(sol.nfev), tire_ratios=(float(kappa[0]), float(kappa[1])))
+        signals=signals, nfev=int(sol.nfev), tire_ratios=(float(kappa[0]), float(kappa[1])),
+        error_bounds=measurement_error_bounds(cols, fit))
 
 
 def _tire_curve_ratios(base: Vehicle, sim: dict, fit: np.ndarray, vals0: dict, s_hat: np.ndarray
@@ -368,6 +401,13 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
                  if kappa != 1.0 else "")
         doc["parameters"][k]["source"] = (f"identified: output-error fit of {fitted} on {tune_until_text}{slope}; "
                                           f"box {lo:.0f} ... {hi:.0f} N/rad")
+    for k, (bound, rms) in result.error_bounds.items():
+        unit = "rad/s" if k == "yaw_rate" else "m/s^2"
+        doc["parameters"][NOISE_SIGNALS[k]] = {
+            "value": float(f"{bound:.4g}"), "unit": unit,
+            "description": f"bound of |measured - true| {k} (the interval observer's measurement-error bound)",
+            "source": f"identified: the {NOISE_QUANTILE:.1%} quantile of |{k} - its zero-phase "
+                      f"{NOISE_CUTOFF_HZ:g} Hz low-pass| on {tune_until_text} (RMS {rms:.4g} {unit})"}
     ranges = doc.setdefault("ranges", {})
     for k, (lo, hi) in (("Cf", result.Cf_interval), ("Cr", result.Cr_interval)):
         ranges[k] = {"min": round(lo, 1), "max": round(hi, 1), "unit": "N/rad",
@@ -383,7 +423,8 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
         "tire_curve_ratio": {"Cf": round(result.tire_ratios[0], 6), "Cr": round(result.tire_ratios[1], 6),
                              "meaning": "the stiffness a linear model fits over the drive's slip angles / the "
                                         "slope at zero slip, on the base vehicle's tire curve (1: none given)"},
-        "identified": ["Cf", "Cr"],
-        "given": sorted(k for k in doc["parameters"] if k not in ("Cf", "Cr")),
+        "identified": ["Cf", "Cr", *(NOISE_SIGNALS[k] for k in result.error_bounds)],
+        "given": sorted(k for k in doc["parameters"]
+                        if k not in ("Cf", "Cr", *(NOISE_SIGNALS[k] for k in result.error_bounds))),
     }
     return doc

@@ -32,7 +32,10 @@ class DesignOptions:
     epsilon: float = 0.5                        # 1/s, ISS rate of eq. (35)
     eta: float = 7.0                            # 1/s, Metzler shift of eq. (36)
     margin: float = 1e-7                        # strictness of (35) in scaled units
-    y_error_bound: tuple[float, float] = (0.0, 0.0)     # rad/s, m/s^2: |measured - true| of [r, ay]
+    # rad/s, m/s^2: |measured - true| of [r, ay] (not in the paper: its y is exact); None: the
+    # vehicle's parameters yaw_rate_error_bound, ay_error_bound (`latobs identify` writes them), else 0.
+    # The FMU's start values of its parameters of the same names
+    y_error_bound: tuple[float, float] | None = None
     x0_halfwidth: tuple[float, float, float, float] = (3.0, 0.0, 0.0, 30.0)  # initial box half-widths
     # bound of an additive model error w of eq. (9), x' = A x + B delta + w (units of x': m/s^2,
     # rad/s^2, m/s^3, rad/s^3). Not in the paper (0: its model class). E.g. a rolling car's
@@ -56,8 +59,10 @@ class DesignOptions:
             raise ValueError(f"{where}: epsilon and eta must be > 0 (1/s), got {self.epsilon}, {self.eta}")
         if len(self.model_error_bound) != 4 or any(not (b >= 0 and math.isfinite(b)) for b in self.model_error_bound):
             raise ValueError(f"{where}: model_error_bound must be four finite values >= 0, got {self.model_error_bound}")
-        if len(self.y_error_bound) != 2 or any(b < 0 for b in self.y_error_bound):
-            raise ValueError(f"{where}: y_error_bound must be two values >= 0, got {self.y_error_bound}")
+        if self.y_error_bound is not None and (len(self.y_error_bound) != 2 or any(
+                not (b >= 0 and math.isfinite(b)) for b in self.y_error_bound)):
+            raise ValueError(f"{where}: y_error_bound must be two finite values >= 0 (rad/s, m/s^2), got "
+                             f"{self.y_error_bound}")
 
 
 @dataclass
@@ -73,6 +78,26 @@ class Design:
     gamma: float
     modes: list[dict]                   # per mode: A, B, N, E, J, H, P, K
     solver: dict = field(default_factory=dict)
+    y_error_bound: tuple[float, float] = (0.0, 0.0)     # rad/s, m/s^2 (:func:`error_bounds`)
+
+
+#: the vehicle parameters of the measurement-error bounds, in the order of y = [r, ay]
+ERROR_BOUND_PARAMETERS = ("yaw_rate_error_bound", "ay_error_bound")
+
+
+def error_bounds(vehicle: Vehicle, opts: DesignOptions) -> tuple[float, float]:
+    """(rad/s, m/s^2) bounds of |measured - true| of [r, ay]: the option's, else the vehicle's
+    parameters ERROR_BOUND_PARAMETERS (both or none), else exact measurements as in the paper."""
+    if opts.y_error_bound is not None:
+        return (float(opts.y_error_bound[0]), float(opts.y_error_bound[1]))
+    have = [k for k in ERROR_BOUND_PARAMETERS if k in vehicle.parameters]
+    if not have:
+        return (0.0, 0.0)
+    if len(have) < 2:
+        missing = next(k for k in ERROR_BOUND_PARAMETERS if k not in have)
+        raise ValueError(f"design {opts.name}: vehicle {vehicle.name!r} has {have[0]} but not {missing}: give both "
+                         "measurement-error bounds (or neither)")
+    return (vehicle.value(ERROR_BOUND_PARAMETERS[0]), vehicle.value(ERROR_BOUND_PARAMETERS[1]))
 
 
 def speed_grid(vehicle: Vehicle, opts: DesignOptions) -> tuple[list[float], list[float]]:
@@ -104,6 +129,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
     for i, (s, lo, hi) in enumerate(zip(speeds, edges, edges[1:])):
         if not lo <= s <= hi:
             raise ValueError(f"design {opts.name}: mode {i + 1} model speed {s} m/s outside its band [{lo}, {hi}]")
+    nu = error_bounds(vehicle, opts)
     cf_box = (v["Cf"] * (1 - opts.box[0]), v["Cf"] * (1 + opts.box[0]))
     cr_box = (v["Cr"] * (1 - opts.box[1]), v["Cr"] * (1 + opts.box[1]))
     A0, A1, B1 = rm.coefficients(v["m"], v["Iz"], v["lf"], v["lr"], v["sigma"], v["Cf"], v["Cr"])
@@ -151,7 +177,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
                           f"structure of (36): largest eigenvalue {worst:.3g} > -{VERIFY_MARGIN * opts.margin:.3g} "
                           f"(scaled units); raise margin")
     return Design(options=opts, vehicle=vehicle, values=v, edges=edges, speeds=speeds, cf_box=cf_box,
-                  cr_box=cr_box, q=qv, gamma=float(g.value) / tau, modes=modes,
+                  cr_box=cr_box, q=qv, gamma=float(g.value) / tau, modes=modes, y_error_bound=nu,
                   solver={"name": lmi.current(), "status": str(status), "seconds": round(seconds, 4),
                           "lmis": len(base) + len(lmi35) + len(lmi36), "time_scale_per_s": tau,
                           "structure": {"largest_projection_shift": shift, "lmi35_max_eig_scaled": worst,
@@ -229,7 +255,7 @@ def to_design_dict(d: Design) -> dict:
         "alpha": alpha,
         "beta": float(np.max(d.q)),
         "iss_gain": math.sqrt(d.gamma / (alpha * o.epsilon)),
-        "runtime": {"vx_hold": 1.0, "y_error_bound": list(o.y_error_bound), "x0_halfwidth": list(o.x0_halfwidth),
+        "runtime": {"vx_hold": 1.0, "y_error_bound": list(d.y_error_bound), "x0_halfwidth": list(o.x0_halfwidth),
                     "disturbance_bound": list(o.model_error_bound), "eta": eta_shift},
         "solver": d.solver,
         "notes": [

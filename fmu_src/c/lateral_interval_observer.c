@@ -135,6 +135,8 @@ typedef struct {
     int consistent;
     int started, holding, outside, inconsistent, fallback_episode;
     double me_xi[NB];              /* model exchange: [xi_lo; xi_up] of eq. (23) */
+    double nu[NY];                 /* |measured - true| of [r, ay]: the FMU parameters
+                                      yaw_rate_error_bound (rad/s), ay_error_bound (m/s2) */
 } State;
 
 struct Model {
@@ -1043,8 +1045,8 @@ static int band(State *s, double vx, const Log *log)
 static void restart(State *s, const double y[NY], int keep)
 {
     for (int q = 0; q < NY; q++) {
-        s->box[MEAS[q]] = y[q] - IV_NU[q];
-        s->box[NX + MEAS[q]] = y[q] + IV_NU[q];
+        s->box[MEAS[q]] = y[q] - s->nu[q];
+        s->box[NX + MEAS[q]] = y[q] + s->nu[q];
         int j = UNMEAS[q];
         double lo = -IV_X0_HALFWIDTH[j], hi = IV_X0_HALFWIDTH[j];
         if (keep) {
@@ -1121,7 +1123,7 @@ static int intersect_measurement(State *s, const double y[NY])
     int consistent = 1;
     for (int q = 0; q < NY; q++) {
         int j = MEAS[q];
-        double lo = s->box[j], hi = s->box[NX + j], ml = y[q] - IV_NU[q], mu = y[q] + IV_NU[q];
+        double lo = s->box[j], hi = s->box[NX + j], ml = y[q] - s->nu[q], mu = y[q] + s->nu[q];
         if (ml > lo) lo = ml;
         if (mu < hi) hi = mu;
         if (lo > hi) {
@@ -1298,8 +1300,16 @@ int model_setup(Model *m, const double *p, const Log *log)
         log_event(log, LOG_ERROR, "parameter vx_hold must be finite and >= 0 m/s, got %g", hold);
         return -1;
     }
+    const double nu[NY] = {p[PAR_yaw_rate_error_bound], p[PAR_ay_error_bound]};
+    static const char *const NU_NAMES[NY] = {"yaw_rate_error_bound (rad/s)", "ay_error_bound (m/s2)"};
+    for (int q = 0; q < NY; q++)
+        if (!(isfinite(nu[q]) && nu[q] >= 0.0)) {
+            log_event(log, LOG_ERROR, "parameter %s must be finite and >= 0, got %g", NU_NAMES[q], nu[q]);
+            return -1;
+        }
     memset(m, 0, sizeof *m);
     m->vx_hold = hold;
+    memcpy(m->s.nu, nu, sizeof nu);
     m->s.xi_mode = -1;
     m->s.consistent = 1;
     m->s.vx_pub = py_max(hold, 1e-3);
@@ -1350,7 +1360,7 @@ void model_me_nominals(const Model *m, double *nominal)
 static void me_box(const State *s, const double y[NY], double X[NB])
 {
     for (int i = 0; i < NX; i++) {
-        double ey = acc(0.0, IV_E[s->mode][i], y, NY), en = acc_abs(0.0, IV_E[s->mode][i], IV_NU, NY);
+        double ey = acc(0.0, IV_E[s->mode][i], y, NY), en = acc_abs(0.0, IV_E[s->mode][i], s->nu, NY);
         X[i] = s->me_xi[i] + ey - en;
         X[NX + i] = s->me_xi[NX + i] + ey + en;
     }
@@ -1374,7 +1384,7 @@ void model_me_derivatives(const Model *m, const double *u, double *dx)
     omega(mode, u[IN_vx], d, X, X + NX, c, r, 1, oc, orad);
     for (int i = 0; i < NX; i++) {
         double base = acc(0.0, IV_J[mode][i], y, NY) + IV_H[mode][i] * d + acc(0.0, IV_P[mode][i], oc, NX);
-        double rad = acc_abs(0.0, IV_J[mode][i], IV_NU, NY) + acc_abs(0.0, IV_P[mode][i], orad, NX);
+        double rad = acc_abs(0.0, IV_J[mode][i], s->nu, NY) + acc_abs(0.0, IV_P[mode][i], orad, NX);
         dx[i] = acc(0.0, IV_N[mode][i], s->me_xi, NX) + base - rad;
         dx[NX + i] = acc(0.0, IV_N[mode][i], s->me_xi + NX, NX) + base + rad;
     }

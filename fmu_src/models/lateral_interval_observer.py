@@ -65,6 +65,12 @@ SPEC = ModelSpec(
     parameters=(
         Var("vx_hold", "m/s", "below this speed the observer is frozen and its bounds held",
             start=1.0, min=0.01, max=10.0),
+        # not in the paper (its measurements are exact): the bounds of the sensors' errors, start
+        # values from the design file (runtime.y_error_bound; `latobs identify` estimates them)
+        Var("yaw_rate_error_bound", "rad/s", "bound of |measured - true| yaw rate (sensor noise and bias): "
+            "the measurement is known to within +-this", start=0.0, min=0.0, max=1.0),
+        Var("ay_error_bound", "m/s2", "bound of |measured - true| lateral acceleration (sensor noise, "
+            "vibration and bias): the measurement is known to within +-this", start=0.0, min=0.0, max=50.0),
     ),
     starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
     # longest communication step (s): the longest at which the design's bounds contract (stored in

@@ -62,7 +62,7 @@ def emit(data: dict) -> CModel:
         c_array("IV_W", md["w"]),
         c_array("IV_DAMPED", [int(i in tb["damped"]) for i in range(4)], "int"),
         c_array("IV_SMOOTH", [int(i in tb["smooth"]) for i in range(4)], "int"),
-        c_array("IV_NU", tb["nu"]), c_array("IV_X0_HALFWIDTH", tb["x0_halfwidth"]),
+        c_array("IV_X0_HALFWIDTH", tb["x0_halfwidth"]),
         c_array("IV_EDGES", tb["edges"]),
         c_array("IV_MODE_VX", mode("vx")), c_array("IV_ETA", mode("eta")), c_array("IV_RHO", mode("rho")),
         c_array("IV_N", mode("N")), c_array("IV_P", mode("P")), c_array("IV_E", mode("E")),

@@ -172,10 +172,12 @@ class ReplayRun:
 
 
 def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: str | None = None,
-          source: Any = "the record", unzipdir: str | None = None) -> ReplayRun:
+          source: Any = "the record", unzipdir: str | None = None,
+          parameters: Mapping[str, Any] | None = None) -> ReplayRun:
     """Drive the FMU at ``fmu_path`` with the columns of ``data`` (``t`` and one column per FMU
     input; see the module docstring for the timing). ``source`` names the data in errors.
-    ``unzipdir``: the folder the FMU is already extracted to (kept), else a temporary one."""
+    ``unzipdir``: the folder the FMU is already extracted to (kept), else a temporary one.
+    ``parameters``: FMU parameters set before initialisation (name: value)."""
     from .harness import FmuInstance, WiringError, _unit_of, observer_design
     from .instance import fmi_type
 
@@ -214,7 +216,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
             for name, val in values.items():
                 rec[name][k] = val
 
-        record(0, call("initialisation", 0, f.start, rows[0], None, float(t[0]), float(t[-1])))
+        record(0, call("initialisation", 0, f.start, rows[0], parameters, float(t[0]), float(t[-1])))
         set_inputs, do_step, get_outputs = f.set_inputs, f.do_step, f.get_outputs
         tl = t.tolist()
         for k in range(n - 1):

@@ -144,11 +144,11 @@ def synthetic_drive(data: dict, n: int = 2500, seed: int = 3):
     return u, h
 
 
-def drive(path, u, h):
+def drive(path, u, h, parameters=None):
     """Outputs after initialisation and after each step, and the log, of the FMU at ``path``."""
     f = FmuInstance("I", path)
     try:
-        f.start(dict(zip(INPUTS, u[0])))
+        f.start(dict(zip(INPUTS, u[0])), parameters)
         rows, t = [f.get_outputs()], 0.0
         for k in range(len(h)):
             f.set_inputs(dict(zip(INPUTS, u[k])))
@@ -172,6 +172,36 @@ def test_every_branch_and_warning_equals_python_fmu(fmus):
                  "a priori enclosure not found", "outside the bounds"):
         assert what in said, what
     assert 0 in b["consistent"] and set(b["mode"].tolist()) == {1, 2, 3}
+
+
+def test_measurement_error_bound_parameters_equal_python_fmu(fmus):
+    """yaw_rate_error_bound and ay_error_bound (FMU parameters, not in the paper): the synthetic
+    drive's measurements with errors inside +-nu. Both FMUs agree, and with the bounds set the
+    measurements the bounds cover no longer make the observer restart."""
+    u, h = synthetic_drive(fmus["design"], n=1200, seed=5)
+    rng = np.random.default_rng(5)
+    nu = {"yaw_rate_error_bound": 0.004, "ay_error_bound": 0.4}
+    u[:, 2] += rng.uniform(-1, 1, len(u)) * nu["yaw_rate_error_bound"]
+    u[:, 3] += rng.uniform(-1, 1, len(u)) * nu["ay_error_bound"]
+    u[::97, 3] -= 30.0                            # no spikes (synthetic_drive adds them)
+    (a, log_a), (b, log_b) = drive(fmus["py"], u, h, nu), drive(fmus["c"], u, h, nu)
+    finite = {k: np.nan_to_num(v) for k, v in a.items()}
+    assert_same(finite, {k: np.nan_to_num(v) for k, v in b.items()}, "synthetic drive with error bounds")
+    assert log_a == log_b
+    c0, _ = drive(fmus["c"], u, h)                  # exact measurements assumed (the paper): restarts
+    falls, falls0 = (np.flatnonzero(np.diff(np.asarray(c, int)) < 0) for c in (b["consistent"], c0["consistent"]))
+    assert len(falls0) > 100
+    # with the bounds, restarts only where the drive itself jumps (its state reset above 50 m/s,
+    # seen at that step or the next)
+    assert np.all(np.maximum(np.abs(u[falls, 1]), np.abs(u[falls - 1, 1])) > 50.0), u[falls, 1]
+    for k, bad in (("yaw_rate_error_bound", -0.1), ("ay_error_bound", float("nan"))):
+        f = FmuInstance("I", fmus["c"])
+        try:
+            with pytest.raises(Exception):
+                f.start(dict(zip(INPUTS, u[0])), {k: bad})
+            assert any(k in m for m in f.logs), f.logs
+        finally:
+            f.close()
 
 
 def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):

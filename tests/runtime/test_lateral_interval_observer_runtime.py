@@ -535,6 +535,27 @@ def test_bounds_enclose_with_time_varying_stiffness_and_measurement_noise(design
     assert np.max(w[len(w) // 2:, 0]) < 1.0
 
 
+def test_measurement_error_bounds_are_parameters_defaulting_to_the_design(design):
+    """yaw_rate_error_bound and ay_error_bound: start values from runtime.y_error_bound, the
+    parameters win over them, bad values are refused naming the parameter; the guarantee holds
+    with measurements anywhere within +-nu given as parameters."""
+    d = copy.deepcopy(design)
+    d["runtime"]["y_error_bound"] = [0.002, 0.05]
+    assert IntervalObserver.parameter_defaults(d) == {"vx_hold": 1.0, "yaw_rate_error_bound": 0.002,
+                                                      "ay_error_bound": 0.05}
+    assert observer(d).nu == [0.002, 0.05]
+    assert observer(d, {"ay_error_bound": 0.5}).nu == [0.002, 0.5]
+    for k, bad in (("yaw_rate_error_bound", -1e-3), ("ay_error_bound", math.inf), ("ay_error_bound", math.nan)):
+        with pytest.raises(ValueError, match=k):
+            observer(design, {k: bad})
+    cfb, crb = design["stiffness_box"]["Cf"], design["stiffness_box"]["Cr"]
+    rows, v = _simulate(design, 0.005, 6.0, lambda t: (cfb[1], crb[0]), [0.5, 0.0, 0.0, 0.0], nu=(0.004, 0.3),
+                        seed=9, params={"yaw_rate_error_bound": 0.004, "ay_error_bound": 0.3})
+    viol, w = _check_enclosure(rows, v)
+    assert viol == [], viol[:5]
+    assert {r[3]["consistent"] for r in rows} == {1}
+
+
 def test_additive_disturbance_bound_is_enclosed(design):
     """runtime.disturbance_bound (optional, not in the paper): x' = A x + B delta + w, |w| <= bound."""
     d = copy.deepcopy(design)
@@ -780,6 +801,10 @@ def test_max_communication_step_is_where_the_bounds_stop_contracting(design):
     assert min(obs.decay_rate(0.05, v) for v in speeds) > 20.0     # the sampled correction: ~29 /s
     assert obs.decay_rate(0.005, 15.0) > 4.0              # ~5 /s at the default step (continuous only)
     assert obs.decay_rate(0.01, 15.0) > 100.0             # the sampled correction from 10 ms: ~150 /s
+    # the measurement-error bounds (FMU parameters) do not move it: the probes run with nu = 0
+    noisy = IntervalObserver(design, {"yaw_rate_error_bound": 0.05, "ay_error_bound": 3.0})
+    assert noisy.max_communication_step() == hmax
+    assert [noisy.decay_rate(hmax, v) for v in speeds[:3]] == [obs.decay_rate(hmax, v) for v in speeds[:3]]
     bare = copy.deepcopy(design)
     del bare["runtime"]["max_communication_step"]
     assert observer(bare).max_communication_step() == hmax
@@ -814,14 +839,17 @@ def test_model_file_interface(design):
     assert units["Fyf_lower"] == "N" and units["Fyr_upper"] == "N"
     assert [v.name for v in SPEC.integer_outputs] == ["mode", "consistent"]
     assert SPEC.bounds(design) == {"mode": (1, 3), "consistent": (0, 1)}
-    (p,) = SPEC.parameters
+    p, nr, na = SPEC.parameters
     assert (p.name, p.unit, p.start, p.min, p.max) == ("vx_hold", "m/s", 1.0, 0.01, 10.0)
+    assert (nr.name, nr.unit, nr.start, nr.min) == ("yaw_rate_error_bound", "rad/s", 0.0, 0.0)
+    assert (na.name, na.unit, na.start, na.min) == ("ay_error_bound", "m/s2", 0.0, 0.0)
     assert SPEC.stop_time == 20.0 and "Ifqir" in SPEC.description and "ACC 2020" in SPEC.description
     text = SPEC.describe(design)
     assert "Cf in [" in text and "3 speed modes" in text and "11.5 m/s on [10, 13)" in text
     obs = SPEC.runtime(design, {"vx_hold": 1.0})
     assert set(obs.y) == {v.name for v in SPEC.outputs} | {"mode", "consistent"}
-    assert IntervalObserver.parameter_defaults(design) == {"vx_hold": 1.0}
+    assert IntervalObserver.parameter_defaults(design) == {"vx_hold": 1.0, "yaw_rate_error_bound": 0.0,
+                                                           "ay_error_bound": 0.0}
 
 
 def test_outputs_change_only_in_initialize_and_step(design):

@@ -83,7 +83,15 @@ def test_a_carplant_drive_gives_its_stiffnesses_within_5_percent(built_fmus, tmp
         assert lo <= truth <= hi, (k, lo, hi, truth)          # the box holds the truth
     assert car.name == "mycar" and car.value("m") == SEDAN.value("m")
     prov = doc["identification"]
-    assert prov["identified"] == ["Cf", "Cr"] and "m" in prov["given"]
+    assert prov["identified"] == ["Cf", "Cr", "yaw_rate_error_bound", "ay_error_bound"] and "m" in prov["given"]
+    # the measurement-error bounds cover the sensors' white noise (the 99.99 % quantile of a
+    # normal's magnitude: 3.9 standard deviations; of 2400 samples, about their largest) and stay
+    # near it (ay: plus the plant's own ay above 5 Hz, from the tire relaxation); the bias is not
+    # seen (a common offset is no noise)
+    for k, std, most in (("yaw_rate_error_bound", pipeline.DEFAULT_NOISE["yaw_rate"][0], 5.0),
+                         ("ay_error_bound", 0.05, 8.0)):
+        assert 3.0 * std < car.value(k) < most * std, (k, car.value(k), std)
+        assert doc["parameters"][k]["source"].startswith("identified: ")
     assert prov["signals"] == (["yaw_rate", "ay", "beta"] if with_beta else ["yaw_rate", "ay"])
     assert prov["record_sha256"] == ident.record_sha256({k: np.asarray(v, float) for k, v in cols.items()})
     assert prov["tune_until"] == pytest.approx(cols["t"][0] + 0.6 * (cols["t"][-1] - cols["t"][0]))
@@ -122,3 +130,25 @@ def test_the_command_line_refuses_without_a_base_vehicle_or_a_toml(tmp_path, cap
     assert main(["identify", str(record), "--vehicle", "sedan", "--tune-fraction", "1.5",
                  "--out", str(tmp_path / "car.toml")]) == 2
     assert not (tmp_path / "car.toml").exists()
+
+
+def test_the_interval_observer_design_takes_the_vehicles_measurement_error_bounds():
+    """Paper 001's design option y_error_bound: given, it wins; else the vehicle's identified
+    bounds (both, or an error naming the missing one); else exact measurements as in the paper."""
+    from latobs.synthesis import lateral_interval_observer as d001
+    from latobs.synthesis.params import Parameter
+
+    def car(**bounds):
+        params = dict(SEDAN.parameters)
+        params.update({k: Parameter(k, v, "x") for k, v in bounds.items()})
+        return type(SEDAN)("car", SEDAN.kind, "", "", params, SEDAN.ranges)
+
+    opts = d001.DesignOptions(name="LateralIntervalObserver")
+    assert d001.error_bounds(SEDAN, opts) == (0.0, 0.0)
+    both = car(yaw_rate_error_bound=0.01, ay_error_bound=0.4)
+    assert d001.error_bounds(both, opts) == (0.01, 0.4)
+    assert d001.error_bounds(both, d001.DesignOptions(name="x", y_error_bound=(0.0, 0.1))) == (0.0, 0.1)
+    with pytest.raises(ValueError, match="has yaw_rate_error_bound but not ay_error_bound"):
+        d001.error_bounds(car(yaw_rate_error_bound=0.01), opts)
+    with pytest.raises(ValueError, match="y_error_bound must be two finite values >= 0"):
+        d001.DesignOptions(name="x", y_error_bound=(0.01, -1.0)).validate()

@@ -1,0 +1,86 @@
+"""Paper 001's interval observer on the real MBDS record, designed for the car ``latobs identify``
+finds on its tuning part (t < 425 s): the reference lateral velocity's enclosure, the mean width of
+the bounds and the restarts per minute (``consistent`` falling to 0), on the tuning and the held-out
+part, as the measurement-error bounds (the FMU parameters yaw_rate_error_bound, ay_error_bound)
+vary: the quantile of the tuning part's sensor residuals they are taken at
+(``synthesis.identification.measurement_error_bounds``; identify writes the 99.9 % quantile).
+
+    python benchmarks/interval_mbds.py [--box F] [--out DIR]
+
+``--box F``: the design's relative stiffness half-widths around the identified Cf, Cr (default
+0.2, the design's default). Builds the native FMU for this machine in DIR (default a temporary
+folder) and drives it with fmpy through ``latobs.validation.replay.drive``.
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from latobs import __version__, packaging
+from latobs.cbackend.toolchain import host_platform
+from latobs.synthesis import design_file, designs
+from latobs.synthesis import identification as ident
+from latobs.synthesis.params import load_vehicle
+from latobs.validation import replay as rp
+
+QUANTILES = (None, 0.99, 0.995, 0.999, 0.9999, 1.0)    # None: exact measurements (the paper)
+SPLIT = 425.0          # s, the record's tuning / held-out split
+SETTLE = 2.0           # s, not scored after the start
+
+
+def scores(run, t) -> dict[str, tuple[float, float, float]]:
+    """{part: (enclosure of the reference vy, mean width m/s, restarts per minute)}."""
+    o, vy = run.outputs, run.columns["vy"]
+    lo, hi, c = o["vy_lower"], o["vy_upper"], o["consistent"]
+    out = {}
+    for part, m in (("tuning", (t < SPLIT) & (t >= t[0] + SETTLE)), ("held-out", t >= SPLIT)):
+        enc = float(np.mean((vy[m] >= lo[m]) & (vy[m] <= hi[m])))
+        falls = int(np.sum(np.diff(c[m].astype(int)) < 0))
+        out[part] = (enc, float(np.mean(hi[m] - lo[m])), falls / (m.sum() * run.dt / 60.0))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--box", type=float, default=0.2)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    out = args.out or Path(tempfile.mkdtemp(prefix="interval-mbds-"))
+    out.mkdir(parents=True, exist_ok=True)
+    path = rp.resolve_csv("mbds")
+    cols = rp.load_csv(path)
+    base = load_vehicle("mbds_250lm")
+    res = ident.identify(cols, base, SPLIT)
+    car = out / "mycar.toml"
+    car.write_text(tomli_w.dumps(ident.vehicle_document(res, base, "mycar", "mbds", f"t < {SPLIT:g} s", __version__)))
+    data = packaging.complete_runtime_data(designs.run("LateralIntervalObserver", str(car), box=(args.box, args.box)))
+    fmu = packaging.package_design(design_file.write(data, out), out, backend="c", platforms=[host_platform()])
+    fit = cols["t"] < SPLIT
+    print(f"LateralIntervalObserver for the identified car (Cf {res.Cf:.0f}, Cr {res.Cr:.0f} N/rad, box "
+          f"+-{100 * args.box:g} %), MBDS record, tuning t < {SPLIT:g} s / held-out t >= {SPLIT:g} s")
+    print("| quantile | yaw_rate_error_bound (rad/s) | ay_error_bound (m/s²) | vy enclosed (tuning / held-out) "
+          "| mean vy width, m/s (tuning / held-out) | restarts per minute (tuning / held-out) |")
+    print("|---|---|---|---|---|---|")
+    t = cols["t"]
+    for q in QUANTILES:
+        if q is None:
+            params = {k: 0.0 for k in ident.NOISE_SIGNALS.values()}
+        else:
+            ident.NOISE_QUANTILE = q
+            b = ident.measurement_error_bounds(cols, fit)
+            params = {ident.NOISE_SIGNALS[k]: v[0] for k, v in b.items()}
+        s = scores(rp.drive(fmu, {k: cols[k] for k in ("t", "delta", "vx", "yaw_rate", "ay", "vy")},
+                            parameters=params), t)
+        tu, ho = s["tuning"], s["held-out"]
+        print(f"| {'0 (exact, the paper)' if q is None else f'{q:g}'} | {params['yaw_rate_error_bound']:.4g} | {params['ay_error_bound']:.3g} | "
+              f"{100 * tu[0]:.2f} % / {100 * ho[0]:.2f} % | {tu[1]:.2f} / {ho[1]:.2f} | {tu[2]:.2f} / {ho[2]:.2f} |",
+              flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
