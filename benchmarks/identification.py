@@ -2,7 +2,8 @@
 at 30 km/h, 40 s at 100 Hz, Magic Formula tires), each with its stiffnesses scaled by factors drawn
 in 0.8 ... 1.2 of ``sedan``'s and the sensors of ``latobs validate --noise`` (plus 0.05 m/s^2 on
 ay), identified on their first 60 % with ``sedan`` as the base vehicle. Prints one line per drive
-and the counts: Cf and Cr within 5 % of the truth, the truth inside the reported interval.
+and the counts: Cf and Cr within 5 % of the truth, the truth inside the reported interval, the yaw
+inertia (sedan's) identified and its error.
 
     python benchmarks/identification.py [RUNS] [CARPLANT.fmu]
 
@@ -29,6 +30,7 @@ def main(argv: list[str]) -> int:
     noise = {**pipeline.DEFAULT_NOISE, "ay": (0.05, 0.0)}
     rng = np.random.default_rng(1)
     within = inside = 0
+    iz_errors: list = []
     for k in range(runs):
         sf, sr = rng.uniform(0.8, 1.2, 2)
         r = run(get_scenario("w1-steer", seed=k, duration=40.0), plant, {}, dt=0.01, vehicle="sedan",
@@ -45,9 +47,15 @@ def main(argv: list[str]) -> int:
         ins = res.Cf_interval[0] <= tf <= res.Cf_interval[1] and res.Cr_interval[0] <= tr <= res.Cr_interval[1]
         within += ok
         inside += ins
+        iz = (f"Iz {100 * (res.Iz / base.value('Iz') - 1):+.2f} %" if res.Iz is not None
+              else "Iz not identified")
+        iz_errors.append(None if res.Iz is None else res.Iz / base.value("Iz") - 1)
         print(f"{k:3d}: scales {sf:.3f} {sr:.3f}: Cf {100 * ef:+.2f} %, Cr {100 * er:+.2f} %, truth "
-              f"{'inside' if ins else 'outside'} the interval", flush=True)
+              f"{'inside' if ins else 'outside'} the interval; {iz}", flush=True)
     print(f"Cf and Cr within 5 %: {within}/{runs}; the truth inside the interval: {inside}/{runs}")
+    got = [e for e in iz_errors if e is not None]
+    print(f"Iz identified in {len(got)}/{runs}" + (f", error {100 * min(got):+.2f} ... {100 * max(got):+.2f} %"
+                                                    if got else ""))
     return 0
 
 

@@ -211,8 +211,13 @@ def _cmd_identify(args) -> int:
                                   ("Cr", result.Cr, result.Cr_interval, result.tire_ratios[1])):
         slope = f"; the slope at zero slip: fitted / {kappa:.4f} on {base.name}'s tire curve" if kappa != 1.0 else ""
         print(f"  {k} = {v:.0f} N/rad (95 % interval {lo:.0f} ... {hi:.0f}; {base.name}: {base.value(k):.0f}{slope})")
+    if result.Iz is not None:
+        print(f"  Iz = {result.Iz:.0f} kg*m^2 (95 % interval {result.Iz_interval[0]:.0f} ... {result.Iz_interval[1]:.0f}; "
+              f"{base.name}: {base.value('Iz'):.0f})")
+    for k, why in result.not_identified.items():
+        print(f"  {k} not identified ({base.name}'s {base.value(k):g} kept): {why}")
     for k in result.signals:
-        print(f"  residual RMS {k}: {result.rms[k]:.4g} (with {base.name}'s Cf, Cr: {result.rms_base[k]:.4g})")
+        print(f"  residual RMS {k}: {result.rms[k]:.4g} (with {base.name}'s values: {result.rms_base[k]:.4g})")
     for k, (bound, rms) in result.error_bounds.items():
         print(f"  {identification.NOISE_SIGNALS[k]} = {bound:.4g} {'rad/s' if k == 'yaw_rate' else 'm/s^2'} "
               f"(measurement noise RMS {rms:.4g}; the interval observer's bound)")

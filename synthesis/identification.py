@@ -1,4 +1,4 @@
-"""Identify a car's cornering stiffnesses from a recorded drive (``latobs identify``).
+"""Identify a car's cornering stiffnesses (and yaw inertia) from a recorded drive (``latobs identify``).
 
 The model is paper 001's design model, the single-track (bicycle) model with first-order tire
 relaxation (``synthesis.relaxation_model``, eq. 9: states vy, r at the CG, ay = sum Fy / m and the
@@ -9,7 +9,9 @@ speed (zero-order hold). The front and rear axle stiffnesses Cf, Cr are the outp
 least-squares fit (``scipy.optimize.least_squares``) of the simulated yaw rate and lateral
 acceleration, and of the sideslip when the record has a reference ``beta``, to the record's tuning
 part (t < tune_until); each signal's residual is divided by the signal's spread, and the unknowns
-are the scale factors of the base vehicle's values (numbers near 1).
+are the scale factors of the base vehicle's values (numbers near 1). The yaw inertia Iz is a third
+unknown, kept when the record's transients reveal it (:data:`IZ_MAX_SPREAD`), else the base
+vehicle's with the reason recorded.
 
 Uncertainty: a moving-block bootstrap over segments of the tuning part, linearised at the fit
 (one Gauss-Newton step per resample from the segments' Jacobians and residuals: the spread that
@@ -19,8 +21,8 @@ the interval written to the vehicle file's ``[ranges]``: the stiffness box of pa
 The sensors' measurement-error bounds (:func:`measurement_error_bounds`: paper 001's interval
 observer needs them) come from each sensor's residual about its zero-phase low-pass.
 
-What the record cannot reveal is taken from the base vehicle and marked so: mass, geometry, yaw
-inertia, relaxation length, roll (none of them identified here); the steering ratio needs a
+What the record cannot reveal is taken from the base vehicle and marked so: mass, geometry,
+relaxation length, roll (latobs's records carry no roll signals); the steering ratio needs a
 steering-wheel angle, which latobs's records do not carry (``delta`` is the road-wheel angle).
 """
 from __future__ import annotations
@@ -48,6 +50,9 @@ MIN_STEER_RMS = math.radians(0.1)   # rad, the least steering excitation (RMS of
 SEGMENT_SECONDS = 10.0        # s, the bootstrap's blocks
 BOOTSTRAP = 400               # resamples
 SCALE_BOUNDS = (0.2, 5.0)     # the stiffness scales searched, x the base vehicle's
+#: the yaw inertia is identified with Cf, Cr when the record's transients reveal it: its 95 %
+#: interval within +-IZ_MAX_SPREAD of the fit (relative), else it stays the base vehicle's, and why
+IZ_MAX_SPREAD = 0.15
 
 
 class IdentificationError(ValueError):
@@ -72,6 +77,9 @@ class Identified:
     tire_ratios: tuple[float, float] = (1.0, 1.0)   # effective / zero-slip stiffness (:func:`_tire_curve_ratios`)
     # {signal: (bound, RMS)} of the measurement error, SI (:func:`measurement_error_bounds`)
     error_bounds: dict = field(default_factory=dict)
+    Iz: float | None = None                # kg m^2, when identified (else the base vehicle's stays)
+    Iz_interval: tuple[float, float] | None = None
+    not_identified: dict = field(default_factory=dict)     # {parameter: why the record does not reveal it}
 
 
 #: the measurement-error bounds: the residual of each sensor about its zero-phase low-pass
@@ -278,7 +286,10 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
           float(cols["yaw_rate"][0]))
 
     def values(s: np.ndarray) -> dict:
-        return {**vals0, "Cf": vals0["Cf"] * s[0], "Cr": vals0["Cr"] * s[1]}
+        v = {**vals0, "Cf": vals0["Cf"] * s[0], "Cr": vals0["Cr"] * s[1]}
+        if len(s) > 2:                  # the yaw inertia too
+            v["Iz"] = vals0["Iz"] * s[2]
+        return v
 
     def residual_parts(s: np.ndarray) -> dict[str, np.ndarray]:
         sim = simulate(cols, values(s), x0)
@@ -288,18 +299,45 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
         r = np.concatenate(list(residual_parts(s).values()))
         return r / math.sqrt(len(r))
 
-    sol = least_squares(residuals, x0=np.ones(2), bounds=SCALE_BOUNDS, x_scale=np.ones(2), method="trf",
-                        diff_step=1e-4)
-    s_hat = sol.x
-    if np.any(np.isclose(s_hat, SCALE_BOUNDS[0], rtol=1e-3)) or np.any(np.isclose(s_hat, SCALE_BOUNDS[1], rtol=1e-3)):
+    def solve(n: int):
+        sol = least_squares(residuals, x0=np.ones(n), bounds=SCALE_BOUNDS, x_scale=np.ones(n), method="trf",
+                            diff_step=1e-4)
+        edge = np.isclose(sol.x, SCALE_BOUNDS[0], rtol=1e-3) | np.isclose(sol.x, SCALE_BOUNDS[1], rtol=1e-3)
+        return sol, edge
+
+    # Cf, Cr and the yaw inertia (a third scale) first; the inertia is kept only when the record
+    # reveals it (the fit inside the search, a bootstrap interval within +-IZ_MAX_SPREAD)
+    not_identified = {}
+    sol, edge = solve(3)
+    iz_box = None
+    if not edge.any():
+        s_hat = sol.x
+        try:
+            interval = _bootstrap(cols, fit, signals, residual_parts, s_hat, seed)
+            iz_spread = max(s_hat[2] - interval[2][0], interval[2][1] - s_hat[2]) / s_hat[2]
+        except np.linalg.LinAlgError:            # a resample that does not determine it at all
+            iz_spread = math.inf
+        if iz_spread <= IZ_MAX_SPREAD:
+            iz_box = interval[2]
+        else:
+            width = f"+-{100 * iz_spread:.0f} %" if iz_spread < 10.0 else "wider than +-1000 %"
+            not_identified["Iz"] = (f"the record's yaw transients do not reveal it: its 95 % interval would be "
+                                    f"{width} (at most +-{100 * IZ_MAX_SPREAD:g} % is kept)")
+    elif not edge[:2].any():
+        not_identified["Iz"] = "the record's yaw transients do not reveal it: its fit ran to the edge of the search"
+    if iz_box is None:
+        sol, edge = solve(2)
+        s_hat = sol.x
+    if edge.any():
         raise IdentificationError(f"{source}: the fit ran to the edge of the search ({SCALE_BOUNDS[0]:g}..."
                                   f"{SCALE_BOUNDS[1]:g} x the base vehicle's Cf, Cr): the record does not fit the "
                                   "bicycle model with this base vehicle (check the units: delta is the road-wheel "
                                   "angle in rad, ay in m/s^2)")
-    interval = _bootstrap(cols, fit, signals, residual_parts, s_hat, seed)
+    if iz_box is None:
+        interval = _bootstrap(cols, fit, signals, residual_parts, s_hat, seed)
     kappa = _tire_curve_ratios(base, simulate(cols, values(s_hat), x0), fit, vals0, s_hat)
     parts = residual_parts(s_hat)
-    parts_base = residual_parts(np.ones(2))
+    parts_base = residual_parts(np.ones(len(s_hat)))
     t = np.asarray(cols["t"], dtype=float)
     # the slope at zero slip: the fitted (effective) stiffness over the tire curve's ratio; the box
     # reaches from the effective stiffness to the zero-slip slope's interval
@@ -314,7 +352,10 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
         rms={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts.items()},
         rms_base={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts_base.items()},
         signals=signals, nfev=int(sol.nfev), tire_ratios=(float(kappa[0]), float(kappa[1])),
-        error_bounds=measurement_error_bounds(cols, fit))
+        error_bounds=measurement_error_bounds(cols, fit),
+        Iz=None if iz_box is None else float(vals0["Iz"] * s_hat[2]),
+        Iz_interval=None if iz_box is None else (float(vals0["Iz"] * iz_box[0]), float(vals0["Iz"] * iz_box[1])),
+        not_identified=not_identified)
 
 
 def _tire_curve_ratios(base: Vehicle, sim: dict, fit: np.ndarray, vals0: dict, s_hat: np.ndarray
@@ -355,31 +396,32 @@ def _bootstrap(cols, fit: np.ndarray, signals: list[str], residual_parts, s_hat:
     nb = int(block.max()) + 1
     base = residual_parts(s_hat)
     step = 1e-4
+    n = len(s_hat)
     jac = []
-    for j in range(2):
+    for j in range(n):
         d = s_hat.copy()
         d[j] += step * s_hat[j]
         moved = residual_parts(d)
         jac.append({k: (moved[k] - base[k]) / (step * s_hat[j]) for k in signals})
-    # per block: J^T J (2x2) and J^T e (2), summed over the signals
-    JtJ = np.zeros((nb, 2, 2))
-    Jte = np.zeros((nb, 2))
+    # per block: J^T J (n x n) and J^T e (n), summed over the signals
+    JtJ = np.zeros((nb, n, n))
+    Jte = np.zeros((nb, n))
     for k in signals:
-        J = np.stack([jac[0][k], jac[1][k]], axis=1)
+        J = np.stack([jac[j][k] for j in range(n)], axis=1)
         e = base[k]
-        for i in range(2):
+        for i in range(n):
             Jte[:, i] += np.bincount(block, J[:, i] * e, minlength=nb)
-            for j in range(2):
+            for j in range(n):
                 JtJ[:, i, j] += np.bincount(block, J[:, i] * J[:, j], minlength=nb)
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, nb, size=(BOOTSTRAP, nb))
-    est = np.empty((BOOTSTRAP, 2))
+    est = np.empty((BOOTSTRAP, n))
     for b in range(BOOTSTRAP):
         A = JtJ[draws[b]].sum(axis=0)
         g = Jte[draws[b]].sum(axis=0)
         est[b] = s_hat - np.linalg.solve(A, g)
     lo, hi = np.percentile(est, [2.5, 97.5], axis=0)
-    return [(float(min(lo[i], s_hat[i])), float(max(hi[i], s_hat[i]))) for i in range(2)]
+    return [(float(min(lo[i], s_hat[i])), float(max(hi[i], s_hat[i]))) for i in range(n)]
 
 
 def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, tune_until_text: str,
@@ -401,6 +443,13 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
                  if kappa != 1.0 else "")
         doc["parameters"][k]["source"] = (f"identified: output-error fit of {fitted} on {tune_until_text}{slope}; "
                                           f"box {lo:.0f} ... {hi:.0f} N/rad")
+    if result.Iz is not None:
+        lo, hi = result.Iz_interval
+        doc["parameters"]["Iz"]["value"] = round(result.Iz, 1)
+        doc["parameters"]["Iz"]["source"] = (f"identified: output-error fit of {fitted} on {tune_until_text}, with Cf "
+                                             f"and Cr; 95 % interval {lo:.0f} ... {hi:.0f} kg*m^2")
+    for k, why in result.not_identified.items():
+        doc["parameters"][k]["source"] += f"; not identified: {why}"
     for k, (bound, rms) in result.error_bounds.items():
         unit = "rad/s" if k == "yaw_rate" else "m/s^2"
         doc["parameters"][NOISE_SIGNALS[k]] = {
@@ -413,6 +462,8 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
         ranges[k] = {"min": round(lo, 1), "max": round(hi, 1), "unit": "N/rad",
                      "description": f"{'front' if k == 'Cf' else 'rear'} axle cornering stiffness box: the 95 % "
                                     "interval of the identification (block bootstrap)"}
+    identified = ["Cf", "Cr", *(["Iz"] if result.Iz is not None else []),
+                  *(NOISE_SIGNALS[k] for k in result.error_bounds)]
     doc["identification"] = {
         "record": record, "record_sha256": result.record_sha256, "tuning": tune_until_text,
         "tune_until": result.tune_until, "samples": result.samples, "signals": result.signals,
@@ -423,8 +474,8 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
         "tire_curve_ratio": {"Cf": round(result.tire_ratios[0], 6), "Cr": round(result.tire_ratios[1], 6),
                              "meaning": "the stiffness a linear model fits over the drive's slip angles / the "
                                         "slope at zero slip, on the base vehicle's tire curve (1: none given)"},
-        "identified": ["Cf", "Cr", *(NOISE_SIGNALS[k] for k in result.error_bounds)],
-        "given": sorted(k for k in doc["parameters"]
-                        if k not in ("Cf", "Cr", *(NOISE_SIGNALS[k] for k in result.error_bounds))),
+        "identified": identified,
+        "given": sorted(k for k in doc["parameters"] if k not in identified),
+        "not_identified": dict(result.not_identified),
     }
     return doc
