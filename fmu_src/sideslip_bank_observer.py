@@ -215,12 +215,15 @@ class SwitchedPIObserver:
 
     def check_validity(self, beta: float, r: float, vx: float, w, t: float) -> int:
         """valid (1/0): the slip angles and |vx yaw_rate| against the validity limits, with the release
-        hysteresis (not in the paper); one rate-limited warning per entry into valid = 0."""
+        hysteresis, and vx inside the design grid (neither in the paper: below the grid the model
+        frozen at its lowest speed is far from the car's, and the bank estimate takes up the
+        difference); one rate-limited warning per entry into valid = 0."""
         val = self.validity
         alpha = self.slip_premise(beta, r, vx, w[3], val["lf"], val["lr"])
         ay = abs(vx * w[0])
+        inside = self.lo <= vx <= self.hi
         if self.valid:
-            if alpha > val["alpha_max"] or ay > val["ay_max"]:
+            if alpha > val["alpha_max"] or ay > val["ay_max"] or not inside:
                 self.valid = 0
                 self.invalid_entries += 1
                 last = self._invalid_logged
@@ -228,15 +231,17 @@ class SwitchedPIObserver:
                     more = (f"; {self._invalid_unlogged} more entries since the last message not logged"
                             if self._invalid_unlogged else "")
                     held = "; bank estimate held until valid again" if self.freeze else ""
+                    why = ("estimates outside the validity limits" if inside else
+                           f"vx = {vx:.4g} m/s outside the design grid [{self.lo:.4g}, {self.hi:.4g}] m/s, and")
                     self.events.append((
-                        "warning", f"t = {t:.6g} s: valid = 0, estimates outside the validity limits: "
+                        "warning", f"t = {t:.6g} s: valid = 0, {why}: "
                                    f"max(|alpha_f|, |alpha_r|) = {alpha:.3g} rad (limit {val['alpha_max']:.3g}), "
                                    f"|vx yaw_rate| = {ay:.3g} m/s^2 (limit {val['ay_max']:.3g}){held} "
                                    f"(entry {self.invalid_entries}{more})"))
                     self._invalid_logged, self._invalid_unlogged = t, 0
                 else:
                     self._invalid_unlogged += 1
-        elif alpha < val["alpha_release"] and ay < val["ay_release"]:
+        elif alpha < val["alpha_release"] and ay < val["ay_release"] and inside:
             self.valid = 1
         self.y["valid"] = self.valid
         return self.valid

@@ -190,7 +190,7 @@ static void check_grid(Model *m, double vx, const Log *log)
 }
 
 /* one rate-limited warning per entry into valid = 0 (at time t, s) */
-static void log_invalid(Model *m, double alpha, double ay, double t, const Log *log)
+static void log_invalid(Model *m, double alpha, double ay, double vx, int inside, double t, const Log *log)
 {
     m->invalid_entries++;
     if (m->invalid_logged && !(t - m->invalid_logged_t >= INVALID_LOG_PERIOD)) {
@@ -200,9 +200,13 @@ static void log_invalid(Model *m, double alpha, double ay, double t, const Log *
     char more[96] = "";
     if (m->invalid_unlogged)
         snprintf(more, sizeof more, "; %ld more entries since the last message not logged", m->invalid_unlogged);
-    log_event(log, LOG_WARNING, "t = %.6g s: valid = 0, estimates outside the validity limits: "
+    char why[128] = "estimates outside the validity limits";
+    if (!inside)
+        snprintf(why, sizeof why, "vx = %.4g m/s outside the design grid [%.4g, %.4g] m/s, and", vx, PI_GRID_LO,
+                 PI_GRID_HI);
+    log_event(log, LOG_WARNING, "t = %.6g s: valid = 0, %s: "
               "max(|alpha_f|, |alpha_r|) = %.3g rad (limit %.3g), |vx yaw_rate| = %.3g m/s^2 (limit %.3g)%s "
-              "(entry %ld%s)", t, alpha, PI_A_MAX, ay, PI_AY_MAX,
+              "(entry %ld%s)", t, why, alpha, PI_A_MAX, ay, PI_AY_MAX,
               PI_FREEZE ? "; bank estimate held until valid again" : "", m->invalid_entries, more);
     m->invalid_logged = 1;
     m->invalid_logged_t = t;
@@ -210,17 +214,19 @@ static void log_invalid(Model *m, double alpha, double ay, double t, const Log *
 }
 
 /* valid for the step starting at t: the slip angles from beta^, r^ and |vx yaw_rate| against the
- * limits, with the release hysteresis */
+ * limits, with the release hysteresis, and vx inside the design grid (neither in the paper; the
+ * runtime's ``check_validity``) */
 static int check_validity(Model *m, double beta, double r, double vx, const double w[NW], double t, const Log *log)
 {
     double alpha = slip(beta, r, vx, w[3], PI_VAL_LF, PI_VAL_LR);
     double ay = fabs(vx * w[0]);
+    int inside = PI_GRID_LO <= vx && vx <= PI_GRID_HI;
     if (m->valid) {
-        if (alpha > PI_A_MAX || ay > PI_AY_MAX) {
+        if (alpha > PI_A_MAX || ay > PI_AY_MAX || !inside) {
             m->valid = 0;
-            log_invalid(m, alpha, ay, t, log);
+            log_invalid(m, alpha, ay, vx, inside, t, log);
         }
-    } else if (alpha < PI_A_REL && ay < PI_AY_REL) {
+    } else if (alpha < PI_A_REL && ay < PI_AY_REL && inside) {
         m->valid = 1;
     }
     return m->valid;

@@ -165,7 +165,9 @@ def test_speed_outside_grid_is_clamped_with_a_warning(design_speed, design_tire,
             assert any("frozen" in m for _, m in obs.events)
         else:
             assert any("outside the design grid" in m for _, m in obs.events)
-        clamps = [m for _, m in obs.events if "frozen" in m or "outside the design grid" in m]
+            # and not valid there (the validity limits of the default designs)
+            assert obs.y["valid"] == 0 and sum("valid = 0, vx = " in m for _, m in obs.events) == 1
+        clamps = [m for _, m in obs.events if "frozen" in m or "clamped to the nearest" in m]
         assert len(clamps) == 1        # one warning per excursion, not one per step
 
 

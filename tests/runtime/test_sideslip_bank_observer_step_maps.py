@@ -83,7 +83,8 @@ class ReferenceObserver:
     (w(t + tau) = w_k + tau (w_k - w_{k-1}) / h_{k-1}, evaluated at the RK4 stage times; slope 0 at
     the first step and after a frozen period; the outputs use the hold's y at t + h). Validity
     (design "validity"): the slip angles from beta^, r^ at the start of the step and |vx yaw_rate|
-    against their limits with the release hysteresis; while invalid with freeze_integral, w^' = 0.
+    against their limits with the release hysteresis, and vx inside the design grid; while invalid
+    with freeze_integral, w^' = 0.
     """
 
     def __init__(self, design: dict):
@@ -125,9 +126,17 @@ class ReferenceObserver:
         a_f = delta - xh[0] - v["lf"] * xh[1] / vx
         a_r = -xh[0] + v["lr"] * xh[1] / vx
         alpha, ay = max(abs(a_f), abs(a_r)), abs(vx * yaw_rate)
-        if self.valid and (alpha > v["alpha_max"] or ay > v["ay_max"]):
+        # the design grid: the speed bands' ends, or the union of the tire modes' measured ranges
+        if self.sw["kind"] == "speed_bands":
+            lo, hi = self.sw["edges"][0], self.sw["edges"][-1]
+        else:
+            ranges = [m["model_speed"]["range"] for m in self.design["modes"]]
+            lo, hi = min(r[0] for r in ranges), max(r[1] for r in ranges)
+        inside = lo <= vx <= hi
+        if self.valid and (alpha > v["alpha_max"] or ay > v["ay_max"] or not inside):
             self.valid = 0
-        elif not self.valid and alpha < v["release"] * v["alpha_max"] and ay < v["release"] * v["ay_max"]:
+        elif (not self.valid and alpha < v["release"] * v["alpha_max"] and ay < v["release"] * v["ay_max"]
+              and inside):
             self.valid = 1
 
     def step(self, h: float, u: dict):
