@@ -86,6 +86,15 @@ def _cmd_design(args) -> int:
 
 def _cmd_build(args) -> int:
     import contextlib
+
+    from . import cache
+
+    with cache.turned_off() if args.no_cache else contextlib.nullcontext():
+        return _build(args)
+
+
+def _build(args) -> int:
+    import contextlib
     import json
 
     from .pipeline import build, build_summary
@@ -522,6 +531,9 @@ def parser() -> argparse.ArgumentParser:
                    help="the FMI version(s) of the FMUs (default 2): FMI 3.0 FMUs (native C, co-simulation and "
                         "model exchange) go to DIR/fmi3 under the same names, with their design files. Not 3 with "
                         "--backend python (pythonfmu makes FMI 2.0 FMUs only)")
+    b.add_argument("--no-cache", action="store_true",
+                   help="decide everything again instead of reusing the cache's results for identical inputs "
+                        "(the cache folder: $LATOBS_CACHE_DIR, else ~/.cache/latobs)")
     b.set_defaults(func=_cmd_build)
     v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
     v.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")

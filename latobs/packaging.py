@@ -381,8 +381,9 @@ def package_design(design_path: Path, out_dir: Path, backend: str = "python",
 def complete_runtime_data(data: dict) -> dict:
     """``data`` (a design dict with its tables) with what only running its runtime decides, stored
     once so that neither backend has to find it in the FMU: the runtime class's ``build_time_facts``
-    (paper 001: ``runtime.max_communication_step``, the longest step at which its bounds contract).
-    Its tables are computed again when a fact changed them. Returns ``data``."""
+    (paper 001: ``runtime.max_communication_step``, the longest step at which its bounds contract),
+    through the content-addressed cache (``latobs.cache``). Its tables are computed again when a
+    fact changed them. Returns ``data``."""
     from .synthesis import tables
 
     entry = catalogue.get(data.get("design", "")) if data.get("design") in catalogue.OBSERVERS else None
@@ -391,7 +392,13 @@ def complete_runtime_data(data: dict) -> dict:
     if facts is None:
         return data
     tables.attach(data)
-    new = facts(data)
+    # decided once per design content and runtime code (latobs.cache)
+    from . import cache, identity
+    from .synthesis import design_file
+
+    content = design_file.reproducible({k: v for k, v in data.items() if k != tables.TABLES_KEY})
+    new = cache.remember("build-time-facts", {"design": content, "code": identity.packaging_code()},
+                         lambda: facts(data))
     if new:
         data.setdefault("runtime", {}).update(new)
         data[tables.TABLES_KEY] = tables.compute(data)

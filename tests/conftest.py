@@ -125,6 +125,26 @@ class SessionBuild:
         return self._c3_paths[name]
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _session_cache(tmp_path_factory):
+    """latobs's cache (``latobs.cache``) in the run's temporary folder, shared by the workers (and
+    the subprocesses they start): a test run starts from an empty cache, as on a fresh machine,
+    and never reads or fills the user's."""
+    from latobs import cache
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    saved = {k: os.environ.get(k) for k in (cache.ENV_DIR, cache.ENV_OFF)}
+    os.environ[cache.ENV_DIR] = str(shared / "latobs-cache")
+    os.environ.pop(cache.ENV_OFF, None)
+    yield
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+
+
 @pytest.fixture(scope="session")
 def built_fmus(tmp_path_factory) -> SessionBuild:
     """One build for the whole test run: with pytest-xdist every worker builds into the same folder
