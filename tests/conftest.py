@@ -60,10 +60,12 @@ class SessionBuild:
         self._c_paths: dict[str, Path] = {}
         self._c3_paths: dict[str, Path] = {}
 
-    def design(self, name: str) -> dict:
+    def design(self, name: str, vehicle: str | None = None) -> dict:
+        """(``vehicle``: a shipped set other than the design's default, also solved once per run.)"""
         if name not in packaging.OBSERVERS:
             raise KeyError(f"{name!r} is not an observer of latobs.packaging.OBSERVERS")
-        if name not in self._designs:
+        key = name if vehicle is None else f"{name}_{vehicle}"
+        if key not in self._designs:
             # as `latobs design` writes it (pipeline.solve): what only running the runtime decides
             # included; solved by the first worker that needs it, read back from its file by all
             from latobs.atomic import atomic_write_text, locked_folder
@@ -71,11 +73,12 @@ class SessionBuild:
 
             folder = self.out / "designs"
             with locked_folder(folder, "design"):
-                path = folder / f"{name}.json"
+                path = folder / f"{key}.json"
                 if not path.is_file():
-                    atomic_write_text(path, design_file.dumps(packaging.complete_runtime_data(designs.run(name))))
-                self._designs[name] = json.loads(path.read_text(encoding="utf-8"))
-        return self._designs[name]
+                    data = packaging.complete_runtime_data(designs.run(name, vehicle))
+                    atomic_write_text(path, design_file.dumps(data))
+                self._designs[key] = json.loads(path.read_text(encoding="utf-8"))
+        return self._designs[key]
 
     def path(self, name: str) -> Path:
         if name not in self._paths:

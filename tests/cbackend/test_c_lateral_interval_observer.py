@@ -102,10 +102,9 @@ def test_equals_python_fmu_on_the_mbds_record(built_fmus, tmp_path):
     """The demo's replay of the real record (its own design, 10 ms steps, measured signals): its
     first 60 s, 6 000 steps from 18 to 57 m/s through 10 of the design's 12 speed modes (the whole
     record is 55 000 steps, 80 s for the pythonfmu FMU alone)."""
-    from latobs.synthesis import designs
     from latobs.validation import replay
 
-    path = design_file.write(packaging.complete_runtime_data(designs.run(NAME, "mbds_250lm")), tmp_path)
+    path = design_file.write(built_fmus.design(NAME, "mbds_250lm"), tmp_path)      # solved once per test run
     py, c = packaging.package_design(path, tmp_path), packaging.package_design(path, tmp_path / "c", backend="c")
     data = {k: v[:6000] for k, v in replay.load_csv(replay.resolve_csv("mbds")).items()}
     outs = replay.drive(c, data).outputs

@@ -20,6 +20,9 @@ def _bare(design):
 
 
 def test_a_build_time_fact_is_decided_once_per_design_content(built_fmus, tmp_path, monkeypatch):
+    """The runtime's own decision (its probes) once, then from the cache: the same value; another
+    design content decides again; so does an unreadable entry, and a turned-off cache. The probes
+    themselves (5 s each) are counted through a stand-in after the first real one."""
     design = built_fmus.design("LateralIntervalObserver")
     monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))      # an empty cache
     calls = []
@@ -27,23 +30,24 @@ def test_a_build_time_fact_is_decided_once_per_design_content(built_fmus, tmp_pa
 
     def counted(cls, data):
         calls.append(1)
-        return real(cls, data)
+        return real(cls, data) if len(calls) == 1 else {"max_communication_step": 0.25}
 
     monkeypatch.setattr(IntervalObserver, "build_time_facts", classmethod(counted))
     first = packaging.complete_runtime_data(_bare(design))["runtime"]["max_communication_step"]
     assert first == design["runtime"]["max_communication_step"] and len(calls) == 1
-    again = packaging.complete_runtime_data(_bare(design))["runtime"]["max_communication_step"]
-    assert again == first and len(calls) == 1                       # from the cache
+    again = packaging.complete_runtime_data(_bare(design))
+    assert again["runtime"]["max_communication_step"] == first and len(calls) == 1     # from the cache
+    assert again["tables"]["max_communication_step"] == first
     entries = list((tmp_path / "cache" / "build-time-facts").glob("*.json"))
     assert len(entries) == 1
-    # another design (its bands moved): another key, decided again
+    # another design (its initial box changed): another key, decided again
     other = _bare(design)
     other["runtime"]["x0_halfwidth"] = [2.0, 0.0, 0.0, 30.0]
     packaging.complete_runtime_data(other)
     assert len(calls) == 2 and len(list((tmp_path / "cache" / "build-time-facts").glob("*.json"))) == 2
     # an unreadable entry: decided again, rewritten
     entries[0].write_text("{ not json")
-    assert packaging.complete_runtime_data(_bare(design))["runtime"]["max_communication_step"] == first
+    assert packaging.complete_runtime_data(_bare(design))["runtime"]["max_communication_step"] == 0.25
     assert len(calls) == 3
     # turned off: decided every time, nothing read
     with cache.turned_off():

@@ -582,9 +582,9 @@ def test_additive_disturbance_bound_is_enclosed(design):
         tables.compute(d)
 
 
-def test_a_design_with_many_bands(design):
+def test_a_design_with_many_bands(built_fmus):
     """The real-data vehicle's design: 12 bands over 15-63 m/s (any number of modes)."""
-    d = complete_runtime_data(designs.run("LateralIntervalObserver", "mbds_250lm"))
+    d = built_fmus.design("LateralIntervalObserver", "mbds_250lm")      # solved once per test run
     obs = IntervalObserver(d, {})
     obs.initialize(_u(vx=16.0))
     for k in range(2000):
