@@ -36,6 +36,7 @@ import numpy as np
 
 import scipy.linalg
 
+from .lateral_interval_observer import ERROR_BOUND_PARAMETERS
 from .params import Vehicle
 from .relaxation_model import coefficients
 from .sideslip_kalman_filter import model as bicycle
@@ -85,7 +86,7 @@ class Identified:
 #: the measurement-error bounds: the residual of each sensor about its zero-phase low-pass
 #: (2nd-order Butterworth, forward and backward) at NOISE_CUTOFF_HZ, above a car's lateral dynamics
 #: (about 1-2 Hz) and below the vibration, at the NOISE_QUANTILE of its magnitude over the tuning part
-NOISE_SIGNALS = {"yaw_rate": "yaw_rate_error_bound", "ay": "ay_error_bound"}
+NOISE_SIGNALS = dict(zip(("yaw_rate", "ay"), ERROR_BOUND_PARAMETERS))     # {signal: vehicle parameter}
 NOISE_CUTOFF_HZ = 5.0
 NOISE_QUANTILE = 0.9999
 

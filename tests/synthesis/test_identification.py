@@ -160,6 +160,10 @@ def test_the_interval_observer_design_takes_the_vehicles_measurement_error_bound
         params.update({k: Parameter(k, v, "x") for k, v in bounds.items()})
         return type(SEDAN)("car", SEDAN.kind, "", "", params, SEDAN.ranges)
 
+    from latobs.fmu_src.lateral_interval_observer import NU_PARAMETERS
+
+    # the vehicle's parameters, identify's and the FMU's parameters share their names
+    assert d001.ERROR_BOUND_PARAMETERS == NU_PARAMETERS == tuple(ident.NOISE_SIGNALS.values())
     opts = d001.DesignOptions(name="LateralIntervalObserver")
     assert d001.error_bounds(SEDAN, opts) == (0.0, 0.0)
     both = car(yaw_rate_error_bound=0.01, ay_error_bound=0.4)
