@@ -1,26 +1,39 @@
-"""The content-addressed cache of what latobs computes once per input and reuses: today the
-build-time facts of a design (paper 001's longest communication step, which the runtime decides
-by probing itself: 5-20 s per design).
+"""The content-addressed cache of what latobs computes once per input and reuses, shared by every
+command (build, validate, replay, campaign, check, demo) and every output folder:
 
-An entry's key is the SHA-256 of everything its value is computed from: the design's reproducible
-content and the code that decides it (``identity.packaging_code``: the runtimes and the
-packaging). A changed design or a changed runtime is another key, so a stale value is never
-reused. The folder is ``$LATOBS_CACHE_DIR``, else the user's cache folder (``$XDG_CACHE_HOME`` or
-``~/.cache``, then ``latobs``); ``LATOBS_NO_CACHE=1`` (``latobs build --no-cache``) turns it off.
-Entries are small JSON files written atomically; an unreadable one is computed again."""
+* ``design``: a certified design (``pipeline.solve``: the LMI solve and its certificate, 1-30 s);
+* ``build-time-facts``: what only running a runtime decides (paper 001's longest communication
+  step: 5-20 s per design);
+* ``fmu``: a built FMU with the design file beside it (``pipeline.build``: compilation for every
+  platform, the reference experiment), reused by a build into any folder.
+
+An entry's key is the SHA-256 of everything its value is made from (the identities of
+``latobs.identity``: design inputs, design-time code, solver versions, runtime and packaging code,
+toolchain, platforms); a changed input is another key, so a stale value is never reused. An entry
+is checked again where it is used (an FMU's identity is read back; a design is certified again
+when packaged). The folder is ``$LATOBS_CACHE_DIR``, else the user's cache folder
+(``$XDG_CACHE_HOME`` or ``~/.cache``, then ``latobs``); ``LATOBS_NO_CACHE=1`` (``latobs build
+--no-cache``) turns it off. Entries are written atomically (a file, or a folder renamed into
+place); an unreadable one is made again; the least recently used entries are removed when the
+folder grows past ``$LATOBS_CACHE_MAX_MB`` (default :data:`MAX_MB`)."""
 from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
+import time
 from contextlib import contextmanager
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from .atomic import atomic_write_text
 from .synthesis.identity import sha256_json
 
-ENV_DIR, ENV_OFF = "LATOBS_CACHE_DIR", "LATOBS_NO_CACHE"
+ENV_DIR, ENV_OFF, ENV_MAX = "LATOBS_CACHE_DIR", "LATOBS_NO_CACHE", "LATOBS_CACHE_MAX_MB"
 VERSION = 1                      # of the entries' layout
+MAX_MB = 2000.0                  # the folder's default size bound (one full native build: ~60 MB)
 
 
 def folder() -> Path:
@@ -61,13 +74,132 @@ def remember(kind: str, parts: dict, compute: Callable[[], Any]) -> Any:
         return compute()
     path = folder() / kind / f"{key(kind, parts)}.json"
     try:
-        return json.loads(path.read_text(encoding="utf-8"))["value"]
+        value = json.loads(path.read_text(encoding="utf-8"))["value"]
+        os.utime(path)                                 # recently used (pruning goes by age)
+        return value
     except (OSError, ValueError, KeyError, TypeError):
         pass                                           # a miss, or an entry that cannot be read
-    text = json.dumps({"kind": kind, "value": compute()}, sort_keys=True)
+    # (the value's key order kept: what is packaged from it is written in that order)
+    text = json.dumps({"kind": kind, "value": compute()})
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, text)
+        prune()
     except OSError:                                    # a read-only or full disk: computed, not kept
         pass
     return json.loads(text)["value"]
+
+
+def files(kind: str, parts: dict) -> dict[str, bytes] | None:
+    """The files stored under ``kind`` for ``parts`` ({file name: bytes}), None on a miss (or with
+    the cache off). A hit marks the entry as recently used."""
+    if not enabled():
+        return None
+    entry = folder() / kind / key(kind, parts)
+    try:
+        names = json.loads((entry / _INDEX).read_text(encoding="utf-8"))
+        found = {str(n): (entry / str(n)).read_bytes() for n in names}
+        os.utime(entry)
+    except (OSError, ValueError, TypeError):
+        return None
+    return found
+
+
+_INDEX = ".files.json"
+
+
+def store_files(kind: str, parts: dict, content: dict[str, bytes]) -> None:
+    """Store ``content`` ({plain file name: bytes}) under ``kind`` for ``parts``: written into a
+    temporary folder, then renamed into place (a reader sees all of it or nothing); an entry already
+    there is kept. Then the folder is pruned to its size bound. A full or read-only disk is not an
+    error: nothing is kept."""
+    if not enabled():
+        return
+    entry = folder() / kind / key(kind, parts)
+    if entry.exists():
+        return
+    for name in content:
+        if not name or "/" in name or "\\" in name or name.startswith(".") or name in (".", ".."):
+            raise ValueError(f"cache entry {kind}: {name!r} is not a plain file name")
+    try:
+        entry.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{entry.name}.", dir=entry.parent))
+        try:
+            for name, raw in content.items():
+                (tmp / name).write_bytes(raw)
+            (tmp / _INDEX).write_text(json.dumps(sorted(content)), encoding="utf-8")
+            os.chmod(tmp, 0o755)
+            os.rename(tmp, entry)                     # atomic; fails if another writer was first
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    except OSError:
+        return
+    prune()
+
+
+def _max_bytes() -> float:
+    try:
+        return float(os.environ.get(ENV_MAX, "") or MAX_MB) * 1e6
+    except ValueError:
+        return MAX_MB * 1e6
+
+
+def prune(max_bytes: float | None = None) -> int:
+    """Remove the least recently used entries until the folder holds at most ``max_bytes`` (default
+    ``$LATOBS_CACHE_MAX_MB``); returns how many were removed. Temporaries older than an hour
+    (an interrupted writer's) go too."""
+    limit = _max_bytes() if max_bytes is None else max_bytes
+    root = folder()
+    if not root.is_dir():
+        return 0
+    entries, total, now = [], 0, time.time()
+    for kind_dir in root.iterdir():
+        if not kind_dir.is_dir():
+            continue
+        for entry in kind_dir.iterdir():
+            try:
+                st = entry.stat()
+                size = (sum(f.stat().st_size for f in entry.iterdir()) if entry.is_dir() else st.st_size)
+            except OSError:
+                continue
+            if entry.name.startswith(".") and now - st.st_mtime > 3600:
+                _remove(entry)
+                continue
+            entries.append((st.st_mtime, size, entry))
+            total += size
+    removed = 0
+    for _, size, entry in sorted(entries, key=lambda e: e[0]):
+        if total <= limit:
+            break
+        _remove(entry)
+        total -= size
+        removed += 1
+    return removed
+
+
+def _remove(entry: Path) -> None:
+    if entry.is_dir():
+        shutil.rmtree(entry, ignore_errors=True)
+    else:
+        try:
+            entry.unlink()
+        except OSError:
+            pass
+
+
+@lru_cache(maxsize=None)
+def _versions() -> tuple:
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = []
+    for name in ("cvxpy", "clarabel", "numpy", "scipy", "sympy"):
+        try:
+            found.append((name, version(name)))
+        except PackageNotFoundError:
+            found.append((name, ""))
+    return tuple(found)
+
+
+def solver_versions() -> dict[str, str]:
+    """The versions of the packages a design's numbers come from (part of a design's cache key)."""
+    return dict(_versions())

@@ -532,8 +532,9 @@ def parser() -> argparse.ArgumentParser:
                         "model exchange) go to DIR/fmi3 under the same names, with their design files. Not 3 with "
                         "--backend python (pythonfmu makes FMI 2.0 FMUs only)")
     b.add_argument("--no-cache", action="store_true",
-                   help="decide everything again instead of reusing the cache's results for identical inputs "
-                        "(the cache folder: $LATOBS_CACHE_DIR, else ~/.cache/latobs)")
+                   help="solve, compile and decide everything again instead of reusing the cache's designs, "
+                        "FMUs and build-time facts of identical inputs (the cache folder: $LATOBS_CACHE_DIR, "
+                        "else ~/.cache/latobs; LATOBS_NO_CACHE=1 turns it off for every command)")
     b.set_defaults(func=_cmd_build)
     v = sub.add_parser("validate", help="co-simulate the plant FMU with observer FMU(s) on a scenario")
     v.add_argument("scenario", metavar="SCENARIO", help="a registered scenario (see `latobs list`)")

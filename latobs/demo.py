@@ -372,13 +372,13 @@ class _Tee:
 def _replays(out: Path, report: Path, platforms: list[str] | None = None) -> dict:
     """Paper 001 on the real MBDS record (vehicle mbds_250lm): the default design and a wider box."""
     from . import packaging
-    from .pipeline import package_design_data, replay
+    from .pipeline import package_design_data, replay, solve
     from .validation import replay as rp
 
     runs = {}
     m = replay("mbds", "LateralIntervalObserver", "mbds_250lm", out=report, fmu_dir=out, platforms=platforms)
     runs["LateralIntervalObserver_mbds_250lm, +-20 % box"] = (m, report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm")
-    wide = designs.run("LateralIntervalObserver", "mbds_250lm", box=WIDE_BOX)
+    wide = solve("LateralIntervalObserver", "mbds_250lm", quiet=True, box=WIDE_BOX)
     wide_dir = out / "wide-box"
     # packaged as `latobs build` packages, with its reference results, by the demo's backend
     backend, _ = packaging.resolve_backend("auto", packaging.OBSERVERS["LateralIntervalObserver"], platforms)

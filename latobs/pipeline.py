@@ -20,13 +20,27 @@ class PipelineError(RuntimeError):
     pass
 
 
-def solve(name: str, vehicle: str | None, quiet: bool = False) -> dict:
-    """Design and certify (``designs.run``); prints the headline figures."""
-    from .synthesis import certificate
+def solve(name: str, vehicle: str | None, quiet: bool = False, **overrides) -> dict:
+    """Design and certify (``designs.run``, with design-option ``overrides``) through the cache
+    (``latobs.cache``: solved once per inputs); prints the headline figures."""
+    import json
 
+    from . import cache, identity
     from .packaging import complete_runtime_data
+    from .synthesis import certificate, design_file
 
-    data = complete_runtime_data(designs.run(name, vehicle))
+    # solved once per design inputs, design-time code and solver versions (latobs.cache): a cached
+    # design is what designs.run returned, as its design file holds it (certified again when packaged)
+    ident = identity.of_design(name, vehicle, overrides)
+    solved = []
+
+    def compute() -> dict:
+        solved.append(True)
+        return json.loads(design_file.dumps(designs.run(name, vehicle, **overrides)))
+
+    data = complete_runtime_data(cache.remember("design", _design_cache_parts(ident), compute))
+    if not quiet and not solved:
+        print(f"{data['name']}: the cached design of identical inputs (latobs.cache), not solved again")
     if not quiet:
         s = certificate.summary(data)    # its keys depend on the paper: print those present
         extra = "".join(f", {label} = {s[key]:{fmt}}" for key, label, fmt in
@@ -261,9 +275,13 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
     built = {}
     with locked_folder(out, "build"), _ReferencePlants(out) as plants:
         plans = _plan(names, vehicle, out, backend, platforms, host_suffices, fmi)   # again: another build may have written
+        made = _make_in_parallel(plans, design_files)
         # plants first: an observer's reference experiment runs beside the plant built here
         for p in sorted(plans, key=lambda p: p.design_path is not None):
             ok, what = p.current(design_files)
+            if ok and p.name in made:
+                built[p.name] = p.fmu
+                continue
             if ok:
                 print(f"reusing {p.fmu.name} (identical inputs)")
                 built[p.name] = p.fmu
@@ -271,17 +289,132 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
             if p.why:
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
+            if _from_cache(p):
+                print(f"installed {p.fmu} from the cache (identical inputs)")
+                built[p.name] = p.fmu
+                continue
             if p.design_path is None:
                 path = package_plant(p.model, p.vehicle, out, p.backend, plants, platforms=p.platforms, fmi=fmi)
             else:
                 data = _current_design(p) or solve(p.model, p.vehicle)
                 path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
                                            origin=str(p.design_path), plants=plants, platforms=p.platforms, fmi=fmi)
+            _to_cache(p)
             folders = (p.platforms if fmi == 2 else fmi3_folders(p.platforms)) if p.platforms else []
             print(f"built {path} ({BACKEND_LABEL[p.backend]}{', FMI 3.0' if fmi == 3 else ''}"
                   f"{': ' + ', '.join(folders) if folders else ''})")
             built[p.name] = path
     return [built[p.name] for p in plans]
+
+
+def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
+    """Make the FMUs of ``plans`` (those not current, and not in the cache) at once in parallel
+    processes (``lmi.parallel_map``: bounded by the cores and ``$LATOBS_JOBS``) when there are two
+    or more: each worker builds one FMU, designed and packaged exactly as this process would, into
+    a scratch folder of its own; each result is installed here (under this folder's lock, as one
+    unit, the FMU last: :func:`_install`) and kept only if current. Returns the names installed;
+    one that failed is left to the build's own sequential step, which reports the failure."""
+    from . import cache
+    from .synthesis import lmi
+
+    todo = [p for p in plans if not p.current(design_files)[0] and cache.files("fmu", _cache_parts(p)) is None]
+    n = lmi.jobs(len(todo))
+    if len(todo) < 2 or n < 2:
+        return set()
+    for p in todo:
+        print(p.current(design_files)[1])                  # building / rebuilding, saying what changed
+    print(f"making {len(todo)} FMUs in {n} processes", flush=True)
+    made = set()
+    items = [(p.model, p.vehicle, p.backend, p.platforms, p.fmi) for p in todo]
+    for p, (printed, scratch, files) in zip(todo, lmi.parallel_map(_make_worker, items)):
+        if files is not None and _install(p, files):
+            # what the worker's build said, of this folder
+            lines = [line.replace(scratch, str(p.fmu.parent)) for line in printed.splitlines()
+                     if line != f"building {p.fmu.name}"]
+            print("\n".join(lines), flush=True)
+            made.add(p.name)
+    return made
+
+
+def _make_worker(item: tuple) -> tuple[str, str, dict[str, bytes] | None]:
+    """One FMU of :func:`_make_in_parallel` in a worker: (what its build printed, the folder it
+    built in, {file name: bytes} of the FMU and its design file, or None when the build failed)."""
+    import contextlib
+    import io
+    import shutil
+    import tempfile
+
+    model, vehicle, backend, platforms, fmi = item
+    scratch = Path(tempfile.mkdtemp(prefix="latobs-part-"))
+    out = fmi_folder(scratch, fmi)
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf):
+            path, = _build([model], vehicle, out, backend, True, platforms, False, fmi)
+        design = path.with_name(f"{path.stem}.design.json")
+        return buf.getvalue(), str(out), {f.name: f.read_bytes() for f in (design, path) if f.is_file()}
+    except Exception:                              # (reported by the build's own sequential step)
+        return "", str(out), None
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _install(p: _Artefact, found: dict[str, bytes]) -> bool:
+    """Install ``found`` ({file name: bytes}: ``p``'s FMU and design file) into ``p``'s folder (the
+    caller holds its lock) as one unit, the FMU last; True if ``p`` is then current."""
+    from .atomic import atomic_paths
+
+    paths = _cache_files(p)
+    if sorted(found) != sorted(q.name for q in paths):
+        return False
+    with atomic_paths(paths) as tmps:
+        for tmp, path in zip(tmps, paths):
+            tmp.write_bytes(found[path.name])
+    return p.current(True)[0]
+
+
+def _design_cache_parts(ident: Identity) -> dict:
+    """What a cached design is made from: its identity (inputs and design-time code) and the
+    versions of the solver stack."""
+    from . import cache
+
+    return {"identity": ident.sha256, "solvers": cache.solver_versions()}
+
+
+def _cache_parts(p: _Artefact) -> dict:
+    """What an FMU of the cache is made from: its identity (design or plant inputs, backend, code,
+    toolchain, platforms, FMI version) and that of its reference results."""
+    from . import identity
+
+    return {"fmu": identity.of_fmu(p.base, p.backend, p.platforms, p.fmi).sha256, "reference": p.reference,
+            "name": p.name}
+
+
+def _cache_files(p: _Artefact) -> list[Path]:
+    return [*([p.design_path] if p.design_path is not None else []), p.fmu]
+
+
+def _from_cache(p: _Artefact) -> bool:
+    """Install ``p``'s FMU (and its design file) from the cache (under the folder's lock, as one
+    unit, the FMU last); True if it is then current, else (a miss, or an entry that is not what its
+    key says) False and the caller builds it."""
+    from . import cache
+
+    found = cache.files("fmu", _cache_parts(p))
+    return found is not None and _install(p, found)
+
+
+def _to_cache(p: _Artefact) -> None:
+    """Store the FMU just built for ``p`` (and its design file) in the cache."""
+    from . import cache
+
+    if not cache.enabled() or not p.current(True)[0]:
+        return
+    try:
+        content = {path.name: path.read_bytes() for path in _cache_files(p)}
+    except OSError:
+        return
+    cache.store_files("fmu", _cache_parts(p), content)
 
 
 #: The reference experiment an FMU carries: the first ``seconds`` of its own validation

@@ -125,6 +125,55 @@ def solve(prob, info: dict | None = None) -> tuple[str, float]:
     return attempts[-1][1], seconds
 
 
+#: the environment variable bounding the processes of :func:`parallel_map` (default: the cores)
+JOBS_ENV = "LATOBS_JOBS"
+
+
+def jobs(n_items: int) -> int:
+    """How many processes :func:`parallel_map` uses for ``n_items`` items: ``$LATOBS_JOBS`` (a
+    positive integer; 1: in this process) else the cores this process may use, at most ``n_items``."""
+    import os
+
+    text = os.environ.get(JOBS_ENV, "").strip()
+    try:
+        limit = int(text) if text else len(os.sched_getaffinity(0))
+    except (ValueError, AttributeError):
+        limit = os.cpu_count() or 1
+    if limit < 1:
+        raise ValueError(f"{JOBS_ENV}={text!r}: a positive number of processes is needed")
+    return max(1, min(limit, n_items))
+
+
+def _in_worker(choice: tuple[str, dict], fn, item):
+    """One item of :func:`parallel_map` in a worker process, under the parent's solver choice:
+    (result, the solves it made)."""
+    with using(choice[0], **choice[1]) as usage:
+        return fn(item), usage.calls
+
+
+def parallel_map(fn, items: list) -> list:
+    """``[fn(x) for x in items]`` in up to :func:`jobs` fresh processes (spawned: no state of this
+    one is inherited but the solver choice of :func:`using`, whose block also records the workers'
+    solves). ``fn`` must be a module-level function and items and results picklable. Each item is
+    computed by the same code on the same input as in this process: the results are those of the
+    sequential loop (tested). An exception of ``fn`` is raised here, the first in item order."""
+    items = list(items)
+    n = jobs(len(items))
+    if n <= 1:
+        return [fn(x) for x in items]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    name, settings_, usage = _CHOICE.get()
+    with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")) as pool:
+        done = list(pool.map(partial(_in_worker, (name, settings_), fn), items))
+    if usage is not None:
+        for _, calls in done:
+            usage.calls.extend(calls)
+    return [result for result, _ in done]
+
+
 def solved(status: str) -> bool:
     import cvxpy as cp
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from functools import partial
 from typing import Callable
 from dataclasses import dataclass, field
 
@@ -914,15 +915,21 @@ def design_for_vehicle(vehicle: Vehicle, opts: DesignOptions) -> VehicleDesign:
     base = vehicle_box(vehicle, opts.box)
     bands = speed_bands(base.v, opts.band_ratio, opts.band_beta_step,
                         lambda v: steady_beta_per_r(base, v)) if opts.scheduled else [base.v]
-    modes = []
-    for i, band in enumerate(bands):
-        box = Box(f"{base.name}" + (f" band {i + 1}" if opts.scheduled else ""), base.m, base.Iz,
-                  base.lf, base.lr, base.cf, base.cr, band)
-        try:
-            modes.append(_design_mode(box, opts))
-        except DesignError as e:
-            raise DesignError(f"{opts.name}, mode {i + 1} (v in [{band[0]:g}, {band[1]:g}] m/s): {e}") from e
+    boxes_ = [Box(f"{base.name}" + (f" band {i + 1}" if opts.scheduled else ""), base.m, base.Iz,
+                  base.lf, base.lr, base.cf, base.cr, band) for i, band in enumerate(bands)]
+    # the bands are independent designs: solved in parallel processes (lmi.parallel_map), each as
+    # in this process
+    modes = lmi.parallel_map(partial(_design_band, opts), list(enumerate(boxes_)))
     return VehicleDesign(vehicle, opts, modes, time.perf_counter() - t0, lmi.current())
+
+
+def _design_band(opts: DesignOptions, item: tuple[int, Box]) -> ModeResult:
+    """The estimator of band ``item`` = (index from 0, its box); DesignError names the mode."""
+    i, box = item
+    try:
+        return _design_mode(box, opts)
+    except DesignError as e:
+        raise DesignError(f"{opts.name}, mode {i + 1} (v in [{box.v[0]:g}, {box.v[1]:g}] m/s): {e}") from e
 
 
 def _asc(p) -> list[float]:

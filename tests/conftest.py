@@ -75,7 +75,9 @@ class SessionBuild:
             with locked_folder(folder, "design"):
                 path = folder / f"{key}.json"
                 if not path.is_file():
-                    data = packaging.complete_runtime_data(designs.run(name, vehicle))
+                    from latobs import pipeline
+
+                    data = pipeline.solve(name, vehicle, quiet=True)     # (through the run's cache)
                     atomic_write_text(path, design_file.dumps(data))
                 self._designs[key] = json.loads(path.read_text(encoding="utf-8"))
         return self._designs[key]

@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 from latobs.packaging import complete_runtime_data
-from latobs import identity, packaging, pipeline
+from latobs import cache, identity, packaging, pipeline
 from latobs.atomic import LOCK_TIMEOUT_ENV, locked_folder, stale_temporaries
 from latobs.cli import main
 from latobs.native_guard import find_compiler
@@ -138,6 +138,7 @@ def test_a_design_file_of_the_same_inputs_is_packaged_without_solving_again(tmp_
     """A design is solved only when its inputs change: the FMU missing beside a current design
     file (e.g. a build killed after the design) is packaged from it."""
     out = tmp_path / "fmus"
+    monkeypatch.setattr(pipeline, "_from_cache", lambda p: False)    # packaged here, not from the cache
     data = complete_runtime_data(designs.run("LateralIntervalObserver"))   # as `latobs design` writes it
     design_file.write(data, out)
 
@@ -148,8 +149,8 @@ def test_a_design_file_of_the_same_inputs_is_packaged_without_solving_again(tmp_
     fmu, = build(["LateralIntervalObserver"], None, out, backend="python")
     assert "packaged without solving again" in capsys.readouterr().out
     assert _inner(fmu, "resources/LateralIntervalObserver.design.json") == _plain(design_file.reproducible(data))
-    # another vehicle is another design: solved
-    with pytest.raises(AssertionError, match="solved again"):
+    # another vehicle is another design: solved (without the cache, which may hold it)
+    with cache.turned_off(), pytest.raises(AssertionError, match="solved again"):
         build(["LateralIntervalObserver"], "compact", out, backend="python")
 
 
@@ -164,7 +165,10 @@ def test_latobs_build_twice_gives_byte_identical_fmus(backend, tmp_path):
     if backend == "c" and find_compiler() is None:
         pytest.skip("no C compiler")
     names = ["LateralIntervalObserver", "SideslipBankObserverTirePaper", "CarPlant"]
-    runs = [_latobs("build", *names, "--backend", backend, "--out", tmp_path / f"run{k}") for k in range(2)]
+    # without the cache (latobs.cache): each process solves and compiles everything itself
+    # (in one process each: the two builds run at once)
+    runs = [_latobs("build", *names, "--backend", backend, "--out", tmp_path / f"run{k}", "--no-cache",
+                    env={**os.environ, "LATOBS_JOBS": "1"}) for k in range(2)]
     for proc in runs:
         out, err = proc.communicate(timeout=600)
         assert proc.returncode == 0, err
@@ -298,7 +302,9 @@ def test_a_build_killed_mid_way_leaves_the_old_pair_and_the_next_build_cleans_up
     toml = _vehicle_file(tmp_path, "mycar")
     fmu, = build(["LateralIntervalObserver"], str(toml), out, backend="python")
     old = fmu.read_bytes()
-    _vehicle_file(tmp_path, "mycar", lr=1.742)                  # the next build has work to do
+    # the next build has work to do: a vehicle of its own, so that no FMU of the cache is it
+    lr = {signal.SIGKILL: 1.742, signal.SIGINT: 1.743}[sig]
+    _vehicle_file(tmp_path, "mycar", lr=lr)
     proc = subprocess.Popen([sys.executable, "-P", "-c", HANG_IN_SEAL, "build", "LateralIntervalObserver",
                              "--vehicle", str(toml), "--backend", "python", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -320,7 +326,7 @@ def test_a_build_killed_mid_way_leaves_the_old_pair_and_the_next_build_cleans_up
     rc = main(["build", "LateralIntervalObserver", "--vehicle", str(toml), "--backend", "python", "--out", str(out)])
     assert rc == 0 and stale_temporaries(out) == []
     assert _inner(fmu, "resources/LateralIntervalObserver_mycar.design.json")["vehicle"]["parameters"]["lr"]["value"] \
-        == 1.742
+        == lr
     _assert_pairs_match(out)
 
 
@@ -333,6 +339,7 @@ def _wait_line(proc, text: str) -> bool:
 
 def test_a_failed_packaging_writes_neither_file(tmp_path, monkeypatch):
     out = tmp_path / "fmus"
+    monkeypatch.setattr(pipeline, "_from_cache", lambda p: False)    # packaged here, not from the cache
     monkeypatch.setattr(packaging, "seal_fmu", lambda *a, **k: ["an invented problem"])
     with pytest.raises(packaging.PackagingError, match="an invented problem"):
         build(["LateralIntervalObserver"], None, out, backend="python")
@@ -382,7 +389,8 @@ def test_a_build_waiting_for_the_lock_builds_once_it_is_released(tmp_path):
         assert proc.poll() is None and not (out / "CarPlant.fmu").exists()
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 0, stderr
-    assert "built" in stdout and (out / "CarPlant.fmu").is_file()
+    # built, or (the run's cache holding it) installed from latobs.cache
+    assert ("built" in stdout or "from the cache" in stdout) and (out / "CarPlant.fmu").is_file(), stdout
 
 
 # ---------------------------------------------------------------------------------------------

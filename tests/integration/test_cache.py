@@ -1,7 +1,8 @@
 """latobs's content-addressed cache (``latobs.cache``): paper 001's build-time fact (the longest
-communication step, decided by probing the runtime) computed once per design content and reused,
-a changed design never served a stale value, an unreadable entry computed again, and
-``latobs build --no-cache`` / LATOBS_NO_CACHE deciding everything again."""
+communication step, decided by probing the runtime), a design and an FMU each made once per
+inputs and reused in any folder; a changed input never served a stale value, an unreadable or
+damaged entry made again, the folder kept to its size bound, and ``latobs build --no-cache`` /
+LATOBS_NO_CACHE deciding everything again."""
 from __future__ import annotations
 
 import copy
@@ -76,3 +77,86 @@ def test_build_no_cache_flag(flag, tmp_path, monkeypatch):
     monkeypatch.setattr("latobs.cli._build", lambda args: seen.append(cache.enabled()) or 0)
     assert main(["build", "CarPlant", "--out", str(tmp_path), *flag]) == 0
     assert seen == [not flag] and cache.enabled()
+
+
+# ---------------------------------------------------------------------------------------------
+# designs and FMUs (issue 24, item 1): shared by every command and output folder
+# ---------------------------------------------------------------------------------------------
+def test_a_design_is_solved_once_per_inputs_and_solver_versions(tmp_path, monkeypatch):
+    """``pipeline.solve`` (every command's design step) solves a design once per identity: the
+    second call is the first's design; another vehicle content, another design-time code or
+    another solver version is another key, solved again."""
+    from latobs import pipeline
+    from latobs.synthesis import designs, design_file
+
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))
+    real, calls = designs.run, []
+    monkeypatch.setattr(designs, "run", lambda *a, **k: calls.append(a) or real(*a, **k))
+    first = pipeline.solve("SideslipBankObserverPaper", None, quiet=True)
+    again = pipeline.solve("SideslipBankObserverPaper", None, quiet=True)
+    assert len(calls) == 1 and again == first and first["certified"]
+    # in the order designs.run gives (what an FMU packages is written in it: the same bytes)
+    fresh = real("SideslipBankObserverPaper")
+    assert design_file.dumps(design_file.reproducible(again)) == design_file.dumps(design_file.reproducible(fresh))
+    # another vehicle: solved
+    pipeline.solve("SideslipBankObserverPaper", "compact", quiet=True)
+    assert len(calls) == 2
+    # another solver version: another key
+    monkeypatch.setattr(cache, "solver_versions", lambda: {"clarabel": "0.0.0-another"})
+    pipeline.solve("SideslipBankObserverPaper", None, quiet=True)
+    assert len(calls) == 3
+
+
+def _fmu_entries(root):
+    return sorted(p for p in (root / "fmu").iterdir() if not p.name.startswith(".")) if (root / "fmu").is_dir() else []
+
+
+@pytest.mark.slow
+def test_an_fmu_is_built_once_and_installed_into_any_folder(tmp_path, monkeypatch, capsys):
+    """A build into a second folder installs the first build's FMU from the cache (the same
+    bytes, a current identity, said so); an entry that is not what its key says (a damaged FMU)
+    is built again; ``--no-cache`` builds without reading or writing the cache."""
+    from latobs import identity
+    from latobs.cli import main
+    from latobs.pipeline import build
+
+    root = tmp_path / "cache"
+    monkeypatch.setenv(cache.ENV_DIR, str(root))
+    first, = build(["CarPlant"], None, tmp_path / "a", backend="python")
+    assert len(_fmu_entries(root)) == 1
+    capsys.readouterr()
+    second, = build(["CarPlant"], None, tmp_path / "b", backend="python")
+    assert f"installed {tmp_path / 'b' / 'CarPlant.fmu'} from the cache (identical inputs)" in capsys.readouterr().out
+    assert second.read_bytes() == first.read_bytes() and identity.read_fmu(second) == identity.read_fmu(first)
+    # a damaged entry: not current once installed, so built again (and the folder holds a good FMU)
+    entry, = _fmu_entries(root)
+    (entry / "CarPlant.fmu").write_bytes(first.read_bytes()[:3000])
+    third, = build(["CarPlant"], None, tmp_path / "c", backend="python")
+    out = capsys.readouterr().out
+    assert "from the cache" not in out and "built" in out and third.read_bytes() == first.read_bytes()
+    # --no-cache: built, the cache untouched
+    before = {p: p.stat().st_mtime_ns for p in root.rglob("*")}
+    assert main(["build", "CarPlant", "--backend", "python", "--out", str(tmp_path / "d"), "--no-cache"]) == 0
+    assert "from the cache" not in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in root.rglob("*")} == before
+
+
+def test_stored_files_are_whole_and_the_folder_keeps_its_size_bound(tmp_path, monkeypatch):
+    """store_files: a reader sees a whole entry or none; the least recently used entries go when
+    the folder grows past LATOBS_CACHE_MAX_MB; a name that is not a plain file name is refused."""
+    import time
+
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path))
+    monkeypatch.setenv(cache.ENV_MAX, "0.25")                  # 250 kB
+    for k in range(3):
+        cache.store_files("fmu", {"k": k}, {"A.fmu": bytes([k]) * 100_000, "A.design.json": b"{}"})
+        time.sleep(0.02)
+    assert cache.files("fmu", {"k": 0}) is None                 # the oldest went
+    assert cache.files("fmu", {"k": 2})["A.fmu"] == bytes([2]) * 100_000
+    cache.files("fmu", {"k": 1})                                # used: now the newest
+    time.sleep(0.02)
+    cache.store_files("fmu", {"k": 3}, {"A.fmu": b"x" * 100_000})
+    assert cache.files("fmu", {"k": 2}) is None and cache.files("fmu", {"k": 1}) is not None
+    with pytest.raises(ValueError, match="not a plain file name"):
+        cache.store_files("fmu", {"k": 4}, {"../escape": b""})
+    assert not list(tmp_path.glob("fmu/.*"))                    # no temporaries left

@@ -165,7 +165,8 @@ def _synthetic_result() -> dict:
     nobs = [row(10.0, k) for k in range(5)]
     fit = {c: {"intercept": 0.05, "slope": 0.01} for c in ("seconds_extract_per_run", "seconds_extracted_once")}
     return {"n_steps": 100, "repeats": 1, "dt": 0.005, "backends": ["python", "c"],
-            "build": [{"backend": "python", "seconds": 80.0, "returncode": 0, "fmus": 11, "lmi_solver_seconds": 12.0,
+            "build": [{"backend": "python", "seconds": 80.0, "warm_new_folder_seconds": 1.25,
+                       "warm_same_folder_seconds": 0.5, "returncode": 0, "fmus": 11, "lmi_solver_seconds": 12.0,
                        "error": None},
                       {"backend": "c", "seconds": 90.0, "returncode": 1, "fmus": 0, "lmi_solver_seconds": 0.0,
                        "error": "no C compiler"}],
@@ -190,7 +191,7 @@ def test_tables_have_every_row_and_the_json_every_figure():
     assert any(line.startswith("| MotorcyclePlant |") and "fmpy: boom" in line for line in lines)
     assert any(line.startswith("| 000 | bank-braking (30)") and "fresh process: 20×" in line for line in lines)
     assert any(line.startswith("| 003 |") and "missing FMU(s) X" in line for line in lines)
-    assert any(line.startswith("| pythonfmu | 80.0 | 11 |") for line in lines)
+    assert any(line.startswith("| pythonfmu | 80.0 | 1.25 | 0.50 | 11 |") for line in lines)
     assert any(line.startswith("| native C |") and "no C compiler" in line for line in lines)
     for T in bench.LENGTHS:
         assert any(line.startswith(f"| {T:g} | {int(T / 0.005)} | 4 |") for line in lines)
