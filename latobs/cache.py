@@ -37,9 +37,16 @@ MAX_MB = 2000.0                  # the folder's default size bound (one full nat
 
 
 def folder() -> Path:
-    """The cache folder (not created)."""
+    """The cache folder (not created): ``$LATOBS_CACHE_DIR``, else ``%LOCALAPPDATA%\\latobs`` on
+    Windows, ``~/Library/Caches/latobs`` on macOS, ``$XDG_CACHE_HOME/latobs`` (``~/.cache/latobs``)."""
+    import sys
+
     if os.environ.get(ENV_DIR):
         return Path(os.environ[ENV_DIR])
+    if sys.platform == "win32" and os.environ.get("LOCALAPPDATA"):
+        return Path(os.environ["LOCALAPPDATA"]) / "latobs"
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches" / "latobs"
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "latobs"
 

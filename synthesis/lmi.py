@@ -151,10 +151,34 @@ def _in_worker(choice: tuple[str, dict], fn, item):
         return fn(item), usage.calls
 
 
+@contextlib.contextmanager
+def _main_not_run_again() -> Iterator[None]:
+    """Spawned workers that do not import the caller's main script (multiprocessing runs it again
+    in each child, as ``__mp_main__``: a user's script calling ``latobs`` at its top level, without
+    ``if __name__ == "__main__"``, would start building again in every worker). The functions sent
+    to the workers are importable by their module's name, so the children need nothing of it."""
+    from multiprocessing import spawn
+
+    real = spawn.get_preparation_data
+
+    def without_main(name):
+        d = real(name)
+        d.pop("init_main_from_path", None)
+        d.pop("init_main_from_name", None)
+        return d
+
+    spawn.get_preparation_data = without_main
+    try:
+        yield
+    finally:
+        spawn.get_preparation_data = real
+
+
 def parallel_map(fn, items: list) -> list:
     """``[fn(x) for x in items]`` in up to :func:`jobs` fresh processes (spawned: no state of this
     one is inherited but the solver choice of :func:`using`, whose block also records the workers'
-    solves). ``fn`` must be a module-level function and items and results picklable. Each item is
+    solves; the caller's main script is not run in them). ``fn`` must be a module-level function of
+    an importable module, and items and results picklable. Each item is
     computed by the same code on the same input as in this process: the results are those of the
     sequential loop (tested). An exception of ``fn`` is raised here, the first in item order."""
     items = list(items)
@@ -163,11 +187,16 @@ def parallel_map(fn, items: list) -> list:
         return [fn(x) for x in items]
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
     from functools import partial
 
     name, settings_, usage = _CHOICE.get()
-    with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")) as pool:
-        done = list(pool.map(partial(_in_worker, (name, settings_), fn), items))
+    try:
+        with _main_not_run_again(), ProcessPoolExecutor(max_workers=n,
+                                                        mp_context=multiprocessing.get_context("spawn")) as pool:
+            done = list(pool.map(partial(_in_worker, (name, settings_), fn), items))
+    except BrokenProcessPool:                 # a worker could not start or died: this process does it
+        return [fn(x) for x in items]
     if usage is not None:
         for _, calls in done:
             usage.calls.extend(calls)

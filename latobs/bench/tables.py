@@ -173,23 +173,42 @@ def fmu_table(r: dict) -> str:
     return "\n".join(lines)
 
 
-def coupled_table(rows: list[dict]) -> str:
+def coupled_table(rows: list[dict], fmus: dict | None = None) -> str:
     lines = ["Coupled runs through the validation harness (`harness.run`, direct FMI calls), best of the repeats "
-             "(first run in parentheses):", "",
+             "(first run in parentheses). µs per step: the whole run (extraction, instantiation, initialisation, "
+             "results) per communication step; stepping loop: the steps alone (every FMU's set + doStep + get and "
+             "the routes; `compiled`: the master's C loop, `python`: its Python loop), and, for native FMUs, its "
+             "ratio to the sum of the same FMUs' fmi2DoStep in the plain C host (\"One FMU step\", this run):", "",
              "| pairing | scenario (s simulated) | plant + observers | backend | wall time (s) | µs per step | "
-             "real time |", "|---|---|---|---|---|---|---|"]
+             "stepping loop µs per step | loop ÷ Σ doStep in a C host | real time |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        fmus = f"{r['plant']} + {', '.join(r['observers'])}"
+        fmus_cell = f"{r['plant']} + {', '.join(r['observers'])}"
         if "error" in r:
-            lines.append(f"| {r['pairing']} | {r['scenario']} | {fmus} | {BACKEND_LABEL.get(r['backend'], r['backend'])} "
-                         f"| {_cell(r['error'])} | — | — |")
+            lines.append(f"| {r['pairing']} | {r['scenario']} | {fmus_cell} | "
+                         f"{BACKEND_LABEL.get(r['backend'], r['backend'])} | {_cell(r['error'])} | — | — | — | — |")
             continue
         fresh = (f" (fresh process: {r['fresh_process_real_time_factor']:.0f}×)"
                  if "fresh_process_real_time_factor" in r else "")
-        lines.append(f"| {r['pairing']} | {r['scenario']} ({r['scenario_seconds']:g}) | {fmus} | "
+        loop = (f"{r['loop_us_per_step']:.2f} ({r.get('master_loop', '?')})"
+                if isinstance(r.get("loop_us_per_step"), (int, float)) else "—")
+        ratio = _loop_ratio(r, fmus or {})
+        lines.append(f"| {r['pairing']} | {r['scenario']} ({r['scenario_seconds']:g}) | {fmus_cell} | "
                      f"{BACKEND_LABEL.get(r['backend'], r['backend'])} | {r['seconds']:.2f} ({r['first_seconds']:.2f}) | "
-                     f"{r['us_per_step']:.0f} | {r['real_time_factor']:.0f}×{fresh} |")
+                     f"{r['us_per_step']:.0f} | {loop} | {ratio} | {r['real_time_factor']:.0f}×{fresh} |")
     return "\n".join(lines)
+
+
+def _loop_ratio(r: dict, fmus: dict) -> str:
+    """The stepping loop's µs per step over the sum of its FMUs' C-host fmi2DoStep µs (native only)."""
+    if r.get("backend") != "c" or not isinstance(r.get("loop_us_per_step"), (int, float)):
+        return "—"
+    total = 0.0
+    for name in (r["plant"], *r["observers"]):
+        e = ((fmus.get(name) or {}).get("backends") or {}).get("c") or {}
+        if not isinstance(e.get("c_host_us_per_doStep"), (int, float)):
+            return "—"
+        total += e["c_host_us_per_doStep"]
+    return f"{r['loop_us_per_step'] / total:.1f}" if total > 0 else "—"
 
 
 def scaling_table(s: dict) -> str:
@@ -230,7 +249,7 @@ def table(r: dict) -> str:
     if r.get("fmus"):
         parts.append(fmu_table(r))
     if r.get("coupled"):
-        parts.append(coupled_table(r["coupled"]))
+        parts.append(coupled_table(r["coupled"], r.get("fmus")))
     if r.get("scaling"):
         parts.append(scaling_table(r["scaling"]))
     return "\n\n".join(parts)
@@ -254,7 +273,7 @@ def markdown(r: dict) -> str:
     sections = (("build", "Whole build", lambda: build_table(r["build"])),
                 ("lmi", "LMI designs: Clarabel and SCS", lambda: lmi_table(r["lmi"])),
                 ("fmus", "One FMU step", lambda: fmu_table(r)),
-                ("coupled", "Coupled runs", lambda: coupled_table(r["coupled"])),
+                ("coupled", "Coupled runs", lambda: coupled_table(r["coupled"], r.get("fmus"))),
                 ("scaling", "Scaling with length and observers", lambda: scaling_table(r["scaling"])))
     parts = ["# Speed",
              "This page is the output of `latobs bench --markdown` (to regenerate it: `latobs bench --markdown "

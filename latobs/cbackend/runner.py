@@ -96,15 +96,11 @@ class RunResult:
 
 
 def cache_dir() -> Path:
-    """latobs's folder in the user cache folder: ``$LATOBS_CACHE_DIR``, else ``$XDG_CACHE_HOME/latobs``
-    (``~/.cache/latobs``), ``%LOCALAPPDATA%\\latobs`` on Windows, ``~/Library/Caches/latobs`` on macOS."""
-    if os.environ.get("LATOBS_CACHE_DIR"):
-        return Path(os.environ["LATOBS_CACHE_DIR"])
-    if sys.platform == "win32" and os.environ.get("LOCALAPPDATA"):
-        return Path(os.environ["LOCALAPPDATA"]) / "latobs"
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "latobs"
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "latobs"
+    """latobs's folder in the user cache folder (``latobs.cache.folder``: ``$LATOBS_CACHE_DIR``,
+    else the platform's user cache folder)."""
+    from .. import cache
+
+    return cache.folder()
 
 
 def _wine() -> str | None:

@@ -151,9 +151,10 @@ _RUN_LOCK = threading.Lock()                        # one run at a time per proc
 
 
 def _local(ref: FmuRef, blob: bytes | None = None) -> tuple[str, str]:
-    """(FMU path, extracted folder) of ``ref`` in this process, written and extracted once per
-    process (in a temporary folder removed at exit). ``blob``: the FMU's bytes when the caller
-    received them separately (a scattered Dask object); checked against the sha256."""
+    """(FMU path, extracted folder) of ``ref`` in this process, copied (or written) and extracted
+    once per process into a temporary folder removed at exit, so that it stays valid whatever
+    happens to the file it came from. ``blob``: the FMU's bytes when the caller received them
+    separately (a scattered Dask object); checked against the sha256, as the copy is."""
     import atexit
     import shutil
     import tempfile
@@ -175,12 +176,25 @@ def _local(ref: FmuRef, blob: bytes | None = None) -> tuple[str, str]:
             path = folder / ref.filename
             path.write_bytes(blob)
         elif ref.path is not None:
-            path = Path(ref.path)
+            # a copy of its own: the cache entry outlives the folder it came from (a campaign run
+            # before, in this process, on the same FMU bytes in a folder since deleted)
+            path = folder / ref.filename
+            shutil.copyfile(ref.path, path)
+            if _sha256_file(path) != ref.sha256:
+                raise CampaignError(f"FMU {ref.filename}: {ref.path} changed since the campaign started")
         else:
             raise CampaignError(f"FMU {ref.filename}: neither its bytes nor its path were given")
         hit = (str(path), extract(str(path), unzipdir=str(folder / "unzipped")))
         _WORKER_CACHE[ref.sha256] = hit
         return hit
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 #: metrics of a replay run start this long (s) after the segment's start unless the definition

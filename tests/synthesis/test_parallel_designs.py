@@ -58,3 +58,20 @@ def test_scheduled_bands_in_parallel_equal_the_sequential_design(monkeypatch):
         assert a.certificate.keys() == b.certificate.keys()
         for k, v in a.certificate.items():
             assert np.array_equal(np.asarray(v), np.asarray(b.certificate[k])), k
+
+
+def test_a_script_without_a_main_guard_is_not_run_again_in_the_workers(tmp_path):
+    """A user's script calling latobs at its top level (no ``if __name__ == "__main__"``): the
+    workers do not run it again (before, each spawned worker re-ran it and the build hung)."""
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "user_script.py"
+    script.write_text("from latobs.synthesis import lmi\n"
+                      "print('script ran', flush=True)\n"
+                      "print(lmi.parallel_map(abs, [-1, -2, -3]), flush=True)\n")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, lmi.JOBS_ENV: "2"})
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.splitlines() == ["script ran", "[1, 2, 3]"], proc.stdout

@@ -154,8 +154,10 @@ def _synthetic_result() -> dict:
                                 "n_steps": 100, "backends": {"python": {"error": "fmpy: boom"}, "c": fmu}}}
     run = {"seconds": 0.5, "first_seconds": 0.6, "scenario_seconds": 30.0, "steps": 6000,
            "real_time_factor": 60.0, "first_real_time_factor": 50.0, "us_per_step": 83.0}
+    fmus["A"] = fmus["B"] = fmus["CarPlant"]          # (each 0.1 µs per doStep in the C host)
     coupled = [{"pairing": "000", "scenario": "bank-braking", "plant": "CarPlant", "observers": ["A", "B"],
-                "backend": "c", **run, "fresh_process_real_time_factor": 20.0},
+                "backend": "c", **run, "fresh_process_real_time_factor": 20.0, "master_loop": "compiled",
+                "loop_us_per_step": 0.6},
                {"pairing": "003", "scenario": "motorcycle-lane-change", "plant": "MotorcyclePlant",
                 "observers": ["MotorcycleFaultObserver"], "backend": "python", "error": "missing FMU(s) X"}]
     row = lambda T, k: {"duration": T, "steps": int(T / 0.005), "n_observers": k,
@@ -189,7 +191,8 @@ def test_tables_have_every_row_and_the_json_every_figure():
     assert "> 180 (stopped)" in text and "1 stopped at the cap" in text
     assert sum(line.startswith("| CarPlant |") for line in lines) == 3            # 2 backends + the ratio table
     assert any(line.startswith("| MotorcyclePlant |") and "fmpy: boom" in line for line in lines)
-    assert any(line.startswith("| 000 | bank-braking (30)") and "fresh process: 20×" in line for line in lines)
+    assert any(line.startswith("| 000 | bank-braking (30)") and "fresh process: 20×" in line
+               and "| 0.60 (compiled) | 2.0 |" in line for line in lines)
     assert any(line.startswith("| 003 |") and "missing FMU(s) X" in line for line in lines)
     assert any(line.startswith("| pythonfmu | 80.0 | 1.25 | 0.50 | 11 |") for line in lines)
     assert any(line.startswith("| native C |") and "no C compiler" in line for line in lines)

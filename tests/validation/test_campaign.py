@@ -509,3 +509,29 @@ def test_latobs_campaign_refuses_a_draw_outside_the_plants_range_before_anything
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "[plant] mu" in err[0] and "c.toml" in err[0]
     assert not (tmp_path / "out").exists()                 # nothing ran, nothing was written
+
+
+def test_a_worker_keeps_its_own_copy_of_an_fmu_whose_folder_is_deleted(tmp_path, built_fmus):
+    """A long-lived process runs a campaign, its FMU folder is deleted, and another campaign on an
+    FMU of the same bytes (a cached build) runs in it: the worker's copy is used, not the deleted
+    file; an FMU whose bytes changed after its sha256 was taken is refused."""
+    import hashlib
+    import shutil
+
+    from latobs.validation import campaign_run as cr
+    from latobs.validation.campaign import CampaignError
+
+    src = built_fmus.c_path("CarPlant")
+    first, second = tmp_path / "a", tmp_path / "b"
+    first.mkdir(), second.mkdir()
+    shutil.copy2(src, first / "CarPlant.fmu"), shutil.copy2(src, second / "CarPlant.fmu")
+    sha = hashlib.sha256(src.read_bytes()).hexdigest()
+    path, folder = cr._local(cr.FmuRef("plant", "CarPlant.fmu", sha, path=str(first / "CarPlant.fmu")))
+    shutil.rmtree(first)
+    again, folder2 = cr._local(cr.FmuRef("plant", "CarPlant.fmu", sha, path=str(second / "CarPlant.fmu")))
+    assert (again, folder2) == (path, folder) and Path(again).is_file() and Path(folder).is_dir()
+    (tmp_path / "c").mkdir()
+    changed = tmp_path / "c" / "CarPlant.fmu"
+    changed.write_bytes(b"not the FMU it was")
+    with pytest.raises(CampaignError, match="changed since the campaign started"):
+        cr._local(cr.FmuRef("plant", "CarPlant.fmu", "0" * 64, path=str(changed)))
