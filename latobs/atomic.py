@@ -38,10 +38,12 @@ class FolderBusy(RuntimeError):
 
 
 @contextmanager
-def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | None = None) -> Iterator[list[Path]]:
+def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | None = None,
+                 mode: int = 0o644) -> Iterator[list[Path]]:
     """Yield one temporary path per target, each in its target's folder; when the block succeeds
-    they replace the targets in the order given (0644). On failure no target is touched and the
-    temporaries are removed. ``suffixes``: of the temporaries (default: each target's suffix)."""
+    they replace the targets in the order given (with permissions ``mode``). On failure no target
+    is touched and the temporaries are removed. ``suffixes``: of the temporaries (default: each
+    target's suffix)."""
     targets = [Path(p) for p in paths]
     suffixes = list(suffixes) if suffixes is not None else [p.suffix for p in targets]
     tmps: list[Path] = []
@@ -53,7 +55,7 @@ def atomic_paths(paths: Sequence[str | os.PathLike], suffixes: Sequence[str] | N
             tmps.append(Path(tmp))
         yield list(tmps)
         for tmp, path in zip(tmps, targets):
-            os.chmod(tmp, 0o644)  # mkstemp makes 0600; outputs are meant to be shared
+            os.chmod(tmp, mode)   # mkstemp makes 0600; outputs are meant to be shared
             os.replace(tmp, path)
     finally:
         for tmp in tmps:
@@ -66,6 +68,25 @@ def atomic_path(path: str | os.PathLike, suffix: str = ".tmp") -> Iterator[Path]
     """Yield a temporary path in the target's folder; on success it replaces ``path`` (0644)."""
     with atomic_paths([path], [suffix]) as (tmp,):
         yield tmp
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """The sha256 (hex) of a file's bytes, read in blocks."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def atomic_write_bytes(path: str | os.PathLike, raw: bytes, mode: int = 0o644) -> Path:
+    """``raw`` into ``path`` atomically (the folder made if missing), with permissions ``mode``
+    (0o755: a program or library latobs compiled for this machine)."""
+    with atomic_paths([path], mode=mode) as (tmp,):
+        tmp.write_bytes(raw)
+    return Path(path)
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:

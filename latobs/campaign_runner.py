@@ -9,7 +9,6 @@ describes the output folder.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import os
@@ -91,12 +90,7 @@ def _design_of(name: str):
 # --------------------------------------------------------------------------------------------
 # FMUs and the record
 # --------------------------------------------------------------------------------------------
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+_sha256 = cp.sha256_file
 
 
 def fmu_refs(c: Campaign, fmu_dir: Path) -> list[cp.FmuRef]:

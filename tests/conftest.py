@@ -134,14 +134,20 @@ class SessionBuild:
 def _session_cache(tmp_path_factory):
     """latobs's cache (``latobs.cache``) in the run's temporary folder, shared by the workers (and
     the subprocesses they start): a test run starts from an empty cache, as on a fresh machine,
-    and never reads or fills the user's."""
+    and never reads or fills the user's. Designs and builds run in one process each
+    (``LATOBS_JOBS=1``): the run already has a worker per core."""
     from latobs import cache
+
+    from latobs.synthesis import lmi
 
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    saved = {k: os.environ.get(k) for k in (cache.ENV_DIR, cache.ENV_OFF)}
+    saved = {k: os.environ.get(k) for k in (cache.ENV_DIR, cache.ENV_OFF, lmi.JOBS_ENV)}
     os.environ[cache.ENV_DIR] = str(shared / "latobs-cache")
     os.environ.pop(cache.ENV_OFF, None)
+    # one process per design and build: the run is already one worker per core (the tests of the
+    # parallel paths set LATOBS_JOBS themselves)
+    os.environ[lmi.JOBS_ENV] = "1"
     yield
     for k, v in saved.items():
         if v is None:

@@ -166,17 +166,9 @@ def compile_runner(platform: str) -> Path:
         raw = toolchain.compile_for(platform, sources, ["fmu_runner.c"], exe.name, shared=False, libs=("-lm", "-ldl"))
     except toolchain.ToolchainError as exc:
         raise RunnerError(f"cannot compile the FMU host for {platform}: {exc}") from exc
-    exe.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{exe.name}.", dir=exe.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(raw)
-        os.chmod(tmp, 0o755)
-        os.replace(tmp, exe)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return exe
+    from ..atomic import atomic_write_bytes
+
+    return atomic_write_bytes(exe, raw, mode=0o755)
 
 
 def libpython() -> Path | None:

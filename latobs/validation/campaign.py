@@ -19,6 +19,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .. import catalogue
+from ..atomic import sha256_file  # noqa: F401  (an FMU's identity in a campaign)
 from .scenarios import Scenario, get_scenario
 
 KINDS = ("cosim", "replay")

@@ -17,7 +17,7 @@ import numpy as np
 from .scenarios import Scenario
 
 from .campaign import (DEFAULT_DT, Campaign, CampaignError, FmuRef, PerturbedScenario, draw, noise_of, scenario_cases,
-                       scenario_of)
+                       scenario_of, sha256_file)
 from .campaign_stats import headline_columns
 
 
@@ -180,21 +180,13 @@ def _local(ref: FmuRef, blob: bytes | None = None) -> tuple[str, str]:
             # before, in this process, on the same FMU bytes in a folder since deleted)
             path = folder / ref.filename
             shutil.copyfile(ref.path, path)
-            if _sha256_file(path) != ref.sha256:
+            if sha256_file(path) != ref.sha256:
                 raise CampaignError(f"FMU {ref.filename}: {ref.path} changed since the campaign started")
         else:
             raise CampaignError(f"FMU {ref.filename}: neither its bytes nor its path were given")
         hit = (str(path), extract(str(path), unzipdir=str(folder / "unzipped")))
         _WORKER_CACHE[ref.sha256] = hit
         return hit
-
-
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 #: metrics of a replay run start this long (s) after the segment's start unless the definition

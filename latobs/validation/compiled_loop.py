@@ -12,7 +12,6 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
-import tempfile
 from functools import lru_cache
 from pathlib import Path
 
@@ -46,6 +45,7 @@ def library() -> ctypes.CDLL | None:
     if os.environ.get(ENV, "").strip().lower() == "python":
         _state["why"] = f"{ENV}=python"
         return None
+    from ..atomic import atomic_write_bytes
     from ..cbackend import toolchain
     from ..cbackend.runner import cache_dir
 
@@ -60,16 +60,7 @@ def library() -> ctypes.CDLL | None:
         if not path.is_file():
             raw = toolchain.compile_for(platform, {"master_loop.c": source}, ["master_loop.c"], path.name,
                                         shared=True, libs=())
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-            try:
-                with os.fdopen(fd, "wb") as f:
-                    f.write(raw)
-                os.chmod(tmp, 0o755)
-                os.replace(tmp, path)
-            finally:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
+            atomic_write_bytes(path, raw, mode=0o755)
         lib = ctypes.CDLL(str(path))
     except (OSError, toolchain.ToolchainError) as exc:
         _state["why"] = f"the compiled loop cannot be made here: {exc}"

@@ -4,7 +4,6 @@ whole record and before and after a split time. Format, timing and scoring are o
 documentation's "Results files" page."""
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 from dataclasses import dataclass, field
@@ -13,6 +12,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..atomic import sha256_file  # noqa: F401  (also this module's: the record's identity)
 from ..data import records as _records
 from . import baselines as _baselines
 from . import metrics as _metrics
@@ -540,14 +540,6 @@ def write_plots(run: ReplayRun, metrics: Mapping[str, Any], out_dir: str | os.Pa
 # --------------------------------------------------------------------------------------------
 # all of it
 # --------------------------------------------------------------------------------------------
-def sha256_file(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.PathLike,
         split: float | None | str = "auto", observer: str | None = None, vehicle: str | None = None,
         mass: float | None = None, plots: bool = True,

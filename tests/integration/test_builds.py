@@ -166,9 +166,8 @@ def test_latobs_build_twice_gives_byte_identical_fmus(backend, tmp_path):
         pytest.skip("no C compiler")
     names = ["LateralIntervalObserver", "SideslipBankObserverTirePaper", "CarPlant"]
     # without the cache (latobs.cache): each process solves and compiles everything itself
-    # (in one process each: the two builds run at once)
-    runs = [_latobs("build", *names, "--backend", backend, "--out", tmp_path / f"run{k}", "--no-cache",
-                    env={**os.environ, "LATOBS_JOBS": "1"}) for k in range(2)]
+    runs = [_latobs("build", *names, "--backend", backend, "--out", tmp_path / f"run{k}", "--no-cache")
+            for k in range(2)]
     for proc in runs:
         out, err = proc.communicate(timeout=600)
         assert proc.returncode == 0, err
@@ -410,3 +409,22 @@ def test_an_explicit_backend_never_replaces_the_other_backends_fmu(tmp_path, cap
     # "auto" (the default, and every command that builds a missing FMU) keeps the folder's backend
     assert main(["build", "CarPlant", "--out", str(out)]) == 0
     assert "reusing CarPlant.fmu" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_fmus_made_in_parallel_processes_are_those_of_one_process(built_fmus, tmp_path, monkeypatch, capsys):
+    """`latobs build` of several FMUs makes them in parallel processes (LATOBS_JOBS=2, the cache
+    off so that the workers make everything): each FMU byte-identical to the one-process build of
+    the session, its design file beside it, and what each worker's build said printed with this
+    folder's paths."""
+    monkeypatch.setenv("LATOBS_JOBS", "2")
+    monkeypatch.setenv(cache.ENV_OFF, "1")
+    names = ["SideslipBankObserverPaper", "CarPlant"]
+    paths = build(names, None, tmp_path / "out", backend="python")
+    printed = capsys.readouterr().out
+    assert "making 2 FMUs in 2 processes" in printed
+    for name, path in zip(names, paths):
+        assert path.read_bytes() == built_fmus.path(name).read_bytes(), name
+        assert f"built {path} (pythonfmu)" in printed, printed
+    _assert_pairs_match(tmp_path / "out")
+    assert "latobs-part-" not in printed
