@@ -11,9 +11,8 @@ An entry's key is the SHA-256 of everything its value is made from (the identiti
 ``latobs.identity``: design inputs, design-time code, solver versions, runtime and packaging code,
 toolchain, platforms); a changed input is another key, so a stale value is never reused. An entry
 is checked again where it is used (an FMU's identity is read back; a design is certified again
-when packaged). The folder is ``$LATOBS_CACHE_DIR``, else the user's cache folder
-(``$XDG_CACHE_HOME`` or ``~/.cache``, then ``latobs``); ``LATOBS_NO_CACHE=1`` (``latobs build
---no-cache``) turns it off. Entries are written atomically (a file, or a folder renamed into
+when packaged). The folder is :func:`folder` (``$LATOBS_CACHE_DIR``, else the platform's user
+cache folder); ``LATOBS_NO_CACHE=1`` (``latobs build --no-cache``) turns it off. Entries are written atomically (a file, or a folder renamed into
 place); an unreadable one is made again; the least recently used entries are removed when the
 folder grows past ``$LATOBS_CACHE_MAX_MB`` (default :data:`MAX_MB`)."""
 from __future__ import annotations
@@ -52,7 +51,12 @@ def folder() -> Path:
 
 
 def enabled() -> bool:
-    return os.environ.get(ENV_OFF, "") in ("", "0")
+    """Whether the cache is on; CacheSettingError (before anything is made) if its size bound is
+    not usable."""
+    if os.environ.get(ENV_OFF, "") not in ("", "0"):
+        return False
+    _max_bytes()
+    return True
 
 
 @contextmanager
@@ -144,11 +148,20 @@ def store_files(kind: str, parts: dict, content: dict[str, bytes]) -> None:
     prune()
 
 
+class CacheSettingError(ValueError):
+    """A cache setting of the environment that is not a value latobs can use."""
+
+
 def _max_bytes() -> float:
+    text = os.environ.get(ENV_MAX, "").strip()
     try:
-        return float(os.environ.get(ENV_MAX, "") or MAX_MB) * 1e6
+        mb = float(text) if text else MAX_MB
     except ValueError:
-        return MAX_MB * 1e6
+        mb = float("nan")
+    if not mb >= 0 or mb == float("inf"):
+        raise CacheSettingError(f"{ENV_MAX}={text!r}: the cache folder's size bound must be a number of "
+                                "megabytes >= 0")
+    return mb * 1e6
 
 
 def prune(max_bytes: float | None = None) -> int:

@@ -730,7 +730,7 @@ USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.validation.scenarios", "UnknownScenarioError"),
                ("latobs.validation.harness", "WiringError"), ("latobs.validation.harness", "CoSimulationError"),
                ("latobs.validation.replay", "ReplayError"), ("latobs.validation.campaign", "CampaignError"),
-               ("latobs.check", "CheckError"))
+               ("latobs.check", "CheckError"), ("latobs.cache", "CacheSettingError"))
 #: (module, function) whose KeyError means "unknown name" (the message names it and the known ones).
 USER_KEY_ERRORS = (("latobs.synthesis.designs", "get"), ("latobs.synthesis.designs", "parse_artefact"))
 

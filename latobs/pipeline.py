@@ -317,12 +317,13 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
     from . import cache
     from .synthesis import lmi
 
-    todo = [p for p in plans if not p.current(design_files)[0] and cache.files("fmu", _cache_parts(p)) is None]
+    states = {p.name: p.current(design_files) for p in plans}
+    todo = [p for p in plans if not states[p.name][0] and cache.files("fmu", _cache_parts(p)) is None]
     n = lmi.jobs(len(todo))
     if len(todo) < 2 or n < 2:
         return set()
     for p in todo:
-        print(p.current(design_files)[1])                  # building / rebuilding, saying what changed
+        print(states[p.name][1])                           # building / rebuilding, saying what changed
     print(f"making {len(todo)} FMUs in {n} processes", flush=True)
     made = set()
     items = [(p.model, p.vehicle, p.backend, p.platforms, p.fmi) for p in todo]

@@ -160,3 +160,16 @@ def test_stored_files_are_whole_and_the_folder_keeps_its_size_bound(tmp_path, mo
     with pytest.raises(ValueError, match="not a plain file name"):
         cache.store_files("fmu", {"k": 4}, {"../escape": b""})
     assert not list(tmp_path.glob("fmu/.*"))                    # no temporaries left
+
+
+@pytest.mark.parametrize("value", ["lots", "-1", "inf", "nan"])
+def test_a_bad_size_bound_is_refused_naming_it(value, tmp_path, monkeypatch):
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path))
+    monkeypatch.setenv(cache.ENV_MAX, value)
+    with pytest.raises(cache.CacheSettingError, match="LATOBS_CACHE_MAX_MB"):
+        cache.store_files("fmu", {"k": 1}, {"A.fmu": b"x"})
+    # a command stops before it makes anything (exit 2, one line naming the setting)
+    from latobs.cli import main
+
+    assert main(["build", "CarPlant", "--backend", "python", "--out", str(tmp_path / "out")]) == 2
+    assert not (tmp_path / "out" / "CarPlant.fmu").exists()
