@@ -5,16 +5,19 @@ command (build, validate, replay, campaign, check, demo) and every output folder
 * ``build-time-facts``: what only running a runtime decides (paper 001's longest communication
   step: 5-20 s per design);
 * ``fmu``: a built FMU with the design file beside it (``pipeline.build``: compilation for every
-  platform, the reference experiment), reused by a build into any folder.
+  platform, the reference experiment), reused by a build into any folder;
+* ``compile``: one target's binary (``cbackend.toolchain``: keyed by the compiler command, the
+  compilers' versions and every source file's bytes, as ccache does).
 
 An entry's key is the SHA-256 of everything its value is made from (the identities of
 ``latobs.identity``: design inputs, design-time code, solver versions, runtime and packaging code,
 toolchain, platforms); a changed input is another key, so a stale value is never reused. An entry
 is checked again where it is used (an FMU's identity is read back; a design is certified again
 when packaged). The folder is :func:`folder` (``$LATOBS_CACHE_DIR``, else the platform's user
-cache folder); ``LATOBS_NO_CACHE=1`` (``latobs build --no-cache``) turns it off. Entries are written atomically (a file, or a folder renamed into
-place); an unreadable one is made again; the least recently used entries are removed when the
-folder grows past ``$LATOBS_CACHE_MAX_MB`` (default :data:`MAX_MB`)."""
+cache folder); ``LATOBS_NO_CACHE=1`` (``latobs build --no-cache``) turns it off. Entries are written
+atomically (a file, or a folder renamed into place); an unreadable one is made again; the least
+recently used entries are removed when the folder grows past ``$LATOBS_CACHE_MAX_MB`` (default
+:data:`MAX_MB`)."""
 from __future__ import annotations
 
 import json

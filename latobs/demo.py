@@ -3,6 +3,7 @@ build/report/index.md (each paper's observers beside their plant, nominal and wi
 sensor errors, and on the MBDS record)."""
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -130,8 +131,6 @@ def _design_section_002(d: dict, s: dict) -> str:
 def _design_section_003(d: dict, s: dict) -> str:
     """Paper 003: per-mode figures, and the average dwell time against the scenario's switching."""
     import re
-
-    import numpy as np
 
     from .synthesis.motorcycle_fault_observer import dwell_report, modes_of_speed
     from .validation import get_scenario
@@ -307,10 +306,14 @@ def demo(out: Path, verbose: bool = False, platforms: list[str] | None = None) -
 
     step(f"building every FMU (design, certificate, packaging; native FMUs for {', '.join(build_for or ['all'])})",
          build, None, None, out, platforms=build_for, host_suffices=host_suffices)
-    for scen, tag, params, noise, observers, plant_vehicle in RUNS:
-        step(f"running {scen}{' [' + tag + ']' if tag else ''}", run_validation, scen, observers, report, out,
-             plant_parameters=params, noise=noise, tag=tag, plant_vehicle=plant_vehicle, platforms=build_for)
-    replays = step("replaying the MBDS record", _replays, out, report, build_for)
+    # each run's figures are drawn in worker processes while the next runs go on (drawing ~80
+    # figures is most of a warm demo); every figure is written when the block ends
+    with _figures() as figures:
+        for scen, tag, params, noise, observers, plant_vehicle in RUNS:
+            step(f"running {scen}{' [' + tag + ']' if tag else ''}", run_validation, scen, observers, report, out,
+                 plant_parameters=params, noise=noise, tag=tag, plant_vehicle=plant_vehicle, platforms=build_for,
+                 plots=figures)
+        replays = step("replaying the MBDS record", _replays, out, report, build_for)
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
                 ReportSection(title="Paper 000: default and paper-faithful designs, every scenario", markdown=_headline(report)),
@@ -344,6 +347,39 @@ def demo(out: Path, verbose: bool = False, platforms: list[str] | None = None) -
         print(f"native FMUs built for this machine ({host or 'all platforms'}); for Windows, macOS and Linux "
               f"(x86-64 and ARM) in one FMU: latobs build --platforms all --out {out}")
     return path
+
+
+@contextlib.contextmanager
+def _figures():
+    """``draw(result, folder)``: the run's figures (``validation.plots.plot_all``) drawn in worker
+    processes (spawned, one per core, at most ``$LATOBS_JOBS``; in this process when that is one),
+    all written when the block ends, where a figure's error is raised. A worker pool that breaks
+    draws the rest here."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from .synthesis import lmi
+    from .validation.plots import plot_all
+
+    if lmi.jobs(len(RUNS)) < 2:
+        yield plot_all
+        return
+    todo: list = []
+    with lmi.main_not_run_again(), ProcessPoolExecutor(max_workers=lmi.jobs(len(RUNS)),
+                                                      mp_context=multiprocessing.get_context("spawn")) as pool:
+        def draw(result, folder) -> None:
+            try:
+                todo.append((pool.submit(plot_all, result, Path(folder)), result, folder))
+            except BrokenProcessPool:
+                plot_all(result, Path(folder))
+
+        yield draw
+        for future, result, folder in todo:
+            try:
+                future.result()
+            except BrokenProcessPool:
+                plot_all(result, Path(folder))
 
 
 def summary_text(header: list[str], rows: list[list]) -> str:

@@ -770,10 +770,11 @@ def ensure_plant(plant: str, vehicle: str | None, fmu_dir: Path, platforms: list
 
 def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_dir: Path,
                    plant_parameters: dict | None = None, noise: bool = False, seed: int = 0,
-                   tag: str = "", quiet: bool = False, plots: bool = True,
+                   tag: str = "", quiet: bool = False, plots=True,
                    plant_vehicle: str | None = None, platforms: list[str] | None = None) -> dict:
     """Co-simulate plant + observers on a scenario; writes out/SCENARIO[_TAG]/metrics.json and PNGs
-    (no PNGs with ``plots=False``). ``plant_vehicle``: the plant FMU's vehicle (its FMU is
+    (no PNGs with ``plots=False``; ``plots(result, folder)`` draws them instead, as in
+    ``validation.validate``). ``plant_vehicle``: the plant FMU's vehicle (its FMU is
     ``PLANT_V``, built if missing); default the plant's default vehicle. ``platforms``: of the
     native FMUs built when missing (:func:`ensure_fmus`)."""
     from . import packaging

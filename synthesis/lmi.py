@@ -152,7 +152,7 @@ def _in_worker(choice: tuple[str, dict], fn, item):
 
 
 @contextlib.contextmanager
-def _main_not_run_again() -> Iterator[None]:
+def main_not_run_again() -> Iterator[None]:
     """Spawned workers that do not import the caller's main script (multiprocessing runs it again
     in each child, as ``__mp_main__``: a user's script calling ``latobs`` at its top level, without
     ``if __name__ == "__main__"``, would start building again in every worker). The functions sent
@@ -192,7 +192,7 @@ def parallel_map(fn, items: list) -> list:
 
     name, settings_, usage = _CHOICE.get()
     try:
-        with _main_not_run_again(), ProcessPoolExecutor(max_workers=n,
+        with main_not_run_again(), ProcessPoolExecutor(max_workers=n,
                                                         mp_context=multiprocessing.get_context("spawn")) as pool:
             done = list(pool.map(partial(_in_worker, (name, settings_), fn), items))
     except BrokenProcessPool:                 # a worker could not start or died: this process does it

@@ -140,15 +140,24 @@ def _session_cache(tmp_path_factory):
 
     from latobs.synthesis import lmi
 
+    import tempfile
+
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    saved = {k: os.environ.get(k) for k in (cache.ENV_DIR, cache.ENV_OFF, lmi.JOBS_ENV)}
+    saved = {k: os.environ.get(k) for k in (cache.ENV_DIR, cache.ENV_OFF, lmi.JOBS_ENV, "TMPDIR")}
     os.environ[cache.ENV_DIR] = str(shared / "latobs-cache")
+    # every temporary file of the run (fmpy's extract(), the subprocesses' too) inside the run's
+    # folder, which pytest removes: a run leaves nothing in the machine's temporary folder
+    scratch = base / "tmp"
+    scratch.mkdir(exist_ok=True)
+    saved_tempdir, tempfile.tempdir = tempfile.tempdir, str(scratch)
+    os.environ["TMPDIR"] = str(scratch)
     os.environ.pop(cache.ENV_OFF, None)
     # one process per design and build: the run is already one worker per core (the tests of the
     # parallel paths set LATOBS_JOBS themselves)
     os.environ[lmi.JOBS_ENV] = "1"
     yield
+    tempfile.tempdir = saved_tempdir
     for k, v in saved.items():
         if v is None:
             os.environ.pop(k, None)

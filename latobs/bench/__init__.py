@@ -1,5 +1,5 @@
 """``latobs bench``: what latobs costs, measured side by side in one run (build, LMI solves, one
-FMU step per backend, coupled runs, scaling), each figure beside a reference measured in the same
+FMU step per backend, coupled runs, a 1000-run campaign, the demo, scaling), each figure beside a reference measured in the same
 process. :mod:`.measure` and :mod:`.lmi` measure, :mod:`.tables` renders the figures as Markdown;
 ``latobs bench --markdown`` prints the documentation's speed page.
 """
@@ -13,17 +13,18 @@ from pathlib import Path
 
 from ..synthesis import designs  # the catalogue only (no solver stack)
 from .lmi import LMI_TIMEOUT, lmi_row, lmi_row_isolated, lmi_section
-from .measure import (BACKEND_LABEL, BACKENDS, DT, LENGTHS, SCALING_OBSERVERS_DURATION, SCALING_SCENARIO,
-                      SOLVER_LABEL, SOLVERS, Pairing, _fmu_pairing, _jsonable, _kind, _numpy_reference, _progress, bus,
-                      build_time, coupled, coupled_in_fresh_process, coupled_section, ensure_fmus, fmu_data, fmu_names,
-                      fmu_section, machine, paper_000_observers, pairings, plant_artefact, runtime_step_time,
+from .measure import (BACKEND_LABEL, BACKENDS, CAMPAIGN, CAMPAIGN_RUNS, DT, LENGTHS, SCALING_OBSERVERS_DURATION,
+                      SCALING_SCENARIO, SOLVER_LABEL, SOLVERS, Pairing, _fmu_pairing, _jsonable, _kind, _numpy_reference,
+                      _progress, bus, build_time, campaign_time, coupled, demo_time, coupled_in_fresh_process, coupled_section,
+                      ensure_fmus, fmu_data, fmu_names, fmu_section, machine, paper_000_observers, pairings, plant_artefact, runtime_step_time,
                       scaling_section)
-from .tables import (_lmi_cell, build_table, coupled_table, fmu_table, lmi_table, machine_statement, markdown,
+from .tables import (_lmi_cell, build_table, campaign_table, coupled_table, demo_table, fmu_table, lmi_table, machine_statement, markdown,
                      scaling_table, table)
 
 __all__ = ["BACKENDS", "BACKEND_LABEL", "DT", "LENGTHS", "LMI_TIMEOUT", "SCALING_OBSERVERS_DURATION",
            "SCALING_SCENARIO", "SOLVERS", "SOLVER_LABEL", "Pairing", "bench", "build_table", "build_time", "bus",
-           "coupled", "coupled_in_fresh_process", "coupled_section", "coupled_table", "ensure_fmus", "fmu_data",
+           "campaign_table", "campaign_time", "coupled", "demo_time", "coupled_in_fresh_process", "coupled_section",
+           "coupled_table", "demo_table", "ensure_fmus", "fmu_data",
            "fmu_names", "fmu_section", "fmu_table", "lmi_row", "lmi_row_isolated", "lmi_section", "lmi_table",
            "machine", "machine_statement", "main", "markdown", "paper_000_observers", "pairings", "parser",
            "plant_artefact", "runtime_step_time", "scaling_section", "scaling_table", "table",
@@ -32,7 +33,7 @@ __all__ = ["BACKENDS", "BACKEND_LABEL", "DT", "LENGTHS", "LMI_TIMEOUT", "SCALING
 
 def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3, *, backends=BACKENDS, lmi: bool = True,
           build: bool = True, fmus: bool = True, coupled_runs: bool = True, scaling: bool = True,
-          lmi_designs: list[str] | None = None, solvers=SOLVERS, scs_max_iters: int | None = None,
+          campaign: bool = True, demo: bool = True, lmi_designs: list[str] | None = None, solvers=SOLVERS, scs_max_iters: int | None = None,
           lmi_timeout: float | None = LMI_TIMEOUT) -> dict:
     """Every section (the module docstring); returns the figures (``--json`` writes them)."""
     from ..synthesis import lmi as lmi_mod
@@ -41,7 +42,7 @@ def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3, *, backends=BACKENDS, 
     names = fmu_names()
     out: dict = {"date": time.strftime("%Y-%m-%d"), "machine": machine(), "n_steps": n, "repeats": repeats, "dt": DT,
                  "backends": list(backends), "pairings": [dict(p.__dict__, plant_fmu=p.plant_fmu) for p in pairings()],
-                 "build": None, "lmi": None, "fmus": None, "coupled": None, "scaling": None,
+                 "build": None, "lmi": None, "fmus": None, "coupled": None, "scaling": None, "campaign": None, "demo": None,
                  "unavailable": {}}
     folders = {b: fmu_dir / b for b in backends}
     if build:
@@ -49,6 +50,9 @@ def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3, *, backends=BACKENDS, 
         for b in backends:
             _progress(f"latobs build --backend {b} in a fresh process")
             out["build"].append(build_time(b, fill=folders[b]))
+    if demo:
+        _progress("latobs demo in a fresh process, cold then warm")
+        out["demo"] = demo_time()
     if lmi:
         out["lmi"] = {"solvers": list(solvers), "timeout_seconds": lmi_timeout,
                       "settings": {s: {**lmi_mod.SOLVERS[s], **({"max_iters": scs_max_iters}
@@ -64,6 +68,12 @@ def bench(fmu_dir: Path, n: int = 3000, repeats: int = 3, *, backends=BACKENDS, 
         out["numpy_reference"] = _numpy_reference(n)
     if coupled_runs:
         out["coupled"] = coupled_section(folders, max(1, repeats - 1))
+    if campaign:
+        if "c" not in folders:
+            out["campaign"] = {"error": "the campaign is timed with the native FMUs (--backends c)"}
+        else:
+            _progress(f"latobs campaign {CAMPAIGN} --runs {CAMPAIGN_RUNS} in a fresh process")
+            out["campaign"] = campaign_time(folders["c"])
     if scaling:
         need = ["CarPlant", *paper_000_observers()]
         backend = next((b for b in ("c", "python") if b in folders
@@ -106,6 +116,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--skip-fmus", action="store_true", help="no per-FMU step timing")
     p.add_argument("--skip-coupled", action="store_true", help="no coupled run per pairing")
     p.add_argument("--skip-scaling", action="store_true", help="no scaling with scenario length and observers")
+    p.add_argument("--skip-demo", action="store_true", help="no timing of `latobs demo` (cold and warm)")
+    p.add_argument("--skip-campaign", action="store_true",
+                   help="no timing of a 1000-run campaign (robustness-000 on 2 local workers)")
     return p
 
 
@@ -133,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         parser().error(f"--designs: unknown design(s) {', '.join(unknown)}; known: {', '.join(designs.DESIGNS)}")
     r = bench(Path(a.fmu_dir), a.steps, a.repeats, backends=backends, lmi=not a.skip_lmi, build=not a.skip_build,
               fmus=not a.skip_fmus, coupled_runs=not a.skip_coupled, scaling=not a.skip_scaling,
-              lmi_designs=lmi_designs, scs_max_iters=a.scs_max_iters, lmi_timeout=a.lmi_timeout)
+              campaign=not a.skip_campaign, demo=not a.skip_demo, lmi_designs=lmi_designs, scs_max_iters=a.scs_max_iters, lmi_timeout=a.lmi_timeout)
     print(markdown(r) if a.markdown else table(r))
     if a.json_file:
         from ..atomic import atomic_write_text

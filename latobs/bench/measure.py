@@ -188,6 +188,69 @@ def build_time(backend: str, fill: Path | None = None) -> dict:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def demo_time() -> dict:
+    """Wall times of ``latobs demo`` in new processes: cold (an empty cache of its own: every
+    design solved, every FMU built for this machine, every run, figure and replay), then warm into
+    a new folder (designs and FMUs from the cache; the runs, figures and replays again): {"seconds"
+    (cold), "warm_new_folder_seconds", "returncode", "error"}."""
+    import os
+
+    tmp = Path(tempfile.mkdtemp(prefix="latobs-bench-demo-"))
+    try:
+        env = {**os.environ, "LATOBS_CACHE_DIR": str(tmp / "cache")}
+        env.pop("LATOBS_NO_CACHE", None)
+
+        def run(out: Path) -> tuple[float, subprocess.CompletedProcess]:
+            t0 = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-P", "-m", "latobs", "demo", "--out", str(out)],
+                                  capture_output=True, text=True, env=env)
+            return time.perf_counter() - t0, proc
+
+        cold, proc = run(tmp / "cold")
+        warm = None
+        if proc.returncode == 0:
+            warm, proc = run(tmp / "warm")
+        return {"seconds": cold, "warm_new_folder_seconds": warm, "returncode": proc.returncode,
+                "command": "demo --out TMP (LATOBS_CACHE_DIR: an empty folder)",
+                "error": None if proc.returncode == 0 else " | ".join(proc.stderr.strip().splitlines()[-3:])}
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+#: the campaign `latobs bench` times: paper 000's robustness campaign (bank-braking, 10 s per run)
+CAMPAIGN, CAMPAIGN_RUNS, CAMPAIGN_WORKERS = "robustness-000", 1000, 2
+
+
+def campaign_time(folder: Path, runs: int = CAMPAIGN_RUNS, workers: int = CAMPAIGN_WORKERS) -> dict:
+    """Wall time of ``latobs campaign robustness-000 --runs RUNS --workers WORKERS`` in a new process
+    with the native FMUs of ``folder`` (its FMUs reused), into an empty output folder: {"seconds"
+    (the whole command), "execution_s" (the runs on the local Dask cluster, as the campaign's
+    summary times them), "cluster_start_s", "runs_per_s", "runs", "ok", "workers", "returncode",
+    "error"}."""
+    import os
+
+    tmp = Path(tempfile.mkdtemp(prefix="latobs-bench-campaign-"))
+    try:
+        cmd = [sys.executable, "-P", "-m", "latobs", "campaign", CAMPAIGN, "--runs", str(runs), "--workers",
+               str(workers), "--no-plots", "--no-progress", "--fmu-dir", str(folder), "--out", str(tmp)]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ))
+        seconds = time.perf_counter() - t0
+        row = {"campaign": CAMPAIGN, "runs": runs, "workers": workers, "seconds": seconds,
+               "returncode": proc.returncode, "command": f"campaign {CAMPAIGN} --runs {runs} --workers {workers} "
+                                                         "--no-plots --no-progress",
+               "error": None if proc.returncode == 0 else " | ".join(proc.stderr.strip().splitlines()[-3:])}
+        summary = tmp / f"campaign_{CAMPAIGN}" / "summary.json"
+        if proc.returncode == 0 and summary.is_file():
+            s = json.loads(summary.read_text(encoding="utf-8"))
+            timing = s.get("timing") or {}
+            row.update(ok=s.get("ok"), execution_s=timing.get("execution_s"),
+                       cluster_start_s=timing.get("cluster_start_s"), runs_per_s=timing.get("runs_per_s"))
+        return row
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 # ------------------------------------------------------------------------------------------------
 # FMUs: building the missing ones, their data, the bus of their pairing
 # ------------------------------------------------------------------------------------------------

@@ -211,6 +211,38 @@ def _loop_ratio(r: dict, fmus: dict) -> str:
     return f"{r['loop_us_per_step'] / total:.1f}" if total > 0 else "—"
 
 
+def demo_table(d: dict) -> str:
+    """The demo section: cold and warm wall times."""
+    lines = ["`latobs demo` in a fresh process: cold with an empty cache (`LATOBS_CACHE_DIR`: every design "
+             "solved, every FMU built for this machine; zig's C runtime already built), then warm into a new "
+             "folder (designs and FMUs from the cache; every run, figure and replay made again):", "",
+             "| cold (s) | warm, new folder (s) | result |", "|---|---|---|"]
+    result = "ok" if not d.get("returncode") else f"failed: {_cell(d.get('error') or '?')}"
+    lines.append(f"| {_s(d.get('seconds'), 1)} | {_s(d.get('warm_new_folder_seconds'), 1)} | {result} |")
+    return "\n".join(lines)
+
+
+def campaign_table(c: dict) -> str:
+    """The campaign section: the whole command and the runs on the local cluster, per run."""
+    if c.get("error") and c.get("returncode") is None:
+        return f"Campaign: not measured ({c['error']})."
+    lines = [f"`latobs {c['command']}` in a fresh process, the native FMUs reused (each run: a drawn car, "
+             "drive and sensors, CarPlant beside the campaign's observers for the scenario's 10 s at 5 ms, its "
+             "metrics): the whole command, and the runs alone on the local Dask cluster as the campaign's summary "
+             "times them.", "",
+             "| campaign | runs ok | workers | whole command (s) | cluster start (s) | runs on the cluster (s) | "
+             "runs/s | ms per run per worker |", "|---|---|---|---|---|---|---|---|"]
+    if c.get("returncode"):
+        lines.append(f"| {c['campaign']} | failed: {_cell(c.get('error') or '?')} | {c['workers']} | "
+                     f"{c['seconds']:.1f} | — | — | — | — |")
+        return "\n".join(lines)
+    ex, rate = c.get("execution_s"), c.get("runs_per_s")
+    per_run = (f"{1e3 * c['workers'] / rate:.1f}" if isinstance(rate, (int, float)) and rate > 0 else "—")
+    lines.append(f"| {c['campaign']} | {c.get('ok', '?')} of {c['runs']} | {c['workers']} | {c['seconds']:.1f} | "
+                 f"{_s(c.get('cluster_start_s'), 1)} | {_s(ex, 1)} | {_s(rate, 0)} | {per_run} |")
+    return "\n".join(lines)
+
+
 def scaling_table(s: dict) -> str:
     if "error" in s:
         return f"Scaling: not measured ({s['error']})."
@@ -244,12 +276,16 @@ def table(r: dict) -> str:
     parts = []
     if r.get("build"):
         parts.append(build_table(r["build"]))
+    if r.get("demo"):
+        parts.append(demo_table(r["demo"]))
     if r.get("lmi"):
         parts.append(lmi_table(r["lmi"]))
     if r.get("fmus"):
         parts.append(fmu_table(r))
     if r.get("coupled"):
         parts.append(coupled_table(r["coupled"], r.get("fmus")))
+    if r.get("campaign"):
+        parts.append(campaign_table(r["campaign"]))
     if r.get("scaling"):
         parts.append(scaling_table(r["scaling"]))
     return "\n\n".join(parts)
@@ -271,9 +307,11 @@ def machine_statement(r: dict) -> str:
 def markdown(r: dict) -> str:
     """The speed page: the machine statement, then each measured section under its heading."""
     sections = (("build", "Whole build", lambda: build_table(r["build"])),
+                ("demo", "The demo", lambda: demo_table(r["demo"])),
                 ("lmi", "LMI designs: Clarabel and SCS", lambda: lmi_table(r["lmi"])),
                 ("fmus", "One FMU step", lambda: fmu_table(r)),
                 ("coupled", "Coupled runs", lambda: coupled_table(r["coupled"], r.get("fmus"))),
+                ("campaign", "A 1000-run campaign", lambda: campaign_table(r["campaign"])),
                 ("scaling", "Scaling with length and observers", lambda: scaling_table(r["scaling"])))
     parts = ["# Speed",
              "This page is the output of `latobs bench --markdown` (to regenerate it: `latobs bench --markdown "

@@ -14,6 +14,7 @@ x86-64 and arm64 macOS) and ``aarch64-linux`` (glibc 2.17 and newer).
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import platform as _platform
 import shlex
@@ -159,28 +160,46 @@ def _uses_zig(platform: str, zig: bool) -> bool:
 
 
 def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_files: list[str], out_name: str,
-                    shared: bool, libs: tuple[str, ...], zig: bool) -> bytes:
+                    shared: bool, libs: tuple[str, ...], zig: bool, cached: bool = True) -> bytes:
     """One target's file, compiled in a scratch folder of its own: every source under its relative
-    name, the output under its final name (a Windows DLL records its own name)."""
+    name, the output under its final name (a Windows DLL records its own name). ``cached``: taken
+    from latobs's cache when the same compilation was made before (and kept there)."""
     if _uses_zig(platform, zig):
         cmd = [*zig_cc(), "-target", target]
     else:
         cmd = shlex.split(system_compiler())
+    args = [*_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *c_files,
+            *(libs if "windows" not in target else ())]
+    # a compilation is a pure function of its command, the compiler and the sources' bytes: kept in
+    # latobs's cache (``latobs.cache``, kind "compile") by their content, like ccache
+    from .. import cache
+
+    sha256_bytes = lambda raw: hashlib.sha256(raw).hexdigest()  # noqa: E731
+    parts = {"command": [Path(cmd[0]).name if cmd[0] == sys.executable else cmd[0], *cmd[1:], *args],
+             "compilers": sha256_bytes(describe()),
+             "sources": {name: sha256_bytes(raw) for name, raw in sorted(sources.items())}}
+    hit = cache.files("compile", parts) if cached else None
+    if hit is not None and set(hit) == {"output"}:
+        return hit["output"]
     with tempfile.TemporaryDirectory(prefix="latobs-c-") as tmp:
         work = Path(tmp)
         for name, raw in sources.items():
             (work / name).write_bytes(raw)
-        _run([*cmd, *_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *c_files,
-              *(libs if "windows" not in target else ())], work)
-        return (work / out_name).read_bytes()
+        _run([*cmd, *args], work)
+        raw = (work / out_name).read_bytes()
+    if cached:
+        cache.store_files("compile", parts, {"output": raw})
+    return raw
 
 
 def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_files: list[str], *,
                       shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False,
-                      jobs: int | None = None) -> dict[str, bytes]:
+                      jobs: int | None = None, cached: bool = True) -> dict[str, bytes]:
     """:func:`compile_for` of several platforms at once: ``out_names`` {platform: output file
     name} -> {platform: file bytes}. Every target is compiled in a thread of its own running the
-    compiler (``jobs`` at a time, default one per core); ToolchainError naming the first failure."""
+    compiler (``jobs`` at a time, default one per core); ToolchainError naming the first failure.
+    A compilation made before with the same command, compilers and sources is taken from latobs's
+    cache (``latobs.cache``, kind "compile"), unless ``cached`` is False or the cache is off."""
     from concurrent.futures import ThreadPoolExecutor
 
     unknown = [p for p in out_names if p not in PLATFORMS]
@@ -191,7 +210,8 @@ def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_fi
         raise ToolchainError(why)
     tasks = [(p, t) for p in out_names for t in PLATFORMS[p]]
     with ThreadPoolExecutor(max_workers=max(1, min(len(tasks), jobs or os.cpu_count() or 1))) as pool:
-        futures = {(p, t): pool.submit(_compile_target, p, t, sources, c_files, out_names[p], shared, libs, zig)
+        futures = {(p, t): pool.submit(_compile_target, p, t, sources, c_files, out_names[p], shared, libs, zig,
+                                          cached)
                    for p, t in tasks}
         thin = {task: f.result() for task, f in futures.items()}
     out = {}
@@ -202,13 +222,15 @@ def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_fi
 
 
 def compile_for(platform: str, sources: dict[str, bytes], c_files: list[str], out_name: str, *,
-                shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False) -> bytes:
+                shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False,
+                cached: bool = True) -> bytes:
     """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
     names) for ``platform`` (a folder of :data:`PLATFORMS`) into a shared library (``shared``) or a
     program named ``out_name``; returns its bytes (darwin64: one universal file of both
     architectures). On x86-64 Linux, linux64 uses the system compiler when there is one, unless ``zig``.
     ToolchainError with the compiler's output."""
-    return compile_platforms({platform: out_name}, sources, c_files, shared=shared, libs=libs, zig=zig)[platform]
+    return compile_platforms({platform: out_name}, sources, c_files, shared=shared, libs=libs, zig=zig,
+                             cached=cached)[platform]
 
 
 # Mach-O universal ("fat") file: a big-endian header, one record per architecture, then each
@@ -293,7 +315,7 @@ def prepare(platforms: list[str] | None = None) -> dict[str, float]:
         t0 = time.perf_counter()
         for shared in (True, False):
             compile_for(platform, src, ["one.c"], "one" + (SUFFIX[platform] if shared else ""), shared=shared,
-                        zig=True)
+                        zig=True, cached=False)     # (zig must run: its runtime is what is made)
         return time.perf_counter() - t0
 
     # one thread per platform: zig itself builds a runtime's many files on every core

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from .scenarios import SCENARIOS, Scenario, get_scenario, scenario_names
 
@@ -25,9 +25,11 @@ __all__ = ["SCENARIOS", "Scenario", "get_scenario", "scenario_names", "validate"
 
 def validate(scenario: Scenario | str, plant_fmu: str | os.PathLike,
              observer_fmus: Mapping[str, str | os.PathLike], out_dir: str | os.PathLike,
-             plots: bool = True, **run_kwargs: Any) -> tuple[Any, dict, list[Path]]:
+             plots: bool | Callable[[Any, Path], Any] = True, **run_kwargs: Any) -> tuple[Any, dict, list[Path]]:
     """Run the co-simulation, write ``out_dir/metrics.json`` and the PNG plots (unless ``plots``
-    is false: matplotlib is then not even imported).
+    is false: matplotlib is then not even imported). ``plots`` may instead be a callable
+    ``plots(result, out_dir)`` that draws them elsewhere (the demo's worker processes): the PNGs
+    are then not among the paths returned.
 
     ``run_kwargs`` go to :func:`latobs.validation.harness.run` (dt, noise, seed,
     plant_parameters, vehicle, progress, observer_parameters). Returns (SimResult, metrics dict,
@@ -39,7 +41,9 @@ def validate(scenario: Scenario | str, plant_fmu: str | os.PathLike,
     m = metrics.compute(result)
     out = Path(out_dir)
     paths = [metrics.write(m, out)]
-    if plots:
+    if callable(plots):
+        plots(result, out)
+    elif plots:
         from . import plots as plotting
 
         paths += plotting.plot_all(result, out)

@@ -17,6 +17,7 @@ import ctypes
 import itertools
 import os
 import shutil
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
@@ -85,6 +86,19 @@ def _dispatch_log(env, instance_name, status, category, message):
 _DISPATCH_LOG = fmi2CallbackLoggerTYPE(_dispatch_log)   # module-level: lives as long as the process
 
 
+def _model_description(path: str):
+    """fmpy's model description of the FMU at ``path``, parsed once per file version (path, inode,
+    size, modification time: a campaign instantiates the same FMUs thousands of times); shared,
+    read-only."""
+    st = os.stat(path)
+    return _parsed_model_description(path, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+@lru_cache(maxsize=64)
+def _parsed_model_description(path: str, inode: int, size: int, mtime_ns: int):
+    return read_model_description(path)
+
+
 class FmuInstance:
     """An extracted FMU: model description, slave, prebuilt value-reference arrays, logger.
 
@@ -98,7 +112,7 @@ class FmuInstance:
         self._owned_dir = unzipdir is None
         self.unzipdir = extract(str(path)) if unzipdir is None else unzipdir
         try:
-            self.md = read_model_description(str(path))
+            self.md = _model_description(str(path))
         except Exception as exc:
             raise WiringError(f"FMU {label!r} ({path}): cannot read its modelDescription.xml: {exc}") from exc
         if self.md.coSimulation is None:
@@ -469,7 +483,20 @@ def design_summary(design: Mapping[str, Any], source: str = "") -> dict[str, Any
 
 def observer_design(fmu_path: str | os.PathLike) -> dict[str, Any] | None:
     """:func:`design_summary` of the design file baked into the observer FMU at ``fmu_path``;
-    None when the FMU carries no design file."""
+    None when the FMU carries no design file. Read once per file version (its path, inode, size
+    and modification time: a campaign's runs read the same FMU thousands of times; its design
+    file, with the runtime's tables, takes ~25 ms to parse); a copy each call."""
+    import copy
+
+    try:
+        st = os.stat(fmu_path)
+    except OSError:
+        return None
+    return copy.deepcopy(_observer_design(str(fmu_path), st.st_ino, st.st_size, st.st_mtime_ns))
+
+
+@lru_cache(maxsize=64)
+def _observer_design(fmu_path: str, inode: int, size: int, mtime_ns: int) -> dict[str, Any] | None:
     found = read_fmu_design(fmu_path)
     if found is None:
         return None

@@ -173,3 +173,41 @@ def test_a_bad_size_bound_is_refused_naming_it(value, tmp_path, monkeypatch):
 
     assert main(["build", "CarPlant", "--backend", "python", "--out", str(tmp_path / "out")]) == 2
     assert not (tmp_path / "out" / "CarPlant.fmu").exists()
+
+
+def test_a_compilation_is_made_once_per_command_compilers_and_source_bytes(tmp_path, monkeypatch):
+    """A target's binary is compiled once per (compiler command, compilers, sources' bytes) and
+    then taken from the cache, bit for bit; a changed source byte, another output name,
+    ``cached=False`` and a turned-off cache compile again. The binary still runs (it is the
+    compiler's output, not a stand-in)."""
+    import ctypes
+
+    from latobs.cbackend import toolchain
+
+    host = toolchain.host_platform()
+    if host is None or toolchain.missing([host]):
+        pytest.skip("no C compiler for this machine's platform")
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path / "cache"))
+    runs = []
+    real = toolchain._run
+    monkeypatch.setattr(toolchain, "_run", lambda cmd, cwd: (runs.append(cmd), real(cmd, cwd))[1])
+    src = {"twice.c": b"__attribute__((visibility(\"default\"))) double twice(double x) { return 2.0 * x; }\n"}
+    name = "twice" + toolchain.SUFFIX[host]
+    first = toolchain.compile_for(host, src, ["twice.c"], name)
+    assert len(runs) == 1
+    assert toolchain.compile_for(host, src, ["twice.c"], name) == first and len(runs) == 1      # from the cache
+    (tmp_path / name).write_bytes(first)
+    lib = ctypes.CDLL(str(tmp_path / name))
+    lib.twice.restype, lib.twice.argtypes = ctypes.c_double, [ctypes.c_double]
+    assert lib.twice(1.25) == 2.5
+    changed = {"twice.c": src["twice.c"].replace(b"2.0 * x", b"x + x")}
+    toolchain.compile_for(host, changed, ["twice.c"], name)
+    assert len(runs) == 2
+    toolchain.compile_for(host, src, ["twice.c"], "other" + toolchain.SUFFIX[host])
+    assert len(runs) == 3
+    toolchain.compile_for(host, src, ["twice.c"], name, cached=False)
+    assert len(runs) == 4
+    with cache.turned_off():
+        toolchain.compile_for(host, src, ["twice.c"], name)
+    assert len(runs) == 5
+    assert len(list((tmp_path / "cache" / "compile").iterdir())) == 3

@@ -448,3 +448,23 @@ def test_demo_prints_a_summary_unless_verbose():
     assert cli.parser().parse_args(["demo", "--verbose"]).verbose is True
     assert cli.parser().parse_args(["campaign", "robustness-000"]).dashboard is None
     assert cli.parser().parse_args(["campaign", "robustness-000", "--dashboard"]).dashboard == ":8787"
+
+
+@pytest.mark.slow
+def test_the_demos_figures_drawn_in_worker_processes_are_those_drawn_here(fmu_dir, tmp_path, monkeypatch):
+    """The demo draws each run's figures in spawned worker processes while its runs go on: the
+    same files, byte for byte, as `plot_all` in this process, all written when the block ends."""
+    from latobs import demo
+    from latobs.validation import harness
+    from latobs.validation.plots import plot_all
+
+    result = harness.run("bank-braking", fmu_dir / "CarPlant.fmu",
+                         {"SideslipBankObserver": fmu_dir / "SideslipBankObserver.fmu"})
+    here = plot_all(result, tmp_path / "here")
+    monkeypatch.setenv("LATOBS_JOBS", "2")
+    with demo._figures() as draw:
+        draw(result, tmp_path / "workers")
+        assert draw is not plot_all                           # (two jobs: the worker processes draw)
+    made = sorted((tmp_path / "workers").iterdir())
+    assert [p.name for p in made] == sorted(p.name for p in here)
+    assert all(p.read_bytes() == (tmp_path / "here" / p.name).read_bytes() for p in made)

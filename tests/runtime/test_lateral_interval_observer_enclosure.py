@@ -32,17 +32,18 @@ ROLL_ERROR_BOUND = (0.0, 0.0, 36.0, 15.0)   # 1.2 x the largest residual measure
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
+def fmus(tmp_path_factory, built_fmus):
     """The FMUs of latobs build's default backend (native C where a C compiler is present, whose
     outputs equal the pythonfmu FMUs' bit for bit: tests/cbackend/test_c_lateral_interval_observer.py and
-    tests/cbackend/test_c_car_plant.py; five times faster per run)."""
+    tests/cbackend/test_c_car_plant.py; five times faster per run): the default observer and plant
+    of the session build, the rigid plant and the robust design built here."""
     out = tmp_path_factory.mktemp("fmus_001")
     backend = packaging.resolve_backend("auto", packaging.OBSERVERS["LateralIntervalObserver"])[0]
     plant_backend = packaging.resolve_backend("auto", packaging.PLANTS["CarPlant"])[0]
-    data = complete_runtime_data(designs.run("LateralIntervalObserver"))
-    observer = packaging.package_design(design_file.write(data, out), out, backend)
+    data = built_fmus.design("LateralIntervalObserver")
+    observer = built_fmus.get("LateralIntervalObserver", backend)
     plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out, plant_backend)  # paper 001's model class
-    plant = packaging.package_plant("CarPlant", None, out, plant_backend)
+    plant = built_fmus.get("CarPlant", plant_backend)
     robust = complete_runtime_data(designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND))
     robust_dir = out / "robust"
     observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir, backend)
@@ -100,16 +101,15 @@ def step_rows(fmus):
     return table, rows
 
 
-def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows, capsys):
+def test_every_communication_step_encloses_bounded_or_is_refused(fmus, step_rows, capsys, built_fmus):
     """At every step up to max_communication_step() (0.452 s: every step of the table): zero
     violations, the vy width after settling bounded and not growing (the last third of a run
     against the middle third); above it, every run refused at once with the limit named (once
     50 ms made the widths 1e30 m/s, silently; then 50-200 ms were refused)."""
     from latobs.fmu_src.lateral_interval_observer import IntervalObserver
-    from latobs.synthesis import designs
 
     table, rows = step_rows
-    hmax = IntervalObserver(complete_runtime_data(designs.run("LateralIntervalObserver"))).max_communication_step()
+    hmax = IntervalObserver(built_fmus.design("LateralIntervalObserver")).max_communication_step()
     with capsys.disabled():
         print(f"\n001 at every step (max_communication_step {hmax:g} s): {table}")
     for h in STEPS:

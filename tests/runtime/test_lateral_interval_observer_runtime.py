@@ -12,11 +12,10 @@ import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
-from latobs.packaging import complete_runtime_data
 from latobs.fmu_src import lateral_interval_observer as io
 from latobs.fmu_src.lateral_interval_observer import IntervalObserver
 from latobs.fmu_src.models.lateral_interval_observer import SPEC
-from latobs.synthesis import designs, relaxation_model as rm
+from latobs.synthesis import relaxation_model as rm
 from latobs.synthesis.tables import lateral_interval_observer as tables
 
 RNG_SEED = 20200701
@@ -99,8 +98,10 @@ def observer(data, params=None):
 
 
 @pytest.fixture(scope="module")
-def design() -> dict:
-    return complete_runtime_data(designs.run("LateralIntervalObserver"))
+def design(built_fmus) -> dict:
+    """The session's default design (``designs.run`` with its build-time facts, as `latobs design`
+    writes it), a copy of this module's own."""
+    return copy.deepcopy(built_fmus.design("LateralIntervalObserver"))
 
 
 def _pos(a):

@@ -9,6 +9,7 @@ model, solver and discretisation than its own, and measures what the reduction c
 """
 from __future__ import annotations
 
+import copy
 import math
 import sys
 
@@ -17,7 +18,6 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from latobs.fmu_src.motorcycle_fault_observer import MotorcycleFaultObserver
-from latobs.synthesis import designs
 from latobs.synthesis import motorcycle_model as mm
 
 H = 0.005            # s, the observer's step
@@ -27,8 +27,8 @@ AMP = 15.0           # N m (linear range: the tyres stay far from saturation in 
 
 
 @pytest.fixture(scope="module")
-def design():
-    return designs.run("MotorcycleFaultObserver")
+def design(built_fmus):
+    return copy.deepcopy(built_fmus.design("MotorcycleFaultObserver"))     # (designs.run, once per test run)
 
 
 def torque(t: float) -> float:

@@ -115,8 +115,8 @@ def test_stiffness_bounds_are_the_box_vertices():
     assert np.allclose(np.min(corners, axis=0), lo) and np.allclose(np.max(corners, axis=0), hi)
 
 
-def test_the_real_data_vehicle_gets_bands_over_its_speed_range():
-    d = designs.run("LateralIntervalObserver", "mbds_250lm")
+def test_the_real_data_vehicle_gets_bands_over_its_speed_range(built_fmus):
+    d = built_fmus.design("LateralIntervalObserver", "mbds_250lm")     # (designs.run, solved once per test run)
     assert d["name"] == "LateralIntervalObserver_mbds_250lm" and d["certified"]
     edges = d["switching"]["edges"]
     assert edges[0] <= 16.5 and edges[-1] >= 61.2 and max(b - a for a, b in zip(edges, edges[1:])) <= 4.0 + 1e-12

@@ -176,6 +176,10 @@ def _synthetic_result() -> dict:
                     "rows": lmi_rows},
             "fmus": fmus, "numpy_reference": {"numpy_affine_map_us": 2.0, "numpy_rk4_substeps_us": 40.0},
             "coupled": coupled,
+            "demo": {"seconds": 58.25, "warm_new_folder_seconds": 24.5, "returncode": 0, "error": None},
+            "campaign": {"campaign": "robustness-000", "runs": 1000, "workers": 2, "seconds": 12.5, "returncode": 0,
+                         "command": "campaign robustness-000 --runs 1000 --workers 2", "error": None, "ok": 1000,
+                         "execution_s": 8.0, "cluster_start_s": 0.5, "runs_per_s": 125.0},
             "scaling": {"backend": "c", "scenario": "bank-braking", "observers": ["A"], "lengths": lengths,
                         "n_observers": nobs, "observers_duration": 10.0, "fit_lengths": fit, "fit_n_observers": fit}}
 
@@ -200,6 +204,8 @@ def test_tables_have_every_row_and_the_json_every_figure():
         assert any(line.startswith(f"| {T:g} | {int(T / 0.005)} | 4 |") for line in lines)
     assert sum(line.startswith(f"| {k} | ") for line in lines for k in range(5)) >= 5
     assert "per observer added" in text
+    assert "| 58.2 | 24.5 | ok |" in lines
+    assert any(line == "| robustness-000 | 1000 of 1000 | 2 | 12.5 | 0.5 | 8.0 | 125 | 16.0 |" for line in lines)
     assert all(line.count("|") == lines[i - 1].count("|") for i, line in enumerate(lines)
                if line.startswith("|---"))                                         # header and rule agree
     back = json.loads(json.dumps(bench._jsonable(r)))
@@ -214,7 +220,7 @@ def test_bench_help_lists_the_options(capsys):
     assert exc.value.code == 0
     out = capsys.readouterr().out
     for option in ("--fmu-dir", "--steps", "--repeats", "--json", "--skip-lmi", "--skip-build", "--skip-fmus",
-                   "--skip-coupled", "--skip-scaling", "--backends", "--designs", "--scs-max-iters",
+                   "--skip-coupled", "--skip-scaling", "--skip-campaign", "--skip-demo", "--backends", "--designs", "--scs-max-iters",
                    "--lmi-timeout"):
         assert option in out
 
@@ -251,8 +257,8 @@ def test_markdown_is_the_speed_page_without_a_date(tmp_path, capsys):
     assert out.startswith("# Speed\n\nThis page is the output of `latobs bench --markdown`")
     assert "\n\nMeasured on Test CPU 9000 (2 logical cores)" in out and "1.50 / 1.25 / 1.00" in out
     headings = [line for line in out.splitlines() if line.startswith("## ")]
-    assert headings == ["## Whole build", "## LMI designs: Clarabel and SCS", "## One FMU step", "## Coupled runs",
-                        "## Scaling with length and observers"]
+    assert headings == ["## Whole build", "## The demo", "## LMI designs: Clarabel and SCS", "## One FMU step", "## Coupled runs",
+                        "## A 1000-run campaign", "## Scaling with length and observers"]
     for part in bench.table(r).split("\n\n"):                     # the same tables as the plain output
         assert part in out
     assert "2031" not in out and "ERRATA" not in out

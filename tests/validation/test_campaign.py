@@ -535,3 +535,31 @@ def test_a_worker_keeps_its_own_copy_of_an_fmu_whose_folder_is_deleted(tmp_path,
     changed.write_bytes(b"not the FMU it was")
     with pytest.raises(CampaignError, match="changed since the campaign started"):
         cr._local(cr.FmuRef("plant", "CarPlant.fmu", "0" * 64, path=str(changed)))
+
+
+def test_an_fmus_design_and_description_are_read_once_per_file_version(fmu_dir, tmp_path):
+    """A campaign reads the same FMU's design file and model description thousands of times: each
+    is parsed once per file version, and an FMU replaced at the same path (renamed over it, or
+    rewritten in place) is read again, never served from the earlier file."""
+    from latobs.validation import instance
+
+    path = tmp_path / "observer.fmu"
+    shutil.copy2(fmu_dir / "SideslipBankObserver.fmu", path)
+    first = instance.observer_design(path)
+    assert first["name"] == "SideslipBankObserver"
+    first["name"] = "changed by the caller"                       # a copy: the next call is not affected
+    assert instance.observer_design(path)["name"] == "SideslipBankObserver"
+    md = instance._model_description(str(path))
+    assert instance._model_description(str(path)) is md           # parsed once
+    other = tmp_path / "other.fmu"
+    shutil.copy2(fmu_dir / "SideslipBankObserverTire.fmu", other)
+    os.replace(other, path)                                       # renamed over it: another inode
+    assert instance.observer_design(path)["name"] == "SideslipBankObserverTire"
+    assert instance._model_description(str(path)).modelName == "SideslipBankObserverTire"
+    raw = (fmu_dir / "SideslipBankObserverPaper.fmu").read_bytes()
+    with open(path, "r+b") as fh:                                 # rewritten in place: same inode
+        fh.write(raw)
+        fh.truncate()
+    os.utime(path, ns=(time.time_ns(), time.time_ns() + 1_000_000))
+    assert instance.observer_design(path)["name"] == "SideslipBankObserverPaper"
+    assert instance._model_description(str(path)).modelName == "SideslipBankObserverPaper"
