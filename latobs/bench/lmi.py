@@ -94,12 +94,28 @@ def lmi_row_isolated(name: str, solver: str, scs_max_iters: int | None = None,
     base = {"design": name, "paper": entry.paper, "vehicle": entry.default_vehicle, "solver": solver,
             "gamma": None, "design_seconds": None, "lmi_seconds": 0.0, "lmi_solves": 0, "lmi_statuses": [],
             "certificate_seconds": None, "recorded_solver": None, "checks_passed": None, "checks_total": None}
+    # one process (LATOBS_JOBS=1: the solvers compared on the same sequential work), in a session of
+    # its own: stopped at the cap with everything it started (a worker left running would load
+    # every later measurement of the run)
+    import os
+    import signal
+
+    env = {**os.environ, "LATOBS_JOBS": "1"}
     t0 = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return {**base, "result": "stopped", "design_seconds": time.perf_counter() - t0, "timed_out": True,
-                "reason": f"not finished within the {timeout:g} s cap (process stopped)"}
+    posix = os.name == "posix"
+    with subprocess.Popen([sys.executable, "-P", "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True, env=env, start_new_session=posix) as child:
+        try:
+            out, err = child.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            if posix:
+                os.killpg(child.pid, signal.SIGKILL)
+            else:
+                child.kill()
+            child.communicate()
+            return {**base, "result": "stopped", "design_seconds": time.perf_counter() - t0, "timed_out": True,
+                    "reason": f"not finished within the {timeout:g} s cap (process stopped)"}
+    proc = subprocess.CompletedProcess(child.args, child.returncode, out, err)
     line = next((x for x in reversed(proc.stdout.splitlines()) if x.startswith("LMI-ROW ")), None)
     if proc.returncode != 0 or line is None:
         tail = " | ".join(proc.stderr.strip().splitlines()[-2:])

@@ -70,8 +70,8 @@ def lmi_table(section: dict) -> str:
     settings = section.get("settings", {})
     scs = settings.get("SCS")
     lines = ["LMI designs at their default vehicle, each solver's result through the independent certificate "
-             "(`certificate.certify`, as `latobs design`/`build`). Time: wall time of the design function in s "
-             "(of it, its LMI solves in s, and their number, fallbacks and infeasibility diagnostics included); "
+             "(`certificate.certify`, as `latobs design`/`build`). Time: wall time of the design function in s, "
+             "in one process (`LATOBS_JOBS=1`: paper 002's bands in turn) (of it, its LMI solves in s, and their number, fallbacks and infeasibility diagnostics included); "
              "certificate time separate. Clarabel: its defaults (with paper 002's fallback on a numerical failure)"
              + (f"; SCS: eps_abs = {scs.get('eps_abs'):g}, eps_rel = {scs.get('eps_rel'):g}, "
                 f"max_iters = {scs.get('max_iters')}" if scs else "")

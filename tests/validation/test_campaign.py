@@ -404,7 +404,7 @@ def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_
 
         with Client(address, timeout="60s") as client:
             client.wait_for_workers(2, timeout=60)
-        runs = 80
+        runs = 300                     # (~10 ms a run: enough to kill a worker mid-campaign)
         out = tmp_path / "out"
         campaign = _start([sys.executable, "-m", "latobs", "campaign", "robustness-000", "--runs", str(runs),
                            "--scheduler", address, "--fmu-dir", str(fmus), "--out", str(out), "--no-plots",
