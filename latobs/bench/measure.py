@@ -138,6 +138,28 @@ def _reason(exc: BaseException) -> str:
 # ------------------------------------------------------------------------------------------------
 # (d) a whole `latobs build`, per backend, in a fresh process
 # ------------------------------------------------------------------------------------------------
+def _empty_cache_env(folder: Path) -> dict[str, str]:
+    """This environment with latobs's cache in ``folder`` (empty: every design solved, every FMU
+    built) and turned on."""
+    import os
+
+    env = {**os.environ, "LATOBS_CACHE_DIR": str(folder)}
+    env.pop("LATOBS_NO_CACHE", None)
+    return env
+
+
+def _timed(args: list[str], env: dict[str, str] | None = None) -> tuple[float, subprocess.CompletedProcess]:
+    """(wall seconds, the finished process) of ``python -P -m latobs ARGS`` in a new process."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-P", "-m", "latobs", *args], capture_output=True, text=True, env=env)
+    return time.perf_counter() - t0, proc
+
+
+def _stderr_tail(proc: subprocess.CompletedProcess) -> str | None:
+    """None for a process that succeeded, else the last lines of its stderr."""
+    return None if proc.returncode == 0 else " | ".join(proc.stderr.strip().splitlines()[-3:])
+
+
 def build_time(backend: str, fill: Path | None = None) -> dict:
     """Wall times of ``python -m latobs build --out TMP --backend BACKEND``, each a new process: cold
     (an empty cache of its own, ``LATOBS_CACHE_DIR``: every design solved, every FMU compiled; zig's
@@ -147,18 +169,12 @@ def build_time(backend: str, fill: Path | None = None) -> dict:
     "lmi_solver_seconds" (sum of the design files' ``solver.seconds`` of the LMI designs), "error"
     (None or the last lines of stderr)}. ``fill``: a folder that then receives the built FMUs and
     design files it lacks."""
-    import os
-
     tmp = Path(tempfile.mkdtemp(prefix=f"latobs-bench-build-{backend}-"))
     try:
-        env = {**os.environ, "LATOBS_CACHE_DIR": str(tmp / "cache")}
-        env.pop("LATOBS_NO_CACHE", None)
+        env = _empty_cache_env(tmp / "cache")
 
         def run(out: Path) -> tuple[float, subprocess.CompletedProcess]:
-            cmd = [sys.executable, "-P", "-m", "latobs", "build", "--out", str(out), "--backend", backend]
-            t0 = time.perf_counter()
-            proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
-            return time.perf_counter() - t0, proc
+            return _timed(["build", "--out", str(out), "--backend", backend], env)
 
         cold_dir = tmp / "cold"
         seconds, proc = run(cold_dir)
@@ -179,7 +195,7 @@ def build_time(backend: str, fill: Path | None = None) -> dict:
             for f in [*fmus, *cold_dir.glob("*.design.json")]:
                 if not (fill / f.name).exists():
                     shutil.copy2(f, fill / f.name)
-        err = None if proc.returncode == 0 else " | ".join(proc.stderr.strip().splitlines()[-3:])
+        err = _stderr_tail(proc)
         return {"backend": backend, "seconds": seconds, "warm_new_folder_seconds": warm_new,
                 "warm_same_folder_seconds": warm_same, "returncode": proc.returncode, "fmus": len(fmus),
                 "lmi_solver_seconds": lmi_seconds,
@@ -193,26 +209,15 @@ def demo_time() -> dict:
     design solved, every FMU built for this machine, every run, figure and replay), then warm into
     a new folder (designs and FMUs from the cache; the runs, figures and replays again): {"seconds"
     (cold), "warm_new_folder_seconds", "returncode", "error"}."""
-    import os
-
     tmp = Path(tempfile.mkdtemp(prefix="latobs-bench-demo-"))
     try:
-        env = {**os.environ, "LATOBS_CACHE_DIR": str(tmp / "cache")}
-        env.pop("LATOBS_NO_CACHE", None)
-
-        def run(out: Path) -> tuple[float, subprocess.CompletedProcess]:
-            t0 = time.perf_counter()
-            proc = subprocess.run([sys.executable, "-P", "-m", "latobs", "demo", "--out", str(out)],
-                                  capture_output=True, text=True, env=env)
-            return time.perf_counter() - t0, proc
-
-        cold, proc = run(tmp / "cold")
+        env = _empty_cache_env(tmp / "cache")
+        cold, proc = _timed(["demo", "--out", str(tmp / "cold")], env)
         warm = None
         if proc.returncode == 0:
-            warm, proc = run(tmp / "warm")
+            warm, proc = _timed(["demo", "--out", str(tmp / "warm")], env)
         return {"seconds": cold, "warm_new_folder_seconds": warm, "returncode": proc.returncode,
-                "command": "demo --out TMP (LATOBS_CACHE_DIR: an empty folder)",
-                "error": None if proc.returncode == 0 else " | ".join(proc.stderr.strip().splitlines()[-3:])}
+                "command": "demo --out TMP (LATOBS_CACHE_DIR: an empty folder)", "error": _stderr_tail(proc)}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -227,19 +232,13 @@ def campaign_time(folder: Path, runs: int = CAMPAIGN_RUNS, workers: int = CAMPAI
     (the whole command), "execution_s" (the runs on the local Dask cluster, as the campaign's
     summary times them), "cluster_start_s", "runs_per_s", "runs", "ok", "workers", "returncode",
     "error"}."""
-    import os
-
     tmp = Path(tempfile.mkdtemp(prefix="latobs-bench-campaign-"))
     try:
-        cmd = [sys.executable, "-P", "-m", "latobs", "campaign", CAMPAIGN, "--runs", str(runs), "--workers",
-               str(workers), "--no-plots", "--no-progress", "--fmu-dir", str(folder), "--out", str(tmp)]
-        t0 = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ))
-        seconds = time.perf_counter() - t0
+        seconds, proc = _timed(["campaign", CAMPAIGN, "--runs", str(runs), "--workers", str(workers), "--no-plots",
+                                "--no-progress", "--fmu-dir", str(folder), "--out", str(tmp)])
         row = {"campaign": CAMPAIGN, "runs": runs, "workers": workers, "seconds": seconds,
                "returncode": proc.returncode, "command": f"campaign {CAMPAIGN} --runs {runs} --workers {workers} "
-                                                         "--no-plots --no-progress",
-               "error": None if proc.returncode == 0 else " | ".join(proc.stderr.strip().splitlines()[-3:])}
+                                                         "--no-plots --no-progress", "error": _stderr_tail(proc)}
         summary = tmp / f"campaign_{CAMPAIGN}" / "summary.json"
         if proc.returncode == 0 and summary.is_file():
             s = json.loads(summary.read_text(encoding="utf-8"))

@@ -86,12 +86,17 @@ def _dispatch_log(env, instance_name, status, category, message):
 _DISPATCH_LOG = fmi2CallbackLoggerTYPE(_dispatch_log)   # module-level: lives as long as the process
 
 
-def _model_description(path: str):
-    """fmpy's model description of the FMU at ``path``, parsed once per file version (path, inode,
-    size, modification time: a campaign instantiates the same FMUs thousands of times); shared,
-    read-only."""
+def _file_version(path: str | os.PathLike) -> tuple[str, int, int, int]:
+    """(path, inode, size, modification time in ns): what the per-file caches below are keyed on
+    (a campaign reads the same FMUs thousands of times); a file replaced or rewritten at the same
+    path is another version. OSError if there is no such file."""
     st = os.stat(path)
-    return _parsed_model_description(path, st.st_ino, st.st_size, st.st_mtime_ns)
+    return str(path), st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def _model_description(path: str):
+    """fmpy's model description of the FMU at ``path``, parsed once per file version; shared, read-only."""
+    return _parsed_model_description(*_file_version(path))
 
 
 @lru_cache(maxsize=64)
@@ -483,16 +488,15 @@ def design_summary(design: Mapping[str, Any], source: str = "") -> dict[str, Any
 
 def observer_design(fmu_path: str | os.PathLike) -> dict[str, Any] | None:
     """:func:`design_summary` of the design file baked into the observer FMU at ``fmu_path``;
-    None when the FMU carries no design file. Read once per file version (its path, inode, size
-    and modification time: a campaign's runs read the same FMU thousands of times; its design
-    file, with the runtime's tables, takes ~25 ms to parse); a copy each call."""
+    None when the FMU carries no design file. Read once per file version (:func:`_file_version`:
+    a design file with the runtime's tables takes ~25 ms to parse); a copy each call."""
     import copy
 
     try:
-        st = os.stat(fmu_path)
+        version = _file_version(fmu_path)
     except OSError:
         return None
-    return copy.deepcopy(_observer_design(str(fmu_path), st.st_ino, st.st_size, st.st_mtime_ns))
+    return copy.deepcopy(_observer_design(*version))
 
 
 @lru_cache(maxsize=64)
