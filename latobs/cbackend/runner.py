@@ -163,7 +163,9 @@ def compile_runner(platform: str) -> Path:
     if exe.is_file():
         return exe
     try:
-        raw = toolchain.compile_for(platform, sources, ["fmu_runner.c"], exe.name, shared=False, libs=("-lm", "-ldl"))
+        # (cached=False: the program is itself kept in the cache folder, named by its inputs)
+        raw = toolchain.compile_for(platform, sources, ["fmu_runner.c"], exe.name, shared=False, libs=("-lm", "-ldl"),
+                                    cached=False)
     except toolchain.ToolchainError as exc:
         raise RunnerError(f"cannot compile the FMU host for {platform}: {exc}") from exc
     from ..atomic import atomic_write_bytes

@@ -58,8 +58,9 @@ def library() -> ctypes.CDLL | None:
     path = cache_dir() / "master-loop" / f"master_loop-{platform}-{digest}{toolchain.SUFFIX[platform]}"
     try:
         if not path.is_file():
+            # (cached=False: the library is itself kept in the cache folder, named by its inputs)
             raw = toolchain.compile_for(platform, {"master_loop.c": source}, ["master_loop.c"], path.name,
-                                        shared=True, libs=())
+                                        shared=True, libs=(), cached=False)
             atomic_write_bytes(path, raw, mode=0o755)
         lib = ctypes.CDLL(str(path))
     except (OSError, toolchain.ToolchainError) as exc:

@@ -466,7 +466,6 @@ class CoSimulation:
                          settle_time=float(sc.settle_time), measured=measured, units=units,
                          inputs={PLANT_LABEL: plant_in, **obs_in}, info=info)
 
-
     def _compiled(self, t, fmus, sets, stepping, gets, routes):
         """The compiled loop (:mod:`.compiled_loop`) over these calls, or None: the Python loop
         (fmpy's checked calls, an FMI 3.0 FMU, an Integer or Boolean route, no compiled loop here)."""
