@@ -86,7 +86,7 @@ class Derivation:
 def derivation() -> Derivation:
     """Kane's equations of Sharp's two-frame motorcycle, linearised about straight running.
 
-    Cached: ~4 s the first time in a process. See the module docstring for the model.
+    Cached: ~2 s the first time in a process (``xreplace``, a structural substitution: ``subs`` took ~11 s). See the module docstring for the model.
     """
     import sympy as sp
     from sympy.physics.vector import Point, ReferenceFrame, dot, dynamicsymbols, outer
@@ -109,7 +109,7 @@ def derivation() -> Derivation:
     C = H.orientnew("C", "Axis", [delta, H.z])
     qd = {psi.diff(t): r, phi.diff(t): p, delta.diff(t): d}
     for fr in (A, B, H, C):
-        fr.set_ang_vel(N, fr.ang_vel_in(N).subs(qd))
+        fr.set_ang_vel(N, fr.ang_vel_in(N).xreplace(qd))
 
     # points: P (ground, below the rear mass centre, on the roll axis), rear mass centre Gr,
     # rear contact Rc, steering-axis ground point Sg, front mass centre Gf, front contact Fc
@@ -139,7 +139,7 @@ def derivation() -> Derivation:
     Hfw = ify * (dot(wC, C.y) - U / rf) * C.y
 
     def ddt(vec):
-        return vec.dt(N).subs(qd)
+        return vec.dt(N).xreplace(qd)
 
     aGr, aGf = ddt(Gr.vel(N)), ddt(Gf.vel(N))
     dHB, dHC, dHrw, dHfw = ddt(HB), ddt(HC), ddt(Hrw), ddt(Hfw)
@@ -160,22 +160,22 @@ def derivation() -> Derivation:
     qs = sp.symbols("psi_ phi_ delta_", real=True)
     rep = {**dict(zip([x.diff(t) for x in (vy, r, p, d)], ud)), **dict(zip((vy, r, p, d), us)),
            **dict(zip((psi, phi, delta), qs))}
-    E = sp.Matrix([x.subs(rep) for x in eqs])
+    E = sp.Matrix([x.xreplace(rep) for x in eqs])
     zero = {**{x: 0 for x in ud + us + qs}, Ff: 0, Fr: 0, tau: 0}
-    Mm = (-E.jacobian(ud)).subs(zero)
-    Cm = (-E.jacobian(us)).subs(zero)
-    Kq = (-E.jacobian(qs)).subs(zero)
+    Mm = (-E.jacobian(ud)).xreplace(zero)
+    Cm = (-E.jacobian(us)).xreplace(zero)
+    Kq = (-E.jacobian(qs)).xreplace(zero)
     if any(sp.simplify(x) != 0 for x in Kq[:, 0]):
         raise AssertionError("motorcycle derivation: the yaw angle must not enter the equations")
-    Bf = E.jacobian([Ff, Fr, tau]).subs(zero)
+    Bf = E.jacobian([Ff, Fr, tau]).xreplace(zero)
     Cm = sp.expand(Cm)
     C1 = Cm.diff(U)
-    C0 = Cm.subs(U, 0)
+    C0 = Cm.xreplace({U: 0})
 
     # tyre kinematics: lateral velocity of the contact points, wheel heading and camber
     def lin(expr, xs):
-        expr = expr.subs(rep)
-        return [sp.simplify(sp.diff(expr, x).subs(zero)) for x in xs]
+        expr = expr.xreplace(rep)
+        return [sp.simplify(sp.diff(expr, x).xreplace(zero)) for x in xs]
 
     speeds = list(us)
     slip = {"front": (lin(dot(Fc.vel(N), A.y), speeds),
