@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 from .car_plant import G, CarPlantModel
+from .linalg import total
 
 __all__ = ["steady_turn"]
 
@@ -120,5 +121,5 @@ def _solve(A, b):
                 M[i][j] -= f * M[c][j]
     x = [0.0] * n
     for i in range(n - 1, -1, -1):
-        x[i] = (M[i][n] - sum(M[i][j] * x[j] for j in range(i + 1, n))) / M[i][i]
+        x[i] = (M[i][n] - total(M[i][j] * x[j] for j in range(i + 1, n))) / M[i][i]
     return x

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 
-from .linalg import expm_taylor as _expm_taylor, phi_gamma
+from .linalg import dot, expm_taylor as _expm_taylor, phi_gamma, total
 
 OUTPUT_NAMES = ("vy_lower", "vy_upper", "beta_lower", "beta_upper", "yaw_rate_lower", "yaw_rate_upper",
                 "Fyf_lower", "Fyf_upper", "Fyr_lower", "Fyr_upper")
@@ -38,11 +38,11 @@ CACHE_SIZE = 64                 # step maps kept per instance, per kind
 # -- linear algebra (lists of rows; sums from the left) ---------------------------------------------
 def _matmul(A, B):
     cols = list(zip(*B))
-    return [[sum([a * b for a, b in zip(row, col)]) for col in cols] for row in A]
+    return [[dot(row, col) for col in cols] for row in A]
 
 
 def _matvec(A, v):
-    return [sum([a * b for a, b in zip(row, v)]) for row in A]
+    return [dot(row, v) for row in A]
 
 
 def _addv(a, b):
@@ -91,8 +91,8 @@ def lemma3_constant(A, xl, xu):
     (Efimov's convention; the paper's text defines A- = A - A+ <= 0, under which eq. (20) fails)."""
     pos = [[max(a, 0.0) for a in row] for row in A]
     neg = [[max(-a, 0.0) for a in row] for row in A]
-    lo = [sum(p * l - q * u for p, q, l, u in zip(rp, rn, xl, xu)) for rp, rn in zip(pos, neg)]
-    hi = [sum(p * u - q * l for p, q, l, u in zip(rp, rn, xl, xu)) for rp, rn in zip(pos, neg)]
+    lo = [total(p * l - q * u for p, q, l, u in zip(rp, rn, xl, xu)) for rp, rn in zip(pos, neg)]
+    hi = [total(p * u - q * l for p, q, l, u in zip(rp, rn, xl, xu)) for rp, rn in zip(pos, neg)]
     return lo, hi
 
 
@@ -390,7 +390,7 @@ class IntervalObserver:
         Bv = [vx * b for b in md["B1"]]
         n = min(max(1, math.ceil(h / tu["sampled_substep"] - 1e-9)), tu["sampled_max_substeps"])
         hs = h / n
-        norm = max(sum(abs(x) for x in row) for row in A) * hs
+        norm = max(total(map(abs, row)) for row in A) * hs
         if not norm <= tu["sampled_max_norm"]:        # |vx| far beyond any vehicle
             raise ValueError(f"no sampled step map at vx = {vx!r} m/s (||A hs|| = {norm:g})")
         phid, gamd = expm_gamma(A, hs)
@@ -411,7 +411,7 @@ class IntervalObserver:
         det = D[0][0] * D[1][1] - D[0][1] * D[1][0]
         if det != 0.0 and math.isfinite(det):
             inv = [[D[1][1] / det, -D[0][1] / det], [-D[1][0] / det, D[0][0] / det]]
-            options.append({i: [sum(ph[i][UNMEAS[k]] * inv[k][q] for k in range(2)) for q in range(2)]
+            options.append({i: [total(ph[i][UNMEAS[k]] * inv[k][q] for k in range(2)) for q in range(2)]
                             for i in UNMEAS})
         for j in UNMEAS:
             for q, jm in enumerate(MEAS):
@@ -426,7 +426,7 @@ class IntervalObserver:
                 L[i] = li
             if not all(math.isfinite(x) for r in L for x in r):
                 continue
-            K = [[eye[i][j] - sum(L[i][q] for q, jm in enumerate(MEAS) if jm == j) for j in _R] for i in _R]
+            K = [[eye[i][j] - total(L[i][q] for q, jm in enumerate(MEAS) if jm == j) for j in _R] for i in _R]
             Kphi = _matmul(K, ph)
             gains.append((L, Kphi, _absm(Kphi), _matvec(K, gamb[n]), [_matmul(K, p) for p in pg],
                           [_matmul(_absm(_matmul(K, p)), gamM) for p in phi[:n]], _absm(L)))
@@ -463,9 +463,9 @@ class IntervalObserver:
                 T = self._comparison_enclosure(hs, vx, d, Bm)
             S = self.stiffness_bounds(vx, d, T)
             tc, tr = _mid_rad(T)
-            mo.append([(S[i] + S[_N + i]) * 0.5 + dv * (sum(a * x for a, x in zip(md["A1"][i], tc)) + md["B1"][i] * d)
+            mo.append([(S[i] + S[_N + i]) * 0.5 + dv * (dot(md["A1"][i], tc) + md["B1"][i] * d)
                        for i in _R])
-            ro.append([(S[_N + i] - S[i]) * 0.5 + md["w"][i] + adv * sum(abs(a) * x for a, x in zip(md["A1"][i], tr))
+            ro.append([(S[_N + i] - S[i]) * 0.5 + md["w"][i] + adv * dot(map(abs, md["A1"][i]), tr)
                        for i in _R])
         if not all(map(math.isfinite, Bm)):
             return None, None

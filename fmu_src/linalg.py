@@ -10,6 +10,25 @@ from __future__ import annotations
 import math
 
 
+# Sums of floats are written out as loops from the left (``dot``, ``total``), never the built-in
+# sum(): from Python 3.12 on, sum() of floats is compensated (Neumaier), so the same runtime would
+# give other bits on another interpreter than on 3.11 and than the C models, which add from the left.
+def dot(a, b, start: float = 0.0) -> float:
+    """start + a[0] b[0] + a[1] b[1] + ..., added from the left in double precision."""
+    s = start
+    for x, y in zip(a, b):
+        s += x * y
+    return s
+
+
+def total(xs, start: float = 0.0) -> float:
+    """start + xs[0] + xs[1] + ..., added from the left in double precision."""
+    s = start
+    for x in xs:
+        s += x
+    return s
+
+
 def matmul(A, B):
     """A B; products summed with math.fsum (correctly rounded dot products)."""
     cols = list(zip(*B))
@@ -19,12 +38,12 @@ def matmul(A, B):
 def _matmul_left(A, B):
     """A B; products summed from the left (the interval observer's arithmetic, as its C model)."""
     cols = list(zip(*B))
-    return [[sum([a * b for a, b in zip(row, col)]) for col in cols] for row in A]
+    return [[dot(row, col) for col in cols] for row in A]
 
 
 def norm_inf(A) -> float:
     """Induced infinity norm (largest row sum of |a|); 0 for an empty matrix."""
-    return max(sum(abs(a) for a in row) for row in A) if A else 0.0
+    return max(total(map(abs, row)) for row in A) if A else 0.0
 
 
 def expm(M) -> list[list[float]]:
@@ -81,7 +100,7 @@ def expm_taylor(M):
     interval observer's step maps (its tables at the default step and the runtime at any other).
     ValueError if ||M||_inf is not finite or above 1e300."""
     m = len(M)
-    norm = max(sum(abs(x) for x in row) for row in M)
+    norm = max(total(map(abs, row)) for row in M)
     if not norm <= 1e300:
         raise ValueError(f"no finite step map (||M h|| = {norm!r})")
     s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0

@@ -9,9 +9,8 @@ from __future__ import annotations
 import math
 import threading
 from bisect import bisect_right
-from operator import mul
 
-from .linalg import zoh_map
+from .linalg import dot, total, zoh_map
 from .spec import tables_of
 
 OUTPUT_NAMES = ("roll_angle_hat", "rider_torque_hat", "vy_hat", "steer_rate_hat", "Ff_hat", "Fr_hat",
@@ -103,7 +102,7 @@ class MotorcycleFaultObserver:
         # their measurement, the others (vy, steer rate, f) at 0
         y = [u[k] for k in MEASUREMENTS]
         C = self._C[0]
-        x0 = [sum(C[r][j] * y[r] for r in range(self.NY)) for j in range(self.N)]
+        x0 = [total(C[r][j] * y[r] for r in range(self.NY)) for j in range(self.N)]
         self.s = x0 + [0.0] * self.NF
         self._started = True
         vx = u["vx"]
@@ -143,7 +142,7 @@ class MotorcycleFaultObserver:
         # eq. (13) in continuous time, stepped exactly with y held over h (zero-order hold)
         W = self._fns.get((mode, h)) or self._map(mode, h)
         v = self.s + y
-        self.s = [sum(map(mul, row, v)) for row in W]
+        self.s = [dot(row, v) for row in W]
         self._publish(y)
 
     def _publish(self, y) -> None:
@@ -152,9 +151,9 @@ class MotorcycleFaultObserver:
         C = self._C[self.mode]
         res = 0.0
         for r in range(self.NY):
-            e = y[r] - sum(map(mul, C[r], s[:n]))
+            e = y[r] - dot(C[r], s[:n])
             res += e * e
-        Ff, Fr = (sum(map(mul, row, s)) for row in self._F[self.mode])
+        Ff, Fr = (dot(row, s) for row in self._F[self.mode])
         out["roll_angle_hat"] = s[n]
         out["rider_torque_hat"] = s[n + 1]
         out["vy_hat"] = s[0]

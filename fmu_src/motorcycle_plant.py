@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from .linalg import matrix
+from .linalg import matrix, total
 from .spec import runtime_parameters, tables_of
 
 _atan = math.atan
@@ -151,10 +151,10 @@ class MotorcyclePlantModel:
         Mi = self._Minv
         D = [[self.C0[i][j] + vx * self.C1[i][j] for j in range(4)] for i in range(4)]
         # u' = Gu u + Gs [sin phi, sin delta] + GF [Ff, Fr] + g0
-        Gu = [[-sum(Mi[i][k] * D[k][j] for k in range(4)) for j in range(4)] for i in range(4)]
-        Gs = [[-sum(Mi[i][k] * self.K[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
-        GF = [[sum(Mi[i][k] * self.BF[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
-        g0 = [sum(Mi[i][k] * self.Btau[k] for k in range(4)) * tau for i in range(4)]
+        Gu = [[-total(Mi[i][k] * D[k][j] for k in range(4)) for j in range(4)] for i in range(4)]
+        Gs = [[-total(Mi[i][k] * self.K[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
+        GF = [[total(Mi[i][k] * self.BF[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
+        g0 = [total(Mi[i][k] * self.Btau[k] for k in range(4)) * tau for i in range(4)]
         ((u00, u01, u02, u03), (u10, u11, u12, u13), (u20, u21, u22, u23), (u30, u31, u32, u33)) = Gu
         ((s00, s01), (s10, s11), (s20, s21), (s30, s31)) = Gs
         ((f00, f01), (f10, f11), (f20, f21), (f30, f31)) = GF

@@ -10,15 +10,11 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
-from operator import mul
+
+from .linalg import dot as _dot   # sum_j row[j] x[j] from the left, as ``dot_from(0.0, ...)`` in C
 
 OUTPUT_NAMES = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat", "bank_angle_hat", "mode", "valid")
 ESTIMATES = OUTPUT_NAMES[:4]
-
-
-def _dot(row, x) -> float:
-    """sum_j row[j] x[j], added from left to right (as ``dot_from(0.0, ...)`` in C)."""
-    return sum(map(mul, row, x))
 
 
 def _matmul(A, B):

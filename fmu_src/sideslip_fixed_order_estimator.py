@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import threading
 
-from .linalg import zoh_map
+from .linalg import dot, zoh_map
 from .spec import tables_of
 
 OUTPUT_NAMES = ("beta_hat", "mode")
@@ -103,7 +103,7 @@ class TfEstimator:
 
     def _publish(self, r: float) -> None:
         _, _, C, D, _ = self.systems[self.mode]
-        self.y["beta_hat"] = sum([c * z for c, z in zip(C, self.z)], D * r)
+        self.y["beta_hat"] = dot(C, self.z, D * r)
         self.y["mode"] = self.mode + 1
 
     def initialize(self, u: dict) -> None:
@@ -134,7 +134,7 @@ class TfEstimator:
             # the paper's continuous-time filter, stepped exactly with r held over h (zero-order hold)
             Phi, Gam = self._map(self.mode, h)
             z = self.z
-            zn = [sum([p * x for p, x in zip(row, z)], g * r) for row, g in zip(Phi, Gam)]
+            zn = [dot(row, z, g * r) for row, g in zip(Phi, Gam)]
             if not all(math.isfinite(x) for x in zn):
                 self.events.append(("warning", f"the step map over h = {h!r} s is not finite: step refused, "
                                                "state held"))

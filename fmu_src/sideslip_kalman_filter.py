@@ -10,6 +10,7 @@ import math
 from functools import reduce
 from operator import add, mul
 
+from .linalg import total
 from .spec import tables_of
 
 OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat")
@@ -32,7 +33,7 @@ def _transpose(A):
 
 def _norm_inf(M) -> float:
     """Induced infinity norm: the largest row sum of |m| (each summed from 0, left to right)."""
-    return max([sum(map(abs, row)) for row in M])
+    return max([total(map(abs, row)) for row in M])
 
 
 def _expm(M):

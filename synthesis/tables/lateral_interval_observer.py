@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from ...fmu_src.linalg import matrix as _matrix, phi_gamma   # the runtime's own arithmetic
+from ...fmu_src.linalg import dot, matrix as _matrix, phi_gamma   # the runtime's own arithmetic
 from ...fmu_src.spec import DEFAULT_STEP   # s: the FMU's default communication step (the maps stored for it)
 
 NX = 4                        # states x = [vy, r, ay, x4]
@@ -38,11 +38,11 @@ TUNING = {
 # -- small dense helpers (lists of rows; sums from the left, as the runtimes) ---------------------
 def _matmul(A, B):
     cols = list(zip(*B))
-    return [[sum([a * b for a, b in zip(row, col)]) for col in cols] for row in A]
+    return [[dot(row, col) for col in cols] for row in A]
 
 
 def _matvec(A, v):
-    return [sum([a * b for a, b in zip(row, v)]) for row in A]
+    return [dot(row, v) for row in A]
 
 
 def _rel(a, b) -> float:
@@ -71,7 +71,7 @@ def _perron(M) -> float:
     v = [1.0] * len(A)
     lam = 0.0
     for _ in range(200):
-        w = [sum(a * b for a, b in zip(row, v)) + 1e-300 for row in A]
+        w = [dot(row, v) + 1e-300 for row in A]
         lam = max(w) / max(v)
         s = max(w)
         v = [x / s for x in w]

@@ -5,7 +5,7 @@ From the derived equations in the plant file (``data["structure"]``): the invers
 """
 from __future__ import annotations
 
-from ...fmu_src.linalg import matrix
+from ...fmu_src.linalg import matrix, total
 
 
 def _mat(obj, rows: int, cols: int, name: str) -> list:
@@ -41,6 +41,6 @@ def compute(data: dict) -> dict:
                   float(s["tyres"][key]["C1"])) for key in ("front", "rear")]
     except (KeyError, TypeError) as exc:
         raise ValueError(f"MotorcyclePlant data lacks {exc} of the derived 'structure' of a motorcycle") from exc
-    MiBF = [[sum(Mi[i][k] * BF[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
-    kt = max(sum(abs(sum(c1 * sl[k] * MiBF[k][j] for k in range(4))) for j in range(2)) for sl, c1 in tyres)
+    MiBF = [[total(Mi[i][k] * BF[k][j] for k in range(4)) for j in range(2)] for i in range(4)]
+    kt = max(total(abs(total(c1 * sl[k] * MiBF[k][j] for k in range(4))) for j in range(2)) for sl, c1 in tyres)
     return {"Minv": Mi, "kt": kt}

@@ -7,7 +7,8 @@ The runtimes evaluate what these build (``synthesis.tables``); nothing here runs
 from __future__ import annotations
 
 import math
-from operator import mul
+
+from ...fmu_src.linalg import dot, total   # sums from the left, as the runtimes' (not sum(): compensated from Python 3.12)
 
 
 # -- dense matrices as lists of rows ---------------------------------------------------------
@@ -16,12 +17,12 @@ def floats(M) -> list[list[float]]:
 
 
 def matvec(M, v):
-    return [sum(map(mul, row, v)) for row in M]
+    return [dot(row, v) for row in M]
 
 
 def matmul(A, B):
     cols = list(zip(*B))
-    return [[sum(map(mul, row, col)) for col in cols] for row in A]
+    return [[dot(row, col) for col in cols] for row in A]
 
 
 def add(A, B):
@@ -42,7 +43,7 @@ def zeros(r, c):
 
 def norm_inf(A) -> float:
     """Induced infinity norm (largest row sum of |a|)."""
-    return max(sum(map(abs, row)) for row in A)
+    return max(total(map(abs, row)) for row in A)
 
 
 # -- matrix power series in d (list of matrices, index = power of d), truncated at degree J ----
@@ -138,11 +139,11 @@ def truncation_bound(coeffs, D, delta, E1, alpha, nsub):
     delta^j <= f(rho) (delta / rho)^(J + 1) for any rho > delta (minimised over a grid of rho).
     """
     J = len(coeffs) - 1
-    exact = sum(norm_inf(coeffs[j]) * delta**j for j in range(D + 1, J + 1))
+    exact = total(norm_inf(coeffs[j]) * delta**j for j in range(D + 1, J + 1))
     best = math.inf
     for k in range(1, 60):
         rho = delta * 1.25**k
-        eta = sum(e * rho ** (j + 1) for j, e in enumerate(E1))
+        eta = total(e * rho ** (j + 1) for j, e in enumerate(E1))
         log_f = math.log(alpha) + nsub * math.log1p(alpha * eta)
         log_tail = log_f + (J + 1) * math.log(delta / rho)
         best = min(best, math.exp(log_tail) if log_tail < 700 else math.inf)

@@ -15,7 +15,10 @@ Regenerate (only when a change of the outputs is intended, from FMUs built by ``
 """
 from __future__ import annotations
 
+import builtins
+import copy
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -128,6 +131,12 @@ def assert_same(got: dict, want: dict, what: str, platform: str, time: np.ndarra
                         f"{float(y[k])!r} vs golden {float(ref[k])!r}")
 
 
+def _names():
+    from conftest import FMU_NAMES
+
+    return FMU_NAMES
+
+
 def _variants():
     from conftest import C_NAMES, FMU_NAMES
 
@@ -166,6 +175,46 @@ def test_fmu_reproduces_its_golden_reference_outputs(variant, built_fmus):
     # (2) the FMU run here by a plain fmpy master on the golden inputs
     got = run_fmpy(fmu, g["time"], g["step"], g["inputs"])
     assert_same(got, g["outputs"], f"{name}[{backend}] run by fmpy", g["platform"], g["time"])
+
+
+_builtin_sum = sum
+
+
+def _compensated_sum(items, start=0):
+    """The built-in sum() of Python >= 3.12 on floats (Neumaier's compensated summation; other
+    items as the built-in does)."""
+    items = list(items)
+    if not all(type(x) is float for x in items) or type(start) not in (int, float):
+        return _builtin_sum(items, start)
+    s, c = float(start), 0.0
+    for x in items:
+        t = s + x
+        c += (s - t) + x if abs(s) >= abs(x) else (x - t) + s
+        s = t
+    return s + c if c and math.isfinite(c) else s
+
+
+def test_the_compensated_sum_is_not_the_sum_from_the_left():
+    assert _compensated_sum([1e16, 1.0, -1e16, 1.0]) == 2.0 != ((1e16 + 1.0) - 1e16) + 1.0
+
+
+@pytest.mark.parametrize("name", _names())
+def test_the_python_runtime_and_its_tables_give_the_golden_bits_on_any_interpreter(name, built_fmus, monkeypatch):
+    """From Python 3.12 on the built-in sum() of floats is compensated: the runtimes and the tables
+    add from the left (``fmu_src.linalg.dot``, ``total``) as the C models do, so a pythonfmu FMU
+    gives its golden bits whatever the host's Python. Here sum() is the compensated one."""
+    from latobs import packaging
+    from latobs.synthesis import tables
+
+    monkeypatch.setattr(builtins, "sum", _compensated_sum)
+    if name in packaging.OBSERVERS:
+        design = built_fmus.design(name)
+        data = copy.deepcopy(design)
+        data.pop(tables.TABLES_KEY, None)
+        assert tables.compute(data) == design.get(tables.TABLES_KEY, {}), f"{name}: tables"
+    g = golden(name, "python")
+    got = run_fmpy(built_fmus.get(name, "python"), g["time"], g["step"], g["inputs"])
+    assert_same(got, g["outputs"], f"{name} with a compensated sum()", g["platform"], g["time"])
 
 
 def test_a_one_ulp_change_fails():
