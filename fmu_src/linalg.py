@@ -8,25 +8,41 @@ interval observer's order-preserving step maps (``phi_gamma``).
 from __future__ import annotations
 
 import math
+from operator import mul
 
-
-# Sums of floats are written out as loops from the left (``dot``, ``total``), never the built-in
-# sum(): from Python 3.12 on, sum() of floats is compensated (Neumaier), so the same runtime would
-# give other bits on another interpreter than on 3.11 and than the C models, which add from the left.
-def dot(a, b, start: float = 0.0) -> float:
-    """start + a[0] b[0] + a[1] b[1] + ..., added from the left in double precision."""
+# Sums of floats add from the left (``dot``, ``total``), never through a bare sum(): from Python 3.12
+# on, sum() of floats is compensated (Neumaier), so the same runtime would give other bits on
+# another interpreter than on 3.11 and than the C models, which add from the left. Where sum() does
+# add from the left (CPython before 3.12; checked on import), it is that very loop at C speed (the
+# tables' ~5 million dot products).
+def _dot_loop(a, b, start: float = 0.0) -> float:
     s = start
     for x, y in zip(a, b):
         s += x * y
     return s
 
 
-def total(xs, start: float = 0.0) -> float:
-    """start + xs[0] + xs[1] + ..., added from the left in double precision."""
+def _total_loop(xs, start: float = 0.0) -> float:
     s = start
     for x in xs:
         s += x
     return s
+
+
+def _dot_sum(a, b, start: float = 0.0) -> float:
+    return _left_sum(map(mul, a, b), start)
+
+
+def _total_sum(xs, start: float = 0.0) -> float:
+    return _left_sum(xs, start)
+
+
+_left_sum = sum
+_SUM_ADDS_FROM_THE_LEFT = sum([1.0, 1e100, 1.0, -1e100]) == 0.0     # compensated: 2.0
+dot = _dot_sum if _SUM_ADDS_FROM_THE_LEFT else _dot_loop
+dot.__doc__ = "start + a[0] b[0] + a[1] b[1] + ..., added from the left in double precision."
+total = _total_sum if _SUM_ADDS_FROM_THE_LEFT else _total_loop
+total.__doc__ = "start + xs[0] + xs[1] + ..., added from the left in double precision."
 
 
 def matmul(A, B):

@@ -198,6 +198,28 @@ def test_the_compensated_sum_is_not_the_sum_from_the_left():
     assert _compensated_sum([1e16, 1.0, -1e16, 1.0]) == 2.0 != ((1e16 + 1.0) - 1e16) + 1.0
 
 
+@pytest.mark.parametrize("impl", ["loop", "sum"])
+def test_dot_and_total_add_from_the_left(impl):
+    """Both ways of ``fmu_src.linalg``'s sums (the loop, used where sum() is compensated; sum(),
+    used where it adds from the left) are the left fold, start first, to the bit."""
+    from functools import reduce
+
+    from latobs.fmu_src import linalg
+
+    if impl == "sum" and not linalg._SUM_ADDS_FROM_THE_LEFT:
+        pytest.skip("this interpreter's sum() is compensated: the loop is used")
+    dot, total = (linalg._dot_loop, linalg._total_loop) if impl == "loop" else (linalg._dot_sum, linalg._total_sum)
+    rng = np.random.default_rng(7)
+    for n in range(12):
+        a = (rng.standard_normal(n) * 10.0 ** rng.integers(-20, 20, n)).tolist()
+        b = (rng.standard_normal(n) * 10.0 ** rng.integers(-20, 20, n)).tolist()
+        for start in (0.0, -0.0, 1e-300, -3.5):
+            want = reduce(lambda s, p: s + p[0] * p[1], zip(a, b), start)
+            assert _bits(dot(a, b, start)) == _bits(want)
+            assert _bits(total(a, start)) == _bits(reduce(lambda s, x: s + x, a, start))
+    assert dot([1.0, 1e100, 1.0, -1e100], [1.0] * 4) == total([1.0, 1e100, 1.0, -1e100]) == 0.0
+
+
 @pytest.mark.parametrize("name", _names())
 def test_the_python_runtime_and_its_tables_give_the_golden_bits_on_any_interpreter(name, built_fmus, monkeypatch):
     """From Python 3.12 on the built-in sum() of floats is compensated: the runtimes and the tables
