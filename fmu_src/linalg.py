@@ -37,12 +37,22 @@ def _total_sum(xs, start: float = 0.0) -> float:
     return _left_sum(xs, start)
 
 
+def _matvec_loop(A, v) -> list[float]:
+    return [_dot_loop(row, v) for row in A]
+
+
+def _matvec_sum(A, v) -> list[float]:
+    return [_left_sum(map(mul, row, v), 0.0) for row in A]
+
+
 _left_sum = sum
 _SUM_ADDS_FROM_THE_LEFT = sum([1.0, 1e100, 1.0, -1e100]) == 0.0     # compensated: 2.0
 dot = _dot_sum if _SUM_ADDS_FROM_THE_LEFT else _dot_loop
 dot.__doc__ = "start + a[0] b[0] + a[1] b[1] + ..., added from the left in double precision."
 total = _total_sum if _SUM_ADDS_FROM_THE_LEFT else _total_loop
 total.__doc__ = "start + xs[0] + xs[1] + ..., added from the left in double precision."
+matvec = _matvec_sum if _SUM_ADDS_FROM_THE_LEFT else _matvec_loop
+matvec.__doc__ = "A v: each row's products added from the left (``dot``)."
 
 
 def matmul(A, B):
