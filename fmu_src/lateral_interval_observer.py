@@ -99,6 +99,29 @@ def omega_bounds(P, wl, wu):
     return lemma3_constant(P, wl, wu)
 
 
+# -- outward rounding of the published bounds ----------------------------------------------------
+_U = 2.0 ** -53                 # the unit roundoff of doubles
+_TINY = 4.0 * 2.0 ** -1074      # the rounding errors' absolute floor (subnormal results)
+
+
+def _outward_atan(q: float, side: int) -> float:
+    """atan of the exact quotient that q = fl(num / den) rounds, rounded outward (side -1: below, +1:
+    above) by 3 ulps: the division's error moves atan by at most half an ulp (|atan'(q) q| <= |atan q|),
+    and libm's atan is within 2 ulps (glibc's, within 1)."""
+    t = math.atan(q)
+    for _ in range(3):
+        t = math.nextafter(t, side * math.inf)
+    return t
+
+
+def _outward_sum(t1: float, t2: float, side: int) -> float:
+    """t1 + t2, each a coefficient (three roundings: L = lf + lr, m lr, / L) times a bound, rounded
+    outward by 8 u (|t1| + |t2|) (the error is below 5 u (|t1| + |t2|): three roundings of the
+    coefficient, one of the product, one of the sum) and one ulp for the rounding of that margin."""
+    err = 8.0 * _U * (abs(t1) + abs(t2)) + _TINY
+    return math.nextafter(t1 + t2 + side * err, side * math.inf)
+
+
 def _product_hull(al, au, l, u):
     """The exact interval product [al, au] [l, u] (contained in the bound of eq. (21), which it
     tightens when both factors change sign), by the signs of the constant factor."""
@@ -906,14 +929,17 @@ class IntervalObserver:
         vx = self._vx
         out = self.y
         out["vy_lower"], out["vy_upper"] = xl0, xu0
+        # DEPARTURE (floating point, not in the paper): beta and the forces are evaluated in doubles
+        # and rounded outward by a bound of that evaluation's error, so that they contain the exact
+        # values for every x in the box (``_outward_atan``, ``_outward_sum``)
         if vx > 0:
-            out["beta_lower"], out["beta_upper"] = math.atan(xl0 / vx), math.atan(xu0 / vx)
+            out["beta_lower"], out["beta_upper"] = _outward_atan(xl0 / vx, -1), _outward_atan(xu0 / vx, 1)
         else:                              # reversing: atan(x / vx) decreases in x
-            out["beta_lower"], out["beta_upper"] = math.atan(xu0 / vx), math.atan(xl0 / vx)
+            out["beta_lower"], out["beta_upper"] = _outward_atan(xu0 / vx, -1), _outward_atan(xl0 / vx, 1)
         out["yaw_rate_lower"], out["yaw_rate_upper"] = xl1, xu1
         L = md["lf"] + md["lr"]
         a, b, c = md["m"] * md["lr"] / L, md["Iz"] / L, md["m"] * md["lf"] / L
         # inverse of eq. (8); DEPARTURE from eq. (45) (misprint): Fyr's lower bound uses x4's upper
-        out["Fyf_lower"], out["Fyf_upper"] = a * xl2 + b * xl3, a * xu2 + b * xu3
-        out["Fyr_lower"], out["Fyr_upper"] = c * xl2 - b * xu3, c * xu2 - b * xl3
+        out["Fyf_lower"], out["Fyf_upper"] = _outward_sum(a * xl2, b * xl3, -1), _outward_sum(a * xu2, b * xu3, 1)
+        out["Fyr_lower"], out["Fyr_upper"] = _outward_sum(c * xl2, -b * xu3, -1), _outward_sum(c * xu2, -b * xl3, 1)
         out["mode"] = self.mode + 1

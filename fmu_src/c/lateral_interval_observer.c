@@ -1094,23 +1094,40 @@ static void start(Model *m, const double *u, const Log *log)
     me_rebase(s, s->box);
 }
 
+/* The runtime's ``_outward_atan``: atan(q) rounded outward by 3 ulps (side -1: below, +1: above). */
+static double outward_atan(double q, int side)
+{
+    double t = atan(q);
+    int k;
+    for (k = 0; k < 3; k++) t = nextafter(t, side * INFINITY);
+    return t;
+}
+
+/* The runtime's ``_outward_sum``: t1 + t2 rounded outward by 8 u (|t1| + |t2|) + 4 2^-1074 and one ulp. */
+static double outward_sum(double t1, double t2, int side)
+{
+    double err = 8.0 * 0x1p-53 * (fabs(t1) + fabs(t2)) + 4.0 * 0x1p-1074;
+    return nextafter(t1 + t2 + side * err, side * INFINITY);
+}
+
 /* The runtime's ``_publish``: vy; beta = atan(vy / vx) (monotone in vy, decreasing when reversing);
  * r; the axle forces Fyf = (m lr x3 + Iz x4)/L, Fyr = (m lf x3 - Iz x4)/L (eq. 8 inverted, eq. 45)
- * by interval arithmetic: the lower bound of Fyr takes the UPPER bound of x4 (eq. 45's misprint). */
+ * by interval arithmetic: the lower bound of Fyr takes the UPPER bound of x4 (eq. 45's misprint).
+ * beta and the forces rounded outward by a bound of their evaluation's error (DEPARTURE, as there). */
 static void outputs_of(const double X[NB], double vx, int mode, int consistent, double *y, int *yi)
 {
     const double *l = X, *u = X + NX;
     double L = IV_LF + IV_LR, a = IV_M * IV_LR / L, b = IV_IZ / L, c = IV_M * IV_LF / L;
     y[OUT_vy_lower] = l[0];
     y[OUT_vy_upper] = u[0];
-    y[OUT_beta_lower] = vx > 0.0 ? atan(l[0] / vx) : atan(u[0] / vx);
-    y[OUT_beta_upper] = vx > 0.0 ? atan(u[0] / vx) : atan(l[0] / vx);
+    y[OUT_beta_lower] = vx > 0.0 ? outward_atan(l[0] / vx, -1) : outward_atan(u[0] / vx, -1);
+    y[OUT_beta_upper] = vx > 0.0 ? outward_atan(u[0] / vx, 1) : outward_atan(l[0] / vx, 1);
     y[OUT_yaw_rate_lower] = l[1];
     y[OUT_yaw_rate_upper] = u[1];
-    y[OUT_Fyf_lower] = a * l[2] + b * l[3];
-    y[OUT_Fyf_upper] = a * u[2] + b * u[3];
-    y[OUT_Fyr_lower] = c * l[2] - b * u[3];
-    y[OUT_Fyr_upper] = c * u[2] - b * l[3];
+    y[OUT_Fyf_lower] = outward_sum(a * l[2], b * l[3], -1);
+    y[OUT_Fyf_upper] = outward_sum(a * u[2], b * u[3], 1);
+    y[OUT_Fyr_lower] = outward_sum(c * l[2], -b * u[3], -1);
+    y[OUT_Fyr_upper] = outward_sum(c * u[2], -b * l[3], 1);
     yi[INT_mode] = mode + 1;
     yi[INT_consistent] = consistent;
 }

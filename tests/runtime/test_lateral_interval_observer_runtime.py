@@ -874,3 +874,40 @@ def test_a_huge_speed_at_a_long_step_returns_at_once(design, vx):
     for _ in range(3):
         obs.step(0.2, _u(vx=vx, delta=0.01, r=0.01, ay=0.1))
     assert time.perf_counter() - t0 < 0.5
+
+
+def test_published_beta_and_forces_contain_the_exact_values_at_the_box_edges(design):
+    """The bounds of beta and of the axle forces are rounded outward: they contain, to the last
+    bit, the exact values (rational arithmetic; atan at 60 digits) at the box's corners, where the
+    extremes lie (eq. 8 inverted, eq. 45), over boxes of every scale. Evaluated plainly in doubles,
+    they exclude the exact force in some of these boxes (the test can fail)."""
+    from fractions import Fraction as Q
+
+    import mpmath
+
+    mpmath.mp.dps = 60
+    obs = IntervalObserver(design, {})
+    md = obs.model
+    m, lf, lr, Iz = (Q(md[k]) for k in ("m", "lf", "lr", "Iz"))
+    rng = np.random.default_rng(3)
+    plain_misses = 0
+    for k in range(400):
+        scale = 10.0 ** rng.uniform(-8, 4, 4)
+        lo = rng.standard_normal(4) * scale
+        box = [float(x) for x in lo] + [float(x + abs(w)) for x, w in zip(lo, rng.standard_normal(4) * scale)]
+        vx = float(rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(-1, 2))
+        obs.box, obs._vx = box, vx
+        obs._publish()
+        y = obs.y
+        for x3, x4 in ((box[2], box[3]), (box[2], box[7]), (box[6], box[3]), (box[6], box[7])):
+            fyf = (m * lr * Q(x3) + Iz * Q(x4)) / (lf + lr)
+            fyr = (m * lf * Q(x3) - Iz * Q(x4)) / (lf + lr)
+            assert Q(y["Fyf_lower"]) <= fyf <= Q(y["Fyf_upper"]), (k, x3, x4)
+            assert Q(y["Fyr_lower"]) <= fyr <= Q(y["Fyr_upper"]), (k, x3, x4)
+        L = md["lf"] + md["lr"]
+        a, b = md["m"] * md["lr"] / L, md["Iz"] / L
+        plain_misses += Q(a * box[2] + b * box[3]) > (m * lr * Q(box[2]) + Iz * Q(box[3])) / (lf + lr)
+        for x0 in (box[0], box[4]):
+            beta = mpmath.atan(mpmath.mpf(x0) / mpmath.mpf(vx))
+            assert mpmath.mpf(y["beta_lower"]) <= beta <= mpmath.mpf(y["beta_upper"]), (k, x0, vx)
+    assert plain_misses > 0
