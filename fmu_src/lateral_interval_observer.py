@@ -122,6 +122,14 @@ def _outward_sum(t1: float, t2: float, side: int) -> float:
     return math.nextafter(t1 + t2 + side * err, side * math.inf)
 
 
+def _measured_box(y: float, nu: float) -> tuple[float, float]:
+    """[y - nu, y + nu], each end rounded outward by one ulp when nu > 0 (the rounding of y -+ nu is
+    within half an ulp): the box contains every value within nu of y, exactly."""
+    if nu == 0.0:
+        return y, y
+    return math.nextafter(y - nu, -math.inf), math.nextafter(y + nu, math.inf)
+
+
 def _product_hull(al, au, l, u):
     """The exact interval product [al, au] [l, u] (contained in the bound of eq. (21), which it
     tightens when both factors change sign), by the signs of the constant factor."""
@@ -680,7 +688,7 @@ class IntervalObserver:
         bounds if ``keep``); no xi, no pending correction."""
         box = self.box
         for k, j in enumerate(self.meas):
-            box[j], box[_N + j] = y[k] - self.nu[k], y[k] + self.nu[k]
+            box[j], box[_N + j] = _measured_box(y[k], self.nu[k])
         for j in self.unmeas:
             lo, hi = -self.w0[j], self.w0[j]
             if keep:
@@ -827,7 +835,7 @@ class IntervalObserver:
         consistent = 1
         for k, j in enumerate(self.meas):
             lo, hi = box[j], box[_N + j]
-            ml, mu = y[k] - self.nu[k], y[k] + self.nu[k]
+            ml, mu = _measured_box(y[k], self.nu[k])
             if ml > lo:
                 lo = ml
             if mu < hi:

@@ -1040,13 +1040,23 @@ static int band(State *s, double vx, const Log *log)
     return i < 0 ? 0 : (i < N_MODES - 1 ? i : N_MODES - 1);
 }
 
+/* The runtime's ``_measured_box``: [y - nu, y + nu], each end one ulp outward when nu > 0. */
+static void measured_box(double y, double nu, double *lo, double *hi)
+{
+    if (nu == 0.0) {
+        *lo = *hi = y;
+        return;
+    }
+    *lo = nextafter(y - nu, -INFINITY);
+    *hi = nextafter(y + nu, INFINITY);
+}
+
 /* The initial box: measured states y +- nu, the others +-x0_halfwidth (hull with the current bounds
  * if keep); no xi, no pending correction (the runtime's ``_restart``) */
 static void restart(State *s, const double y[NY], int keep)
 {
     for (int q = 0; q < NY; q++) {
-        s->box[MEAS[q]] = y[q] - s->nu[q];
-        s->box[NX + MEAS[q]] = y[q] + s->nu[q];
+        measured_box(y[q], s->nu[q], &s->box[MEAS[q]], &s->box[NX + MEAS[q]]);
         int j = UNMEAS[q];
         double lo = -IV_X0_HALFWIDTH[j], hi = IV_X0_HALFWIDTH[j];
         if (keep) {
@@ -1140,7 +1150,8 @@ static int intersect_measurement(State *s, const double y[NY])
     int consistent = 1;
     for (int q = 0; q < NY; q++) {
         int j = MEAS[q];
-        double lo = s->box[j], hi = s->box[NX + j], ml = y[q] - s->nu[q], mu = y[q] + s->nu[q];
+        double lo = s->box[j], hi = s->box[NX + j], ml, mu;
+        measured_box(y[q], s->nu[q], &ml, &mu);
         if (ml > lo) lo = ml;
         if (mu < hi) hi = mu;
         if (lo > hi) {

@@ -911,3 +911,20 @@ def test_published_beta_and_forces_contain_the_exact_values_at_the_box_edges(des
             beta = mpmath.atan(mpmath.mpf(x0) / mpmath.mpf(vx))
             assert mpmath.mpf(y["beta_lower"]) <= beta <= mpmath.mpf(y["beta_upper"]), (k, x0, vx)
     assert plain_misses > 0
+
+
+def test_the_measurement_box_contains_every_value_within_nu_exactly():
+    """[y - nu, y + nu] (the measurement intersection, the restarts) rounded outward: it holds the
+    exact y -+ nu (rational arithmetic) where plain rounding to nearest cuts it off; nu = 0: y."""
+    from fractions import Fraction as Q
+
+    rng = np.random.default_rng(5)
+    plain_cut = 0
+    for _ in range(2000):
+        y = float(rng.standard_normal() * 10.0 ** rng.uniform(-6, 3))
+        nu = float(abs(rng.standard_normal()) * 10.0 ** rng.uniform(-12, 1))
+        lo, hi = io._measured_box(y, nu)
+        assert Q(lo) <= Q(y) - Q(nu) and Q(y) + Q(nu) <= Q(hi)
+        plain_cut += Q(y - nu) > Q(y) - Q(nu)
+    assert plain_cut > 0
+    assert io._measured_box(0.3, 0.0) == (0.3, 0.3)
