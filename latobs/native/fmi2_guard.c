@@ -8,7 +8,7 @@
  * state functions (the FMU does not declare them), forwards every valid call unchanged, logs every
  * refusal through the host's logger and returns fmi2Error without reaching Python. It also releases
  * the Python objects pythonfmu leaks ("pythonfmu 0.7.0's reference leaks" below) and defuses its
- * exit-time use-after-free (guard_at_exit).
+ * exit-time use-after-free (the exit handler of load_real_locked).
  *
  * Why it is still needed (measured against pythonfmu 0.7.0's library alone, fmpy and a plain C
  * host; docs/backends.md, "Why pythonfmu FMUs carry a native guard"): alone, that library accepts
@@ -125,27 +125,22 @@ static size_t n_instances; /* guarded by lock */
  * BEFORE its ELF destructors, so finalizePythonInterpreter assigns to an already destroyed
  * shared_ptr and releases its freed control block again (valgrind: "Invalid read ... in
  * finalizePythonInterpreter"; at random, glibc aborts the host at exit with "corrupted
- * double-linked list"). The guard releases that state itself while it is alive: when the
- * last instance is freed, and from an exit handler registered after the real library's own
- * (handlers run last in, first out). The shared_ptr is then empty and the late reset harmless. */
+ * double-linked list"). The guard has that state released at exit by an exit handler registered
+ * after the real library's own (handlers run last in, first out; see below why not sooner). The
+ * shared_ptr is then empty and the late reset harmless. */
 typedef void guard_finalize_fn(void);
 static guard_finalize_fn *real_finalize; /* guarded by lock; NULL if not exported */
 static int exit_hook_registered;         /* guarded by lock */
-extern void *__dso_handle;
 extern int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
 
-static void release_python_state_locked(void)
-{
-    if (real_finalize != NULL) real_finalize();
-}
-
-static void guard_at_exit(void *unused)
-{
-    (void)unused;
-    pthread_mutex_lock(&lock);
-    release_python_state_locked();
-    pthread_mutex_unlock(&lock);
-}
+/* Python's interpreter, once the real library started it (a host without Python), lives until the
+ * process exits. Released with the last instance, pythonfmu finalises it and starts a new one at
+ * the next instantiation, and CPython >= 3.12 crashes when re-initialised (seen: SIGSEGV at the
+ * first fmi2Instantiate after a reload from a fresh extraction, in a plain C host). So the state is
+ * released at exit only: finalizePythonInterpreter itself (in the real library, never unmapped; a
+ * function of this library could be gone by then) is registered as an exit handler of the process
+ * (dso NULL: not run when this library is unloaded). It takes no argument; the handler's void *
+ * argument is ignored by the calling conventions of the guard's platforms (x86-64, AArch64). */
 
 typedef struct {
     fmi2Component real;
@@ -494,7 +489,6 @@ static void guard_log(const fmi2CallbackFunctions *f, fmi2String instance, fmi2S
 static void unload_real_locked(void)
 {
     if (real_handle != NULL) {
-        release_python_state_locked(); /* before the library can run its own destructors */
         unbind_hooks_locked();         /* it stays mapped; this library may not */
         dlclose(real_handle);
     }
@@ -525,7 +519,9 @@ static const char *load_real_locked(void)
     memcpy(path, slash ? info.dli_fname : "./", dir_len);
     memcpy(path + dir_len, GUARD_REAL_LIBRARY, sizeof GUARD_REAL_LIBRARY);
     dlerror();
-    real_handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    /* never unmapped (RTLD_NODELETE), as the first copy of it is anyway (STB_GNU_UNIQUE): its
+     * finalizePythonInterpreter is an exit handler of the process (below) */
+    real_handle = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_NODELETE);
     if (real_handle == NULL) {
         const char *e = dlerror();
         snprintf(err, sizeof err, "cannot load %s: %s", path, e ? e : "unknown dlopen error");
@@ -536,8 +532,8 @@ static const char *load_real_locked(void)
 #define GUARD_DLSYM(name) *(void **)(&api.name) = dlsym(real_handle, "fmi2" #name);
     GUARD_FORWARDED(GUARD_DLSYM)
     *(void **)(&real_finalize) = dlsym(real_handle, "finalizePythonInterpreter");
-    if (!exit_hook_registered) { /* after the real library's static objects: runs before them */
-        __cxa_atexit(guard_at_exit, NULL, &__dso_handle);
+    if (!exit_hook_registered && real_finalize != NULL) { /* after the real library's static objects: runs before them */
+        __cxa_atexit((void (*)(void *))real_finalize, NULL, NULL);
         exit_hook_registered = 1;
     }
     if (api.Instantiate == NULL || api.FreeInstance == NULL) {
