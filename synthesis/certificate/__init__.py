@@ -30,12 +30,32 @@ def _family(data: dict):
     return import_module(f"{__name__}.{name}")
 
 
+#: certificates made in this process, by the content of what they certified (:func:`certify`)
+_MADE: dict[str, tuple[bool, tuple[Check, ...]]] = {}
+_MADE_SIZE = 32
+_OWN_KEYS = ("certified", "checks")     # what a certificate writes into a design dict
+
+
 def certify(data: dict) -> tuple[bool, list[Check]]:
-    """Certify a design dict. Returns (certified, checks)."""
-    checks = _family(data).certify(data)
-    from ..table_checks import checks as table_checks
-    checks = checks + table_checks(data)      # the runtime's tables, checked independently
-    return all(c.passed for c in checks) and bool(checks), checks
+    """Certify a design dict. Returns (certified, checks).
+
+    A certificate is a pure function of the design's content: one made before in this process of
+    identical content (the design's every number, its tables included; not the ``certified`` and
+    ``checks`` a certificate wrote) is returned again rather than re-evaluated (a build certifies a
+    design when it is solved and again before it is packaged)."""
+    from ..identity import sha256_json
+
+    key = sha256_json({k: v for k, v in data.items() if k not in _OWN_KEYS})
+    made = _MADE.get(key)
+    if made is None:
+        checks = _family(data).certify(data)
+        from ..table_checks import checks as table_checks
+        checks = checks + table_checks(data)      # the runtime's tables, checked independently
+        made = (all(c.passed for c in checks) and bool(checks), tuple(checks))
+        if len(_MADE) >= _MADE_SIZE:
+            _MADE.pop(next(iter(_MADE)))
+        _MADE[key] = made
+    return made[0], list(made[1])
 
 
 def as_dicts(checks: list[Check]) -> list[dict]:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ...fmu_src.linalg import dot, total   # sums from the left, as the runtimes' (not sum(): compensated from Python 3.12)
 
 
@@ -47,58 +49,79 @@ def norm_inf(A) -> float:
 
 
 # -- matrix power series in d (list of matrices, index = power of d), truncated at degree J ----
+# Inside the series the matrices are numpy arrays, multiplied by ``_mm``: each entry's products
+# added from the left from 0.0, exactly the doubles of ``matmul`` (``fmu_src.linalg.dot``), one
+# column of A at a time (numpy neither fuses a multiply and an add nor reorders elementwise sums).
+def _mm(A, B):
+    out = np.zeros((A.shape[0], B.shape[1]))
+    for j in range(A.shape[1]):
+        out += A[:, j:j + 1] * B[j:j + 1, :]
+    return out
+
+
+def _norm(A) -> float:
+    """``norm_inf`` of an array: each row's |a| added from the left."""
+    s = np.zeros(A.shape[0])
+    for j in range(A.shape[1]):
+        s += np.abs(A[:, j])
+    return float(max(s.tolist()))
+
+
+def _arrays(series_):
+    return [np.array(P, dtype=float) for P in series_]
+
+
 def smul(P, Q, J):
     out = [None] * min(len(P) + len(Q) - 1, J + 1)
     for a, Pa in enumerate(P):
         for b, Qb in enumerate(Q):
             if a + b > J:
                 break
-            prod = matmul(Pa, Qb)
-            out[a + b] = prod if out[a + b] is None else add(out[a + b], prod)
+            prod = _mm(Pa, Qb)
+            out[a + b] = prod if out[a + b] is None else out[a + b] + prod
     return out
 
 
 def sadd(P, Q):
     if len(P) < len(Q):
         P, Q = Q, P
-    return [add(Pa, Q[j]) if j < len(Q) else Pa for j, Pa in enumerate(P)]
+    return [Pa + Q[j] if j < len(Q) else Pa for j, Pa in enumerate(P)]
 
 
 def shift(coeffs, v0):
-    """Coefficients in d of sum_k coeffs[k] (v0 + d)**k."""
+    """Coefficients in d of sum_k coeffs[k] (v0 + d)**k (arrays)."""
+    coeffs = _arrays(coeffs)
     out = []
     for j in range(len(coeffs)):
         acc = None
         for k in range(j, len(coeffs)):
-            term = scale(coeffs[k], math.comb(k, j) * v0 ** (k - j))
-            acc = term if acc is None else add(acc, term)
+            term = coeffs[k] * (math.comb(k, j) * v0 ** (k - j))
+            acc = term if acc is None else acc + term
         out.append(acc)
     return out
 
 
 def substep(Ms, Gs, hs, J):
     """One RK4 substep with held inputs as a series of affine maps [R | S G] in d."""
-    n = len(Ms[0])
-    I = eye(n)
-    X = [scale(M, hs) for M in Ms]
+    n = Ms[0].shape[0]
+    I = np.eye(n)
+    X = [M * hs for M in Ms]
     Q = [I]
     for c in (4.0, 3.0, 2.0):                       # Q = I + X/2 (I + X/3 (I + X/4))
-        Q = sadd([I], [scale(P, 1.0 / c) for P in smul(X, Q, J)])
+        Q = sadd([I], [P * (1.0 / c) for P in smul(X, Q, J)])
     R = sadd([I], smul(X, Q, J))                # R = I + X Q
-    SG = [scale(P, hs) for P in smul(Q, Gs, J)]   # S G = hs Q G
-    m = len(Gs[0][0])
-    R += [zeros(n, n)] * (len(SG) - len(R))
-    SG += [zeros(n, m)] * (len(R) - len(SG))
-    return [[ra + rb for ra, rb in zip(A, B)] for A, B in zip(R, SG)]
+    SG = [P * hs for P in smul(Q, Gs, J)]         # S G = hs Q G
+    m = Gs[0].shape[1]
+    R += [np.zeros((n, n))] * (len(SG) - len(R))
+    SG += [np.zeros((n, m))] * (len(R) - len(SG))
+    return [np.hstack([A, B]) for A, B in zip(R, SG)]
 
 
 def compose(W2, W1, n, J):
     """Series of the affine map W2 after W1, each [A | b] (n rows)."""
-    out = smul([[row[:n] for row in P] for P in W2], W1, J)
+    out = smul([P[:, :n] for P in W2], W1, J)
     for j, P in enumerate(W2):
-        for ro, rp in zip(out[j], P):
-            for c in range(n, len(rp)):
-                ro[c] += rp[c]
+        out[j][:, n:] += P[:, n:]
     return out
 
 
@@ -119,13 +142,13 @@ def augment(Ms, Gs, h):
     [s; w]' = [[M, G], [0, 0]] [s; w] + [[0], [I / h]] e, e = the hold's increment over the step,
     so that w(t + tau) = w_k + (tau / h) e is a state. RK4 on this system evaluates w exactly at
     the stage times (w is linear in time), so its maps ARE the RK4 substeps with that input."""
-    n1, nw = len(Ms[0]), len(Gs[0][0])
+    n1, nw = Ms[0].shape[0], Gs[0].shape[1]
     Ma = []
     for k in range(max(len(Ms), len(Gs))):
-        M = Ms[k] if k < len(Ms) else zeros(n1, n1)
-        G = Gs[k] if k < len(Gs) else zeros(n1, nw)
-        Ma.append([list(rm) + list(rg) for rm, rg in zip(M, G)] + zeros(nw, n1 + nw))
-    return Ma, [zeros(n1, nw) + scale(eye(nw), 1.0 / h)]
+        M = Ms[k] if k < len(Ms) else np.zeros((n1, n1))
+        G = Gs[k] if k < len(Gs) else np.zeros((n1, nw))
+        Ma.append(np.vstack([np.hstack([M, G]), np.zeros((nw, n1 + nw))]))
+    return Ma, [np.vstack([np.zeros((n1, nw)), np.eye(nw) * (1.0 / h)])]
 
 
 def truncation_bound(coeffs, D, delta, E1, alpha, nsub):
@@ -139,7 +162,7 @@ def truncation_bound(coeffs, D, delta, E1, alpha, nsub):
     delta^j <= f(rho) (delta / rho)^(J + 1) for any rho > delta (minimised over a grid of rho).
     """
     J = len(coeffs) - 1
-    exact = total(norm_inf(coeffs[j]) * delta**j for j in range(D + 1, J + 1))
+    exact = total(_norm(coeffs[j]) * delta**j for j in range(D + 1, J + 1))
     best = math.inf
     for k in range(1, 60):
         rho = delta * 1.25**k
@@ -160,16 +183,16 @@ def step_series(Mc, Gc, v0, nsub, hs, J, h=None):
     Ms, Gs = shift(Mc, v0), shift(Gc, v0)
     if h is not None:
         Ms, Gs = augment(Ms, Gs, h)
-    n = len(Ms[0])
+    n = Ms[0].shape[0]
     W = substep(Ms, Gs, hs, 4 * (len(Ms) - 1) + len(Gs) - 1)   # all its degrees in d
-    E1 = [norm_inf(P) for P in W[1:]]
+    E1 = [_norm(P) for P in W[1:]]
     # powers of E_0 = [[R0, b0], [0, I]]: ||E_0^a|| = max(1, ||[R0^a | sum_{k<a} R0^k b0]||)
     P, alpha = None, 1.0
     for _ in range(nsub):
         P = W[:1] if P is None else compose(W[:1], P, n, 0)
-        alpha = max(alpha, norm_inf(P[0]))
+        alpha = max(alpha, _norm(P[0]))
     coeffs = power(W[: J + 1], nsub, n, J)
-    coeffs += [zeros(n, len(W[0][0]))] * (J + 1 - len(coeffs))
+    coeffs += [np.zeros((n, W[0].shape[1]))] * (J + 1 - len(coeffs))
     return coeffs, E1, alpha
 
 
@@ -182,8 +205,8 @@ def interval_count(Mc, Gc, v_lo, v_hi, nsub, hs, degree, tol, max_intervals, h=N
         return 1
     n1 = len(Mc[0])
     coeffs, *_ = step_series(Mc, Gc, 0.5 * (v_lo + v_hi), nsub, hs, degree + 3, h)
-    goal = tol * norm_inf(coeffs[0][:n1]) / 4
-    half = min((goal / max(norm_inf(coeffs[j]), 1e-300)) ** (1.0 / j) for j in (degree + 1, degree + 2))
+    goal = tol * _norm(coeffs[0][:n1]) / 4
+    half = min((goal / max(_norm(coeffs[j]), 1e-300)) ** (1.0 / j) for j in (degree + 1, degree + 2))
     return max(1, min(max_intervals, math.ceil(width / (2 * half))))
 
 
@@ -201,10 +224,10 @@ def interval_coefficients(Mc, Gc, v_lo, v_hi, K, k, nsub, hs, degree, tol, h=Non
     center = v_lo + (k + 0.5) * width / K
     delta = 0.5 * width / K * (1 + 1e-6) + 1e-300   # slack for the rounding of k
     coeffs, E1, alpha = step_series(Mc, Gc, center, nsub, hs, J, h)
-    budget = tol * norm_inf(coeffs[0][:n1]) - truncation_bound(coeffs, J, delta, E1, alpha, nsub)
+    budget = tol * _norm(coeffs[0][:n1]) - truncation_bound(coeffs, J, delta, E1, alpha, nsub)
     if budget < 0:
         return center, None
-    kept = [[row[:] for row in P[:n1]] for P in coeffs]
+    kept = [P[:n1].tolist() for P in coeffs]
     for i in range(n1):
         terms = sorted((abs(c) * delta**j, j, col) for j in range(1, len(kept))
                        for col, c in enumerate(kept[j][i]))
@@ -222,7 +245,7 @@ def interval_coefficients(Mc, Gc, v_lo, v_hi, K, k, nsub, hs, degree, tol, h=Non
 def fixed_map(M, G, nsub, hs, h=None):
     """The composite map of nsub RK4 substeps of s' = M s + G w at a fixed speed, exact: [Phi | Gam]
     (first-order hold, ``h`` given: the augmented map, whose top rows are [Phi | Gam | Gam_e])."""
-    Ms, Gs = [M], [G]
+    Ms, Gs = _arrays([M]), _arrays([G])
     if h is not None:
         Ms, Gs = augment(Ms, Gs, h)
-    return power(substep(Ms, Gs, hs, 0), nsub, len(Ms[0]), 0)[0]
+    return power(substep(Ms, Gs, hs, 0), nsub, Ms[0].shape[0], 0)[0].tolist()
