@@ -9,6 +9,8 @@ checks of the runtime's tables (``synthesis.table_checks``). Method per paper: `
 """
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import asdict
 from importlib import import_module
 
@@ -36,6 +38,17 @@ _MADE_SIZE = 32
 _OWN_KEYS = ("certified", "checks")     # what a certificate writes into a design dict
 
 
+def _content_key(obj) -> str:
+    """SHA-256 of ``obj`` as canonical JSON (numpy values as lists)."""
+    def plain(o):
+        if hasattr(o, "tolist"):
+            return o.tolist()
+        if hasattr(o, "__dataclass_fields__"):
+            return asdict(o)
+        raise TypeError(f"{type(o).__name__} in a design dict")
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":"), default=plain).encode()).hexdigest()
+
+
 def certify(data: dict) -> tuple[bool, list[Check]]:
     """Certify a design dict. Returns (certified, checks).
 
@@ -43,9 +56,7 @@ def certify(data: dict) -> tuple[bool, list[Check]]:
     identical content (the design's every number, its tables included; not the ``certified`` and
     ``checks`` a certificate wrote) is returned again rather than re-evaluated (a build certifies a
     design when it is solved and again before it is packaged)."""
-    from ..identity import sha256_json
-
-    key = sha256_json({k: v for k, v in data.items() if k not in _OWN_KEYS})
+    key = _content_key({k: v for k, v in data.items() if k not in _OWN_KEYS})
     made = _MADE.get(key)
     if made is None:
         checks = _family(data).certify(data)
