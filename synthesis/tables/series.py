@@ -18,10 +18,6 @@ def floats(M) -> list[list[float]]:
     return [[float(x) for x in row] for row in M]
 
 
-def matvec(M, v):
-    return [dot(row, v) for row in M]
-
-
 def matmul(A, B):
     cols = list(zip(*B))
     return [[dot(row, col) for col in cols] for row in A]
@@ -33,10 +29,6 @@ def add(A, B):
 
 def scale(A, s):
     return [[a * s for a in row] for row in A]
-
-
-def eye(n):
-    return [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
 
 
 def zeros(r, c):

@@ -266,3 +266,31 @@ def test_frozen_integral_growth_is_bounded_by_mu(which, request):
                 E1 = cyc @ E0
                 assert np.all(np.einsum("ij,ik,kj->j", E1, P, E1) <= V0 * (1 + 1e-9))
     assert reached >= mu * (1 - 1e-4)
+
+
+def test_a_certificate_is_made_again_only_for_other_content(design_speed, monkeypatch):
+    """``certificate.certify`` evaluates a design's checks once per content in a process (a build
+    certifies a design when solved and before packaging): the same content, as another dict, in
+    another key order or with numpy arrays, gives the same checks without evaluating them again;
+    one changed gain (or table entry) is certified anew, and fails; what a certificate wrote into
+    the dict (``certified``, ``checks``) is not part of the content."""
+    from latobs.synthesis.certificate import sideslip_bank_observer as family
+
+    evaluated = []
+    real = family.certify
+    monkeypatch.setattr(family, "certify", lambda d: evaluated.append(1) or real(d))
+    monkeypatch.setattr(certificate, "_MADE", {})
+    d = copy.deepcopy(design_speed)
+    ok, checks = certificate.certify(d)
+    assert ok and len(evaluated) == 1
+    same = dict(reversed(list(copy.deepcopy(d).items())))
+    same["modes"][0]["gains"]["K_P"] = np.asarray(same["modes"][0]["gains"]["K_P"])
+    same["certified"], same["checks"] = False, []
+    assert certificate.certify(same) == (ok, checks) and len(evaluated) == 1
+    bad = copy.deepcopy(d)
+    bad["modes"][0]["gains"]["K_P"][0][0] *= 1.5
+    ok_bad, _ = certificate.certify(bad)
+    assert not ok_bad and len(evaluated) == 2
+    tab = copy.deepcopy(d)
+    tab["tables"]["maps"][0]["intervals"][0]["coef"][0][0][0] += 1e-6
+    assert not certificate.certify(tab)[0] and len(evaluated) == 3

@@ -99,3 +99,25 @@ def test_taylor_intervals_cover_the_clamped_range(design_tire):
         assert m["v_lo"] == 1.0 / hi and m["scale"] == K / (1.0 / lo - 1.0 / hi)
         centers = np.array([iv["center"] for iv in m["intervals"]])
         np.testing.assert_allclose(centers, 1.0 / hi + (np.arange(K) + 0.5) / m["scale"], rtol=1e-14)
+
+
+def test_the_series_arrays_multiply_as_the_runtimes_left_fold():
+    """``series._mm`` (numpy, one column of A at a time) gives, bit for bit, the products added
+    from the left from 0.0 of ``series.matmul`` (``fmu_src.linalg.dot``); ``series._norm`` those of
+    ``norm_inf``: on random matrices of mixed magnitudes and signs, with zeros of both signs,
+    subnormal and huge entries (where a reordered or fused sum would differ)."""
+    from latobs.synthesis.tables import series
+
+    rng = np.random.default_rng(7)
+    bits = lambda M: np.asarray(M, float).view(np.uint64)            # noqa: E731
+    for _ in range(200):
+        r, k, c = rng.integers(1, 9, size=3)
+        A = rng.standard_normal((r, k)) * 10.0 ** rng.integers(-300, 300, size=(r, k))
+        B = rng.standard_normal((k, c)) * 10.0 ** rng.integers(-8, 8, size=(k, c))
+        A[rng.random((r, k)) < 0.2] = -0.0
+        B[rng.random((k, c)) < 0.2] = 0.0
+        want = series.matmul(A.tolist(), B.tolist())
+        assert np.array_equal(bits(series._mm(A, B)), bits(want))
+        assert series._norm(A) == series.norm_inf(A.tolist())
+    # from the left: ((1e16 + 1) - 1e16) + 1 = 1 (a compensated or pairwise sum gives 2)
+    assert series._mm(np.array([[1e16, 1.0, -1e16, 1.0]]), np.ones((4, 1)))[0, 0] == 1.0
