@@ -74,8 +74,13 @@ class MotorcycleFaultObserver:
         hi = e[cur + 1] + self._hyst if cur < k - 1 else math.inf
         if lo <= vx < hi:          # departure: hysteresis at the band edges (no chattering; the
             return cur             # dwell-time analysis assumes it)
-        i = bisect_right(e, vx) - 1
-        return 0 if i < 0 else min(i, k - 1)
+        return self._band(vx)
+
+    def _band(self, vx: float) -> int:
+        """The band of vx, [edges[i], edges[i+1]) (the nearest one outside the grid): the mode at
+        the start, where no mode is active yet whose band the hysteresis would widen."""
+        i = bisect_right(self._edges, vx) - 1
+        return 0 if i < 0 else min(i, self.n_modes - 1)
 
     def _map(self, mode: int, h: float):
         """[Phi | Gam] of ``mode`` over h: the stored map at the default step, else computed
@@ -107,7 +112,7 @@ class MotorcycleFaultObserver:
         self._started = True
         vx = u["vx"]
         if abs(vx) >= self.vx_hold:
-            self.mode = self._select(vx)
+            self.mode = self._band(vx)
             self._check_grid(vx)
         self._publish(y)
 

@@ -156,7 +156,7 @@ static void start(Model *m, const double *u, const Log *log)
     m->started = 1;
     double vx = u[IN_vx];
     if (fabs(vx) >= m->vx_hold) {
-        m->mode = select_mode(m, vx, 0);
+        m->mode = band_of(vx, 0);           /* no active mode yet: no hysteresis */
         check_grid(m, vx, 0, log);
     }
     publish(m, y);
@@ -222,7 +222,7 @@ int model_do_step(Model *m, double h, const double *u, const Log *log)
     double vx = u[IN_vx], y[NY], v[NW];
     MapRow *W = NULL;
     if (!frozen_at(m, vx, 0)) {            /* the map first: a refused step changes nothing */
-        W = step_map(m, select_mode(m, vx, 0), h);
+        W = step_map(m, m->started ? select_mode(m, vx, 0) : band_of(vx, 0), h);   /* start's mode */
         if (W == NULL) {
             log_event(log, LOG_ERROR, "step refused: the step map over h = %g s is not finite", h);
             return -1;

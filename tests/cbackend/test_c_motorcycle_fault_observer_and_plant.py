@@ -200,6 +200,24 @@ def test_observer_steps_of_changing_size_and_every_warning_equal_python(built_fm
     assert sum("frozen" in m for m in c_log) == 6 and sum("outside the design grid" in m for m in c_log) == 6
 
 
+def test_the_start_takes_the_band_of_the_initial_speed_as_python(built_fmus):
+    """A start within the hysteresis above each interior band edge: the C FMU takes that band at
+    the start and keeps it over its first steps, as the Python FMU does."""
+    tables = built_fmus.design(OBS)["tables"]
+    rng = np.random.default_rng(5)
+    for k, e in enumerate(tables["edges"][1:-1]):
+        vx = e + 0.5 * tables["hysteresis"]
+        steps = []
+        for _ in range(3):
+            y = 0.05 * rng.standard_normal(3)
+            steps.append((0.005, {"vx": vx, "steer_angle": y[0], "yaw_rate": y[1], "roll_rate": y[2]}))
+        u0 = {"vx": vx, "steer_angle": 0.01, "yaw_rate": 0.1, "roll_rate": -0.05}
+        py, _ = run_cs(built_fmus.path(OBS), "py", u0, steps)
+        c, _ = run_cs(built_fmus.c_path(OBS), "c", u0, steps)
+        assert [o["mode"] for o in c] == [k + 2] * 4, (e, vx)
+        _outputs_equal(py, c)
+
+
 def test_plant_clamps_and_warnings_equal_python(built_fmus):
     """Torque beyond +-200 N m, vx below 0, below 1 m/s and above 60 m/s, the fall: outputs within
     1e-9 and the same warnings in the same order (the numbers are printed with %g in C, with

@@ -163,6 +163,27 @@ def test_mode_switch_keeps_the_state_and_hysteresis(d003):
         assert rt.y["mode"] == want, vx
 
 
+def test_the_start_takes_the_band_of_the_initial_speed(d003):
+    """At the start no mode is active, so no hysteresis applies: a start just above a band edge
+    (within the hysteresis of the band below) takes the band it is in, as the first step does, and
+    the first step runs that mode's map (the bug was: 12.5-13 m/s took the 10 m/s mode)."""
+    edges = d003["tables"]["edges"]
+    hyst = d003["tables"]["hysteresis"]
+    y = np.array([0.01, 0.1, -0.05])
+    for k, e in enumerate(edges[1:-1]):
+        for vx in (e, e + 0.5 * hyst, math.nextafter(e, -math.inf), e - 0.5 * hyst):
+            want = k + 2 if vx >= e else k + 1
+            rt = MotorcycleFaultObserver(d003)
+            rt.initialize(_u(vx, y))
+            assert rt.y["mode"] == want, (e, vx)
+            first = MotorcycleFaultObserver(d003)
+            first.step(H, _u(vx, y))                   # started by its first step
+            assert first.y["mode"] == want, (e, vx)
+            M, G = _observer_matrices(d003["modes"][want - 1])
+            E = scipy.linalg.expm(np.block([[M * H, G * H], [np.zeros((3, 10))]]))
+            assert np.allclose(first.s, E[:7, :7] @ rt.s + E[:7, 7:] @ y, rtol=1e-10, atol=1e-12)
+
+
 def test_clamps_and_warnings(d003):
     rt = MotorcycleFaultObserver(d003)
     y = np.array([0.0, 0.1, 0.0])
