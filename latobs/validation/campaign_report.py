@@ -52,8 +52,8 @@ _IN_UNIT = ("rms", "max_abs", "mean_width", "max_violation")
 
 def display(column: str) -> tuple[float, str]:
     """(factor, unit) of a metric column in the report: angles in deg, angular rates in deg/s,
-    other quantities in SI (:func:`latobs.validation.plots.display_scale`); counts: (1, "samples")."""
-    from .plots import display_scale
+    other quantities in SI (:func:`latobs.validation.units.display_scale`); counts: (1, "samples")."""
+    from .units import display_scale
 
     parts = column.split(".")
     if len(parts) >= 3 and parts[-1] in _IN_UNIT:

@@ -86,6 +86,48 @@ def _dispatch_log(env, instance_name, status, category, message):
 _DISPATCH_LOG = fmi2CallbackLoggerTYPE(_dispatch_log)   # module-level: lives as long as the process
 
 
+#: fmpy's function table per slave class (and model identifier: FMI 1.0's symbols carry it)
+_FUNCTIONS: dict[tuple, list[tuple[str, str, Any, Any, Any]]] = {}
+
+
+def _fast_loading(base):
+    """``base`` (fmpy's FMU2Slave or FMU3Slave) loading its FMI functions as fmpy does, but reading
+    their Python signatures once per process: fmpy inspects every method of every new instance
+    (~0.7 ms per FMU and instance; a campaign run makes three). The first instance runs fmpy's own
+    ``_loadFunctions``; later ones take each function of their own library with the argument
+    names, argument types and result type it gave (the same table: tested). A base without that
+    method (another fmpy) is used as it is."""
+    if not hasattr(base, "_loadFunctions"):
+        return base
+
+    class Slave(base):
+        def _loadFunctions(self) -> None:
+            key = (base, getattr(self, "modelIdentifier", None))
+            table = _FUNCTIONS.get(key)
+            if table is None:
+                super()._loadFunctions()
+                _FUNCTIONS[key] = [(name, f.__name__, getattr(f, "argnames", None), f.argtypes, f.restype)
+                                   for name, f in self._functions.items()]
+                return
+            for name, symbol, argnames, argtypes, restype in table:
+                f = getattr(self.dll, symbol)
+                f.argnames, f.argtypes, f.restype = argnames, argtypes, restype
+                self._functions[name] = f
+
+    Slave.__name__ = Slave.__qualname__ = base.__name__    # fmpy reads the FMI version from it
+    return Slave
+
+
+_Slave2 = _fast_loading(FMU2Slave)
+
+
+@lru_cache(maxsize=1)
+def _slave3():
+    from fmpy.fmi3 import FMU3Slave     # (only when an FMI 3.0 FMU is driven)
+
+    return _fast_loading(FMU3Slave)
+
+
 def _file_version(path: str | os.PathLike) -> tuple[str, int, int, int]:
     """(path, inode, size, modification time in ns): what the per-file caches below are keyed on
     (a campaign reads the same FMUs thousands of times); a file replaced or rewritten at the same
@@ -180,7 +222,7 @@ class FmuInstance:
             addLoggerProxy(ctypes.byref(self.callbacks))
         except Exception:  # pragma: no cover - the proxy library is optional
             pass
-        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+        self.slave = _Slave2(guid=self.md.guid, unzipDirectory=self.unzipdir,
                                modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.label)
         self.slave.instantiate(callbacks=self.callbacks, loggingOn=True)
         self.instantiated = True
@@ -188,12 +230,11 @@ class FmuInstance:
     def _instantiate3(self):
         """FMI 3.0: fmpy's FMU3Slave with a logger of this instance (FMI 3.0's logger takes no
         variadic arguments: fmpy keeps one callback per instance, no process-wide proxy needed)."""
-        from fmpy.fmi3 import FMU3Slave
 
         def log(env, status, category, message):
             self._log(env, None, status, category, message)
 
-        self.slave = FMU3Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+        self.slave = _slave3()(guid=self.md.guid, unzipDirectory=self.unzipdir,
                                modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.label)
         self.slave.instantiate(loggingOn=True, logMessage=log)
         self.instantiated = True

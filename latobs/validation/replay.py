@@ -409,7 +409,7 @@ def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, n
 def _panels(run: ReplayRun, mass: float | None) -> list[dict[str, Any]]:
     """What to draw: per estimated quantity its truth (if any), estimate and/or band; m*ay and the
     force-sum band last."""
-    from .plots import PREFERRED
+    from .units import PREFERRED
 
     outs = run.outputs
     hats, pairs = _metrics.estimated_quantities(outs)
