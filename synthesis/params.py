@@ -3,6 +3,7 @@ and a description per value, its source); loading validates every value (finite,
 sign, ranges with min <= max), and errors name the vehicle and the parameter."""
 from __future__ import annotations
 
+import functools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -163,6 +164,13 @@ def load_vehicle(name_or_path: str | Path) -> Vehicle:
             raise VehicleParameterError(f"unknown vehicle {str(name_or_path)!r}; known: {', '.join(names)}")
         res = resources.files(__package__) / "vehicles" / f"{name_or_path}.toml"
         text, origin = res.read_text(), f"vehicles/{name_or_path}.toml"
+    return _parsed(text, origin)
+
+
+@functools.lru_cache(maxsize=64)
+def _parsed(text: str, origin: str) -> Vehicle:
+    """The Vehicle of a TOML text, parsed once per text and origin (a campaign's runs load the same
+    set thousands of times); the Vehicle is frozen and nothing changes its parameters."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

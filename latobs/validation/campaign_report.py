@@ -4,9 +4,11 @@ histograms and scatter plots (matplotlib, Agg canvas).
 ``report.md`` in the campaign folder: the declared distributions; runs, failures and timing; the
 percentiles of every metric (and the 95 % bootstrap interval of its mean); the enclosure of every
 interval; the worst runs of every headline metric with their seeds and the command that re-runs
-each alone; and per observer ``figures/hist_LABEL.png`` (the distribution of each headline metric
-over the runs) and per headline metric ``figures/scatter_LABEL.X.rms.png`` (it against each drawn
-quantity, one point per run).
+each alone; every observer against the baselines of ``validate`` (win fraction, ratio percentiles,
+the runs of the highest ratio; ``figures/versus_baselines.png``); and per observer
+``figures/hist_LABEL.png`` (the distribution of each headline metric over the runs) and per
+headline metric ``figures/scatter_LABEL.X.rms.png`` (it against each drawn quantity, one point
+per run).
 """
 from __future__ import annotations
 
@@ -56,7 +58,7 @@ def display(column: str) -> tuple[float, str]:
     from .units import display_scale
 
     parts = column.split(".")
-    if len(parts) >= 3 and parts[-1] in _IN_UNIT:
+    if len(parts) >= 3 and (parts[-1] in _IN_UNIT or parts[-1].startswith("rms_") or parts[-1].endswith("_rms")):
         return display_scale(parts[-2])
     return 1.0, "samples" if parts[-1] in ("violations", "nonfinite") else ""
 
@@ -119,6 +121,7 @@ def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> st
                 "|---|---|---|"]
         for base, e in summary["enclosure"].items():
             out.append(f"| `{base}` | {e['runs_with_violations']} of {e['runs']} | {e['violating_samples']} |")
+    out += _versus_markdown(summary.get("versus_baselines") or {}, c)
     out += ["", "## Worst runs", "", f"Re-run one alone (full validation output and plots): "
             f"`{summary.get('rerun_command', 'latobs campaign ' + c.name + ' --rerun SEED')}`", ""]
     drawn_names = c.drawn_names()
@@ -148,6 +151,75 @@ def markdown(c: Campaign, summary: Mapping[str, Any], figures: list[Path]) -> st
     return "\n".join(out) + "\n"
 
 
+def _versus_markdown(vs: Mapping[str, Any], c: Campaign) -> list[str]:
+    """The section "Against the baselines" (:func:`latobs.validation.campaign_stats.versus_baselines`)."""
+    if not vs:
+        return []
+    out = ["", "## Against the baselines", "",
+           "Each run scores each observer and the baselines of `latobs validate` (the estimate 0; the open-loop "
+           "linear bicycle, or a motorcycle's steady turn, with the design's vehicle parameters, driven by the "
+           "signals the observers received) on the same drawn car, drive, sensors and samples (after the settle "
+           "time). Ratio: the observer's RMS error over the best baseline's in that run (an interval by its "
+           "midpoint); below 1 the observer is better. A run counts as won when every baseline is worse. "
+           "*Valid samples*: only the samples where the observer declares itself valid (`valid`, `consistent`).",
+           "", "| observer | quantity | runs | wins | ratio p5 | p50 | p95 | max | best baseline (runs) "
+           "| valid samples | wins on them | ratio p50 on them |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for e in vs.values():
+        r = e["ratio"]
+        wf = e.get("win_fraction")
+        best = ", ".join(f"{b} {n}" for b, n in sorted(e["best_baseline_runs"].items(), key=lambda kv: -kv[1]))
+        v = e.get("valid") or {}
+        vr = v.get("ratio") or {}
+        out.append(f"| `{e['observer']}` | {e['quantity']} | {e['runs']} | "
+                   f"{'—' if wf is None else f'{100 * wf:.1f} %'} | {_g(r.get('p5'))} | {_g(r.get('p50'))} | "
+                   f"{_g(r.get('p95'))} | {_g(r.get('max'))} | {best or '—'} | "
+                   + (f"{100 * v['mean_valid_fraction']:.1f} % | " if v.get("mean_valid_fraction") is not None else "— | ")
+                   + (f"{100 * v['win_fraction']:.1f} % | " if v.get("win_fraction") is not None else "— | ")
+                   + f"{_g(vr.get('p50'))} |")
+    drawn_names = c.drawn_names()
+    for key, e in vs.items():
+        if not e["worst"]:
+            continue
+        out += ["", f"**`{key}`**: the runs of the highest ratio", "", "| run | seed | ratio | drawn quantities |",
+                "|---|---|---|---|"]
+        for w in e["worst"]:
+            drawn = ", ".join(f"{k} {_g(w['params'][k])}" for k in drawn_names if k in w["params"]
+                              and k != "scenario.seed")
+            out.append(f"| {w['run']} | `--rerun {w['seed']}` | {_g(w['ratio'])} | {drawn} |")
+    return out
+
+
+def _versus_figure(folder: Path, rows: list[Mapping[str, Any]], canvas, figure, atomic_path) -> list[Path]:
+    """``figures/versus_baselines.png``: per observer and quantity, the distribution (empirical CDF)
+    of observer RMS / best baseline RMS over the runs on a log axis, the line at 1 marking a win;
+    dashed: on the valid samples only."""
+    from .campaign_stats import versus_baselines
+
+    ok = [r for r in rows if r["status"] == "ok"]
+    vs = versus_baselines(ok)
+    if not vs:
+        return []
+    fig = figure(figsize=(6.4, 4.2))
+    ax = fig.add_subplot(1, 1, 1)
+    for i, key in enumerate(vs):
+        for pre, style in (("", "-"), ("valid_", "--")):
+            x = np.array([np.nan if r["metrics"].get(f"{key}.{pre}ratio") is None else r["metrics"][f"{key}.{pre}ratio"]
+                          for r in ok], dtype=float)
+            x = np.sort(x[np.isfinite(x) & (x > 0)])
+            if x.size:
+                ax.step(x, np.arange(1, x.size + 1) / x.size, style, where="post", color=f"C{i % 10}",
+                        label=key + (" (valid samples)" if pre else ""))
+    ax.axvline(1.0, color="k", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlabel("observer RMS / best baseline RMS (< 1: the observer wins)")
+    ax.set_ylabel("fraction of runs")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    fig.suptitle(f"Against the baselines: {len(ok)} runs")
+    fig.tight_layout()
+    return [_save(fig, folder / "figures" / "versus_baselines.png", canvas, atomic_path)]
+
+
 def figures(folder: Path, rows: list[Mapping[str, Any]]) -> list[Path]:
     """Per observer: histograms of its headline metrics, and scatter plots of them against the
     drawn quantities. Returns the PNG paths."""
@@ -161,7 +233,7 @@ def figures(folder: Path, rows: list[Mapping[str, Any]]) -> list[Path]:
     cols = [c for c in headlines(ok) if not (c.endswith(".violations")
                                              and all(not r["metrics"].get(c) for r in ok))]
     params = _numeric_params(ok)
-    paths = []
+    paths = _versus_figure(folder, rows, FigureCanvasAgg, Figure, atomic_path)
     for label in dict.fromkeys(_label_of(c) for c in cols):
         mine = [c for c in cols if _label_of(c) == label]
         vals = {c: display(c)[0] * np.array([np.nan if r["metrics"].get(c) is None else r["metrics"][c] for r in ok],

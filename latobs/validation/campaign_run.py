@@ -141,6 +141,82 @@ def observer_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
     return row
 
 
+#: integer outputs by which an observer declares a sample valid (nonzero): paper 000's ``valid``
+#: (inside its linear domain and speed grid), paper 001's ``consistent`` (the measurement inside the bounds)
+VALIDITY_FLAGS = ("valid", "consistent")
+
+
+def baseline_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mapping[str, np.ndarray],
+                     drive: Mapping[str, np.ndarray], time: np.ndarray, after: np.ndarray,
+                     model_name: str | None, design: Mapping[str, Any] | None, inputs=(),
+                     initial: str = "rest") -> dict[str, float]:
+    """The observer ``label`` against the baselines of ``validate`` on the same run and samples.
+
+    For every quantity X the observer estimates (``X_hat``, or an interval by its midpoint) that it
+    does not read as an input and that has a truth: the baselines of
+    :func:`latobs.validation.metrics.baselines_for` (zero, the bicycle or the steady turn, from the
+    design's vehicle, driven by ``drive``: the signals the observers received) are scored on the
+    samples ``after`` (t >= settle time) beside the observer:
+    ``LABEL.X.rms_B`` per baseline B, ``LABEL.X.midpoint_rms`` for an interval, ``LABEL.X.ratio``
+    = observer RMS / best baseline RMS (< 1: the observer is better), ``LABEL.X.wins`` = 1 when
+    every applicable baseline was computed and is worse than the observer, 0 when one is as good
+    (:func:`latobs.validation.metrics.baseline_summary`). With a validity flag
+    (:data:`VALIDITY_FLAGS`) the same on the samples after settling where the flag is nonzero:
+    ``LABEL.X.valid_rms``, ``LABEL.X.valid_ratio``, ``LABEL.X.valid_wins``, and
+    ``LABEL.valid_fraction`` (those samples' share). SI units."""
+    from . import metrics
+
+    ins = set(inputs)
+    targets: dict[str, tuple[np.ndarray, str, str]] = {}     # X -> (estimate, truth signal, what)
+    for name, y in outputs.items():
+        q = None
+        if name.endswith("_hat"):
+            q, est = name[:-4], np.asarray(y, dtype=float)
+        elif name.endswith("_lower") and name[:-6] + "_upper" in outputs and name[:-6] + "_hat" not in outputs:
+            q = name[:-6]
+            est = 0.5 * (np.asarray(y, dtype=float) + np.asarray(outputs[q + "_upper"], dtype=float))
+        if q is None or q in ins:
+            continue
+        src = metrics.truth_signal(q, truth, model_name)
+        if src is not None:
+            targets[q] = (est, src, "estimate" if name.endswith("_hat") else "midpoint")
+    if not targets:
+        return {}
+    b = metrics.baselines_for(time, drive, list(targets), dict(design) if design else None, model_name,
+                              initial=initial)
+    flag = next((f for f in VALIDITY_FLAGS if f in outputs), None)
+    sels = {"": after}
+    row: dict[str, float] = {}
+    if flag is not None:
+        sels["valid_"] = after & (np.asarray(outputs[flag]) != 0)
+        row[f"{label}.valid_fraction"] = float(np.mean(sels["valid_"][after])) if np.any(after) else math.nan
+
+    def rms(e):
+        return float(np.sqrt(np.mean(e * e))) if e.size else None
+
+    for q, (est, src, what) in targets.items():
+        x = np.asarray(truth[src], dtype=float)
+        missing = {base: u[q] for base, u in b["unavailable"].items() if q in u}
+        for pre, sel in sels.items():
+            obs = rms((est - x)[sel])
+            base_rms = {base: rms((np.asarray(ser[q], dtype=float) - x)[sel])
+                        for base, ser in b["series"].items() if q in ser}
+            if not base_rms and not missing:
+                continue
+            v = metrics.baseline_summary(obs if obs is None or math.isfinite(obs) else None, base_rms, "rms",
+                                         what, missing)
+            if pre:
+                row[f"{label}.{q}.valid_rms"] = math.nan if obs is None else obs
+            else:
+                if what == "midpoint":
+                    row[f"{label}.{q}.midpoint_rms"] = math.nan if obs is None else obs
+                for base, r in base_rms.items():
+                    row[f"{label}.{q}.rms_{base}"] = math.nan if r is None else r
+            row[f"{label}.{q}.{pre}ratio"] = math.nan if v["ratio"] is None else v["ratio"]
+            row[f"{label}.{q}.{pre}wins"] = math.nan if v["observer_best"] is None else float(v["observer_best"])
+    return row
+
+
 # --------------------------------------------------------------------------------------------
 # one run, on FMU files (a worker's task)
 # --------------------------------------------------------------------------------------------
@@ -292,8 +368,12 @@ def result_metrics(res, settle: float) -> dict[str, float]:
     after = np.asarray(res.time) >= settle - 1e-12
     models = res.info.get("observer_models", {})
     out: dict[str, float] = {}
+    designs = res.info.get("observer_designs", {})
+    drive = {**res.bus, **(res.measured or {})}       # what the observers received, else the truth
     for label, outs in res.observers.items():
         out.update(observer_metrics(label, outs, res.bus, after, models.get(label)))
+        out.update(baseline_metrics(label, outs, res.bus, drive, np.asarray(res.time, dtype=float), after,
+                                    models.get(label), designs.get(label), res.inputs.get(label, ())))
     return out
 
 
@@ -314,4 +394,8 @@ def _replay_metrics(c, params, seed, fmus, local, record) -> tuple[dict[str, flo
 def replay_metrics(run, c: Campaign) -> dict[str, float]:
     """Flat metrics of a replay run (:class:`latobs.validation.replay.ReplayRun`) after the settle time."""
     after = run.time >= run.time[0] + settle_time(c) - 1e-9
-    return observer_metrics(run.label, run.outputs, run.columns, after, run.model_name)
+    out = observer_metrics(run.label, run.outputs, run.columns, after, run.model_name)
+    # the bicycle starts from the steady state of the segment's first sample, as replay's does
+    out.update(baseline_metrics(run.label, run.outputs, run.columns, run.columns, run.time, after, run.model_name,
+                                run.design, run.inputs, initial="steady"))
+    return out

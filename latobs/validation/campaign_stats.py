@@ -3,6 +3,7 @@ summary statistics."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from pathlib import Path
@@ -160,6 +161,59 @@ def summarize(c: Campaign, rows: list[Mapping[str, Any]]) -> dict[str, Any]:
                       for x, r in vals[:WORST_RUNS] if not (col.endswith(".violations") and x == 0)]
     out["worst"] = worst
     out["headline"] = heads
+    out["versus_baselines"] = versus_baselines(ok, rng)
+    return out
+
+
+def versus_baselines(ok: list[Mapping[str, Any]], rng: np.random.Generator | None = None) -> dict[str, Any]:
+    """Per observer and estimated quantity (``LABEL.X``, the columns ``LABEL.X.ratio`` of
+    :func:`latobs.validation.campaign_run.baseline_metrics`): the distribution of observer RMS /
+    best baseline RMS over the runs (:func:`_stats`), the fraction of runs the observer wins
+    (better than every baseline), how often each baseline was the best, the :data:`WORST_RUNS`
+    runs of the highest ratio with their seeds and drawn quantities; and the same over the samples
+    where the observer declares itself valid (``valid``: its ratio, win fraction and the mean share
+    of valid samples), when it has a validity flag."""
+    rng = rng if rng is not None else np.random.default_rng(0)
+    out: dict[str, Any] = {}
+    keys = list(dict.fromkeys(c[: -len(".ratio")] for c in metric_columns(ok)
+                              if c.endswith(".ratio") and not c.endswith(".valid_ratio")))
+
+    def col(r, name):
+        x = r["metrics"].get(name)
+        return np.nan if x is None else float(x)
+
+    for key in keys:
+        label, _, q = key.partition(".")
+        bases = sorted({c[len(key) + len(".rms_"):] for r in ok for c in r["metrics"]
+                        if c.startswith(key + ".rms_")})
+
+        def part(pre):
+            ratio = np.array([col(r, f"{key}.{pre}ratio") for r in ok], dtype=float)
+            wins = np.array([col(r, f"{key}.{pre}wins") for r in ok], dtype=float)
+            scored = np.isfinite(wins)
+            return ratio, {"runs": int(np.sum(scored)), "ratio": _stats(ratio, rng),
+                           "win_fraction": float(np.mean(wins[scored])) if np.any(scored) else None,
+                           "wins": int(np.sum(wins[scored] == 1.0))}
+
+        ratio, entry = part("")
+        entry.update({"observer": label, "quantity": q, "baselines": bases})
+        best: dict[str, int] = {}
+        for r in ok:
+            rs = {b: col(r, f"{key}.rms_{b}") for b in bases}
+            rs = {b: v for b, v in rs.items() if math.isfinite(v)}
+            if rs:
+                b = min(rs, key=rs.get)
+                best[b] = best.get(b, 0) + 1
+        entry["best_baseline_runs"] = best
+        order = sorted((i for i in range(len(ok)) if math.isfinite(ratio[i])), key=lambda i: (-ratio[i], ok[i]["run"]))
+        entry["worst"] = [{"run": ok[i]["run"], "seed": ok[i]["seed"], "ratio": float(ratio[i]),
+                           "params": ok[i]["params"]} for i in order[:WORST_RUNS]]
+        if any(f"{key}.valid_ratio" in r["metrics"] for r in ok):
+            _, v = part("valid_")
+            frac = np.array([col(r, f"{label}.valid_fraction") for r in ok], dtype=float)
+            v["mean_valid_fraction"] = float(np.nanmean(frac)) if np.any(np.isfinite(frac)) else None
+            entry["valid"] = v
+        out[key] = entry
     return out
 
 

@@ -4,6 +4,7 @@ campaign on a running dask-scheduler that loses a worker mid-way."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import signal
@@ -310,6 +311,92 @@ def test_an_interval_that_never_misses_is_plotted_and_ranked_by_its_width_in_deg
     assert "No run violated `O.beta.violations`, `O.vy.violations`" in md
 
 
+SEDAN_LIKE = {"name": "t", "kind": "car", "parameters": {"m": 1500.0, "Iz": 2500.0, "lf": 1.2, "lr": 1.5,
+                                                          "Cf": 8.0e4, "Cr": 9.0e4}}
+
+
+def test_a_run_scores_the_observer_beside_the_baselines_on_the_same_samples():
+    """baseline_metrics: each baseline's RMS, the ratio to the best one and the win, on the samples
+    after settling and on the valid ones, held against numpy on the same arrays (the bicycle from
+    baselines.bicycle, tested against solve_ivp in test_validation_baselines); an input quantity
+    is not scored; an interval is scored by its midpoint."""
+    from latobs.validation import baselines as bl
+
+    rng = np.random.default_rng(7)
+    n = 2001
+    t = np.arange(n) * 0.005
+    delta = 0.02 * np.sin(1.3 * t)
+    vx = np.full(n, 20.0)
+    bike = bl.bicycle(t, delta, vx, SEDAN_LIKE["parameters"])
+    beta = bike["beta"] + 0.002 * np.sin(5 * t)               # the truth: near the bicycle
+    vy = bike["vy"] + 0.03 * np.cos(3 * t)
+    beta_hat = beta + rng.normal(0, 1e-3, n)
+    vy_mid = vy + rng.normal(0, 0.01, n)
+    valid = (np.sin(0.7 * t) > -0.5).astype(np.int32)
+    outputs = {"beta_hat": beta_hat, "yaw_rate_hat": bike["yaw_rate"] + 1.0, "valid": valid,
+               "vy_lower": vy_mid - 0.2, "vy_upper": vy_mid + 0.2}
+    truth = {"beta": beta, "vy": vy, "yaw_rate": bike["yaw_rate"], "delta": delta, "vx": vx}
+    after = t >= 1.0
+    row = cr.baseline_metrics("O", outputs, truth, truth, t, after, "SideslipBankObserver", {"vehicle": SEDAN_LIKE},
+                              inputs=["yaw_rate", "delta", "vx"])
+
+    def rms(e):
+        return float(np.sqrt(np.mean(e * e)))
+
+    for q, est in (("beta", beta_hat), ("vy", vy_mid)):
+        x = truth[q]
+        for pre, sel in (("", after), ("valid_", after & (valid != 0))):
+            obs, zero, bic = rms((est - x)[sel]), rms(x[sel]), rms((bike[q] - x)[sel])
+            assert row[f"O.{q}.{pre}ratio"] == pytest.approx(obs / min(zero, bic), rel=1e-12)
+            assert row[f"O.{q}.{pre}wins"] == float(obs < min(zero, bic))
+        assert row[f"O.{q}.rms_zero"] == pytest.approx(rms(x[after]), rel=1e-12)
+        assert row[f"O.{q}.rms_bicycle"] == pytest.approx(rms((bike[q] - x)[after]), rel=1e-12)
+    assert row["O.beta.wins"] == 1.0 and row["O.vy.ratio"] > 0
+    assert row["O.vy.midpoint_rms"] == pytest.approx(rms((vy_mid - vy)[after]), rel=1e-12)
+    assert row["O.valid_fraction"] == pytest.approx(np.mean(valid[after] != 0))
+    assert not any(k.startswith("O.yaw_rate.") for k in row)      # the observer reads the yaw rate
+    # a baseline better than the observer: no win, ratio > 1
+    worse = cr.baseline_metrics("O", {"beta_hat": beta + 0.5}, truth, truth, t, after, "SideslipBankObserver",
+                                {"vehicle": SEDAN_LIKE})
+    assert worse["O.beta.wins"] == 0.0 and worse["O.beta.ratio"] > 1 and "O.valid_fraction" not in worse
+    # no vehicle parameters: the bicycle cannot be computed, so no verdict (the zero baseline alone)
+    none = cr.baseline_metrics("O", {"beta_hat": beta_hat}, truth, truth, t, after, "SideslipBankObserver",
+                               {"vehicle": {"name": "x", "parameters": {}}})
+    assert math.isnan(none["O.beta.wins"]) and "O.beta.rms_bicycle" not in none
+
+
+def test_the_summary_gives_each_observers_ratio_distribution_win_fraction_and_worst_runs(tmp_path):
+    from latobs.validation import campaign_report
+
+    c = cp.load(_write(tmp_path, BASE))
+    rng = np.random.default_rng(11)
+    ratio = rng.lognormal(-0.5, 0.6, 120)
+    vratio = ratio * 0.9
+    rows = []
+    for k, r in enumerate(ratio):
+        bic = 1.0 + (k % 4)
+        m = {"O.beta.rms": r * bic, "O.beta.rms_zero": 4.5, "O.beta.rms_bicycle": bic, "O.beta.ratio": r,
+             "O.beta.wins": float(r < 1), "O.valid_fraction": 0.8, "O.beta.valid_rms": vratio[k] * bic,
+             "O.beta.valid_ratio": vratio[k], "O.beta.valid_wins": float(vratio[k] < 1)}
+        rows.append({"run": k, "seed": cp.run_seed(0, k), "status": "ok", "error": None,
+                     "params": {"plant.mu": 0.5 + k / 1000}, "metrics": m, "headline": ["O.beta.rms"],
+                     "seconds": 0.1, "worker": "w"})
+    s = cs.summarize(c, rows)
+    v = s["versus_baselines"]["O.beta"]
+    assert v["win_fraction"] == pytest.approx(np.mean(ratio < 1)) and v["wins"] == int(np.sum(ratio < 1))
+    assert v["ratio"]["p50"] == pytest.approx(np.median(ratio), rel=1e-12)
+    assert v["baselines"] == ["bicycle", "zero"]
+    assert v["best_baseline_runs"] == {"bicycle": 120 - sum(1 for k in range(120) if 1.0 + (k % 4) > 4.5)}
+    assert [w["run"] for w in v["worst"]] == list(np.argsort(-ratio)[: cs.WORST_RUNS])
+    assert v["valid"]["win_fraction"] == pytest.approx(np.mean(vratio < 1))
+    assert v["valid"]["mean_valid_fraction"] == pytest.approx(0.8)
+    figs = campaign_report.figures(tmp_path, rows)
+    assert "versus_baselines.png" in {p.name for p in figs}
+    md = campaign_report.markdown(c, s, figs)
+    assert "## Against the baselines" in md
+    assert f"| `O` | beta | 120 | {100 * np.mean(ratio < 1):.1f} % |" in md
+
+
 # --------------------------------------------------------------------------------------------
 # campaigns on Dask
 # --------------------------------------------------------------------------------------------
@@ -361,6 +448,14 @@ def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_al
     row = rerun("robustness-001", seed, out=out, fmu_dir=fmus, plots=False)
     assert row["identical_to_journal"] and row["journal_run"] == 7
     assert (folder / f"rerun_{seed}" / "metrics.json").is_file()
+    # the campaign's verdict against the baselines is validate's on the same run
+    full = json.loads((folder / f"rerun_{seed}" / "metrics.json").read_text())
+    verdicts = full["observers"]["LateralIntervalObserver"]["baselines"]["summary"]
+    for q in ("vy", "beta", "Fyf", "Fyr"):
+        assert again[7]["metrics"][f"LateralIntervalObserver.{q}.ratio"] == pytest.approx(verdicts[q]["ratio"],
+                                                                                          rel=1e-12), q
+        assert again[7]["metrics"][f"LateralIntervalObserver.{q}.wins"] == float(verdicts[q]["observer_best"]), q
+    assert "LateralIntervalObserver.beta" in s["versus_baselines"]
 
     with pytest.raises(CampaignError, match="another campaign"):   # same folder, other definition
         run_campaign("robustness-001", runs=12, seed=5, **kw)

@@ -88,6 +88,31 @@ def test_bicycle_zero_order_hold_with_varying_speed_and_hold_below_1_ms():
     assert np.all(np.isfinite(y["beta"]))                       # outputs use vx_min there
 
 
+def test_the_elementwise_zero_order_hold_and_scan_agree_with_scipy_and_the_plain_recursion():
+    """zoh_2x2 against scipy.linalg.expm of the augmented matrix; affine_scan against the step-by-step
+    recursion, over steps whose norms span 1e-6 .. 40 (up to 7 squarings; exp up to 1e12)."""
+    rng = np.random.default_rng(4)
+    m = 400
+    A = rng.normal(size=(m, 2, 2)) * rng.uniform(1e-2, 20.0, size=(m, 1, 1))
+    B = rng.normal(size=(m, 2))
+    h = rng.uniform(1e-4, 2.0, m)
+    Phi, gam = bl.zoh_2x2(A, B, h)
+    for k in range(m):
+        M = np.zeros((3, 3))
+        M[:2, :2], M[:2, 2] = A[k] * h[k], B[k] * h[k]
+        E = scipy.linalg.expm(M)
+        scale = np.abs(E).max()
+        assert np.abs(Phi[k] - E[:2, :2]).max() <= 1e-10 * scale and np.abs(gam[k] - E[:2, 2]).max() <= 1e-10 * scale
+    Phi = rng.normal(size=(m, 2, 2)) * 0.7
+    g = rng.normal(size=(m, 2))
+    P, q = bl.affine_scan(Phi, g)
+    x0 = np.array([0.3, -1.2])
+    x = x0
+    for k in range(m):
+        x = Phi[k] @ x + g[k]
+        assert np.allclose(P[k] @ x0 + q[k], x, rtol=1e-12, atol=1e-12 * (1 + np.abs(x).max())), k
+
+
 def test_expm_batch_agrees_with_scipy():
     rng = np.random.default_rng(1)
     M = rng.normal(size=(300, 3, 3)) * rng.uniform(1e-4, 5.0, size=(300, 1, 1))
