@@ -594,7 +594,7 @@ def parser() -> argparse.ArgumentParser:
                                         "(runs.parquet, summary, report.md)")
     c.add_argument("campaign", metavar="SCENARIO",
                    help="a registered scenario (with the distributions of its observers' robustness campaign), "
-                        "a shipped campaign (robustness-000..003, mbds-bootstrap) or a campaign .toml file")
+                        "a shipped campaign (robustness-000..003, robustness-000-flat, mbds-bootstrap) or a campaign .toml file")
     c.add_argument("--observer", action="append", default=None, help="observer FMU name (repeatable; default: "
                                                                       "the campaign's)")
     c.add_argument("--runs", type=_positive_int, default=None, metavar="N",

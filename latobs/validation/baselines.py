@@ -1,6 +1,7 @@
 """Simple baseline estimates from the same signals as an observer (the estimate 0, a car's
-open-loop linear bicycle, a motorcycle's steady turn), so that a report shows what an observer
-adds. Pure numpy/scipy; defined on the documentation's "Results files" page."""
+open-loop linear bicycle, a motorcycle's steady turn, and on a record with a tuning part a ridge
+regression on causally filtered signals), so that a report shows what an observer adds. Pure
+numpy/scipy; defined on the documentation's "Results files" page."""
 from __future__ import annotations
 
 import hashlib
@@ -14,7 +15,7 @@ G = 9.81            # m/s^2, as latobs.synthesis.params.G
 VX_MIN = 1.0        # m/s: below it the bicycle baseline holds its state
 
 #: The baselines in the order reports show them.
-BASELINES = ("zero", "bicycle", "steady_turn")
+BASELINES = ("zero", "bicycle", "steady_turn", "regression")
 #: Parameters the bicycle baseline needs (SI: kg, kg m^2, m, m, N/rad, N/rad).
 BICYCLE_PARAMETERS = ("m", "Iz", "lf", "lr", "Cf", "Cr")
 #: The quantities the bicycle baseline outputs (at the centre of gravity).
@@ -261,6 +262,98 @@ def _bicycle(t, d, v, p, vx_min, initial) -> dict[str, np.ndarray]:
     Fyf, Fyr = p["Cf"] * af, p["Cr"] * ar
     return {"vy": vy, "beta": vy / ve, "yaw_rate": r, "ay": (Fyf + Fyr) / p["m"], "Fyf": Fyf, "Fyr": Fyr,
             "alpha_f": af, "alpha_r": ar}
+
+
+# --------------------------------------------------------------------------------------------
+# a regularised linear regression on causally filtered signals (fitted on a record's tuning part)
+# --------------------------------------------------------------------------------------------
+#: the sensor columns the regression reads (never a reference column)
+REGRESSION_SIGNALS = ("delta", "yaw_rate", "ay", "vx")
+#: time constants (s) of the causal first-order low-pass filters applied to every feature (0: raw)
+REGRESSION_TAUS_S = (0.0, 0.05, 0.2, 0.5, 2.0)
+#: ridge penalties tried (on standardised features), chosen by blocked cross-validation
+REGRESSION_ALPHAS = tuple(10.0 ** k for k in np.arange(-4.0, 4.01, 0.5))
+REGRESSION_FOLDS = 5
+VX_FLOOR = 1.0      # m/s: the speed divisions of the regression's features use max(vx, VX_FLOOR)
+
+
+def regression_features(signals: Mapping[str, np.ndarray], dt: float) -> tuple[list[str], np.ndarray]:
+    """(names, X): the features of :func:`regression` from the sensor columns ``signals`` (delta
+    rad, yaw_rate rad/s, ay m/s^2, vx m/s; SI): the signals, the products and quotients of the
+    bicycle model's steady and kinematic relations (r vx, r / vx, delta vx, delta / vx, ay / vx,
+    ay - r vx, 1 / vx), each also through causal first-order low-pass filters of time constants
+    :data:`REGRESSION_TAUS_S` (started at the first sample; past samples only). Shape (n, k)."""
+    from scipy.signal import lfilter
+
+    miss = [c for c in REGRESSION_SIGNALS if c not in signals]
+    if miss:
+        raise BaselineUnavailable(f"no column {', '.join(repr(m) for m in miss)} to drive the regression")
+    d, r, ay, vx = (np.asarray(signals[c], dtype=float) for c in REGRESSION_SIGNALS)
+    ve = np.maximum(vx, VX_FLOOR)
+    base = {"delta": d, "yaw_rate": r, "ay": ay, "vx": vx, "yaw_rate*vx": r * vx, "yaw_rate/vx": r / ve,
+            "delta*vx": d * vx, "delta/vx": d / ve, "ay/vx": ay / ve, "ay-yaw_rate*vx": ay - r * vx, "1/vx": 1.0 / ve}
+    names, cols = [], []
+    for tau in REGRESSION_TAUS_S:
+        a = 1.0 if tau == 0.0 else -math.expm1(-dt / tau)
+        for n, x in base.items():
+            if tau == 0.0:
+                y = x
+            else:
+                y, _ = lfilter([a], [1.0, a - 1.0], x, zi=[(1.0 - a) * x[0]] if x.size else [0.0])
+            names.append(n if tau == 0.0 else f"lowpass({n}, {tau:g} s)")
+            cols.append(y)
+    return names, np.column_stack(cols) if cols else np.zeros((0, 0))
+
+
+def ridge_fit(X: np.ndarray, y: np.ndarray, alphas=REGRESSION_ALPHAS, folds: int = REGRESSION_FOLDS):
+    """Ridge regression y ~ X w + b on standardised columns, the penalty chosen among ``alphas`` by
+    the least RMS over ``folds`` contiguous blocks of the samples (each left out in turn: a time
+    series is not shuffled). Returns (w, b, alpha, cv_rms) with w for the unstandardised X."""
+    X = np.asarray(X, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n, k = X.shape
+    if n < 10 * (k + 1):
+        raise BaselineUnavailable(f"the regression needs at least {10 * (k + 1)} tuning samples, got {n}")
+
+    def solve(Xa, ya, alpha):
+        mu, sd = Xa.mean(axis=0), Xa.std(axis=0)
+        sd = np.where(sd > 0, sd, 1.0)
+        Z = (Xa - mu) / sd
+        ym = ya.mean()
+        w = np.linalg.solve(Z.T @ Z + alpha * len(ya) * np.eye(Z.shape[1]), Z.T @ (ya - ym))
+        return w / sd, ym - (mu / sd) @ w
+
+    edges = np.linspace(0, n, folds + 1).astype(int)
+    best = None
+    for alpha in alphas:
+        se = 0.0
+        for i in range(folds):
+            test = np.zeros(n, dtype=bool)
+            test[edges[i]:edges[i + 1]] = True
+            w, b = solve(X[~test], y[~test], alpha)
+            se += float(np.sum((X[test] @ w + b - y[test]) ** 2))
+        cv = math.sqrt(se / n)
+        if best is None or cv < best[1]:
+            best = (alpha, cv)
+    w, b = solve(X, y, best[0])
+    return w, float(b), float(best[0]), best[1]
+
+
+def regression(time, signals: Mapping[str, np.ndarray], truth, train) -> tuple[np.ndarray, dict[str, Any]]:
+    """The estimate of a data scientist's afternoon: a ridge regression of ``truth`` (any unit) on
+    :func:`regression_features` of the sensor columns, fitted on the samples ``train`` (a boolean
+    mask: the record's tuning part) only, evaluated on every sample (causal: each estimate uses
+    past and present samples only). Returns (estimate, about)."""
+    t = np.asarray(time, dtype=float)
+    if t.size < 2:
+        raise BaselineUnavailable("the regression needs at least two samples")
+    dt = float(np.median(np.diff(t)))
+    names, X = regression_features(signals, dt)
+    y = np.asarray(truth, dtype=float)
+    train = np.asarray(train, dtype=bool) & np.isfinite(y) & np.all(np.isfinite(X), axis=1)
+    w, b, alpha, cv = ridge_fit(X[train], y[train])
+    return X @ w + b, {"features": len(names), "filters_s": list(REGRESSION_TAUS_S), "alpha": alpha,
+                       "cv_rms": cv, "fitted_on_samples": int(np.sum(train))}
 
 
 # --------------------------------------------------------------------------------------------

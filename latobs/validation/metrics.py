@@ -269,7 +269,8 @@ def observer_kind(design: dict[str, Any] | None, model: str | None = None) -> st
 
 
 def baselines_for(time, signals, quantities, design: dict[str, Any] | None = None, model: str | None = None,
-                  sources: dict[str, str] | None = None, initial: str = "rest") -> dict[str, Any]:
+                  sources: dict[str, str] | None = None, initial: str = "rest",
+                  fit: tuple[np.ndarray, dict[str, np.ndarray]] | None = None) -> dict[str, Any]:
     """Baseline estimates of ``quantities`` (names X of what an observer estimates) computed from
     ``signals`` ({name: array on ``time``}: delta, vx for the bicycle; vx, yaw_rate for the steady
     turn; SI units). ``design``: the observer's design summary (``harness.design_summary``: its
@@ -279,6 +280,9 @@ def baselines_for(time, signals, quantities, design: dict[str, Any] | None = Non
     {"series": {baseline: {X: array}}, "skipped": {baseline: reason}, "about": {baseline: {...}},
     "unavailable": {baseline: {X: reason}}}: ``unavailable`` lists each quantity a baseline gives
     (the bicycle's vy, beta ...; the steady turn's forces) that it could not compute here, and why.
+    ``fit``: (tuning-sample mask, {X: reference array}) of a record with a tuning part: then also
+    the ridge regression of each such X on the causally filtered sensor columns, fitted on those
+    samples only (:func:`baselines.regression`).
 
     The parameters are those of the design file only (``design``: the vehicle the observer was
     designed for, as the user gave it); nothing is looked up elsewhere by the vehicle's name."""
@@ -341,6 +345,26 @@ def baselines_for(time, signals, quantities, design: dict[str, Any] | None = Non
     except _bl.BaselineUnavailable as exc:
         skipped[name] = str(exc)
         unavailable[name] = {q: str(exc) for q in qs}
+    if fit is not None:
+        mask, refs = fit
+        reg: dict[str, np.ndarray] = {}
+        try:
+            for q in quantities:
+                if q in refs:
+                    reg[q], info = _bl.regression(t, signals, refs[q], mask)
+                    about.setdefault("regression", {"what": "ridge regression of the reference on the sensor "
+                                                            f"columns {', '.join(_bl.REGRESSION_SIGNALS)}, their "
+                                                            "products and quotients of the bicycle's relations, "
+                                                            "raw and causally low-passed, fitted on the tuning "
+                                                            "part only (penalty by blocked cross-validation)",
+                                                    "inputs": {n: sources.get(n, "signal")
+                                                               for n in _bl.REGRESSION_SIGNALS}, "fits": {}})
+                    about["regression"]["fits"][q] = info
+            if reg:
+                series["regression"] = reg
+        except _bl.BaselineUnavailable as exc:
+            skipped["regression"] = str(exc)
+            unavailable["regression"] = {q: str(exc) for q in quantities if q in refs}
     return {"series": series, "skipped": skipped, "about": about,
             "unavailable": {b: u for b, u in unavailable.items() if u}}
 

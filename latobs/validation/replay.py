@@ -380,8 +380,11 @@ def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, n
     cols = run.columns
     targets = {name: (name[:-4], e) for name, e in o["estimates"].items()}
     targets.update({name: (name, e) for name, e in o["intervals"].items()})
+    # with a split, the regression baseline is fitted on the tuning part (before it) only
+    fit = ((segs["before_split"], {q: cols[e["truth"]] for q, e in targets.values()})
+           if "before_split" in segs and segs["before_split"].any() else None)
     b = _metrics.baselines_for(run.time, cols, [q for q, _ in targets.values()], run.design, run.model_name,
-                               sources={k: "recorded column" for k in cols}, initial="steady")
+                               sources={k: "recorded column" for k in cols}, initial="steady", fit=fit)
     out: dict[str, Any] = {}
     for base, ser in b["series"].items():
         out[base] = {name: {"truth": e["truth"], "unit": e.get("unit"),

@@ -45,7 +45,8 @@ def _table(header: list[str], rows: list[list[Any]]) -> str:
 
 SEGMENTS = ("all", "before_split", "after_split")
 UNITS_NOTE = "angles in deg, angular rates in deg/s, other quantities in SI units"
-BASELINE_TITLES = {"zero": "zero", "bicycle": "linear bicycle", "steady_turn": "steady turn"}
+BASELINE_TITLES = {"zero": "zero", "bicycle": "linear bicycle", "steady_turn": "steady turn",
+                   "regression": "fitted regression"}
 WARN_MD = "⚠"      # a baseline is as good as or better than the observer (markdown)
 WARN_TEXT = "!"    # the same in plain text
 

@@ -38,7 +38,8 @@ BASE = 'name = "t"\nkind = "cosim"\nscenario = "bank-braking"\nobservers = ["Sid
 # definitions
 # --------------------------------------------------------------------------------------------
 def test_the_shipped_campaigns_load_and_cover_every_paper_and_the_real_data():
-    assert {"robustness-000", "robustness-001", "robustness-002", "robustness-003", "mbds-bootstrap"} <= set(SHIPPED)
+    assert {"robustness-000", "robustness-000-flat", "robustness-001", "robustness-002", "robustness-003",
+            "mbds-bootstrap"} <= set(SHIPPED)
     from latobs.campaign_runner import resolve, shipped
 
     for name, path in shipped().items():

@@ -218,6 +218,63 @@ def test_replay_scores_baselines_per_segment():
     assert "'delta'" in b["skipped"]["bicycle"] and set(metrics.baseline_names(b)) == {"zero"}
 
 
+def _record(n=6001, seed=3):
+    rng = np.random.default_rng(seed)
+    t = 0.01 * np.arange(n)
+    delta = 0.02 * np.sin(0.9 * t) + 0.01 * np.sin(2.3 * t + 1.0)
+    vx = 20.0 + 5.0 * np.sin(0.05 * t)
+    ref = bl.bicycle(t, delta, vx, MBDS)
+    return t, {"delta": delta, "vx": vx, "yaw_rate": ref["yaw_rate"] + rng.normal(0, 1e-3, n),
+               "ay": ref["ay"] + rng.normal(0, 0.05, n), "beta": ref["beta"]}
+
+
+def test_the_regression_baseline_is_causal_and_fitted_on_the_tuning_part_only():
+    """bl.regression: a reference that is an exact combination of its features is recovered; an
+    estimate depends on past and present samples only; the held-out reference never enters the fit."""
+    from scipy.signal import lfilter
+
+    t, cols = _record()
+    train = t < 35.0
+    names, X = bl.regression_features(cols, 0.01)
+    assert len(names) == X.shape[1] == 11 * len(bl.REGRESSION_TAUS_S)
+    # a low-pass feature is the causal filter started at its first sample (independent: lfilter's own zi)
+    k = names.index("lowpass(yaw_rate/vx, 0.2 s)")
+    a = -np.expm1(-0.01 / 0.2)
+    x = cols["yaw_rate"] / cols["vx"]
+    ref = lfilter([a], [1, a - 1], x - x[0]) + x[0]
+    assert np.allclose(X[:, k], ref, rtol=1e-12, atol=1e-15)
+    exact = 0.3 * X[:, k] - 0.002 * X[:, names.index("lowpass(ay, 2 s)")] + 0.01
+    est, about = bl.regression(t, cols, exact, train)
+    assert np.max(np.abs(est - exact)) < 1e-2 * np.max(np.abs(exact)) and about["fitted_on_samples"] == int(train.sum())
+    beta_est, _ = bl.regression(t, cols, cols["beta"], train)
+    moved = dict(cols, beta=np.where(train, cols["beta"], 5.0))          # held-out reference changed
+    assert np.array_equal(bl.regression(t, cols, moved["beta"], train)[0], beta_est)
+    later = {c: np.where(t >= 50.0, v * 3.0 + 1.0, v) for c, v in cols.items()}   # future inputs changed
+    assert np.array_equal(bl.regression(t, later, cols["beta"], train)[0][t < 50.0], beta_est[t < 50.0])
+    held = ~train
+    assert np.sqrt(np.mean((beta_est - cols["beta"])[held] ** 2)) < 0.5 * np.sqrt(np.mean(cols["beta"][held] ** 2))
+    with pytest.raises(bl.BaselineUnavailable, match="'ay'"):
+        bl.regression(t, {c: v for c, v in cols.items() if c != "ay"}, cols["beta"], train)
+    with pytest.raises(bl.BaselineUnavailable, match="tuning samples"):
+        bl.regression(t, cols, cols["beta"], t < 0.5)
+
+
+def test_a_replay_with_a_split_scores_the_regression_fitted_before_it():
+    t, cols = _record()
+    outs = {"beta_hat": cols["beta"] + 0.001}
+    design = {"vehicle": {"name": "mbds_250lm", "parameters": MBDS}}
+    run = ReplayRun(time=t, columns=cols, outputs=outs, inputs=["delta", "vx", "yaw_rate", "ay"], dt=0.01,
+                    fmu=None, model_name="Obs", label="Obs", design=design)
+    b = score(run, split=35.0)["observers"]["Obs"]["baselines"]
+    est, _ = bl.regression(t, cols, cols["beta"], t < 35.0)
+    held = t >= 35.0
+    assert b["regression"]["beta_hat"]["after_split"]["rms"] == pytest.approx(
+        np.sqrt(np.mean((est - cols["beta"])[held] ** 2)), rel=1e-12)
+    assert "regression" in b["summary"]["beta_hat"]["baselines"] and b["about"]["regression"]["fits"]["beta"]
+    assert "regression" not in score(run, split=None)["observers"]["Obs"]["baselines"]   # nothing to fit on
+    assert "fitted regression baseline" in report.metrics_markdown(score(run, split=35.0))
+
+
 # ------------------------------------------------------------------------------------------------
 # the built FMUs (fmpy co-simulation)
 # ------------------------------------------------------------------------------------------------
