@@ -16,7 +16,6 @@ causal) before the observer, its error against the zero-phase reference bounded 
 from __future__ import annotations
 
 import argparse
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +25,11 @@ from latobs import __version__, packaging
 from latobs.cbackend.toolchain import host_platform
 from latobs.synthesis import design_file, designs
 from latobs.synthesis import identification as ident
-from latobs.synthesis.params import load_vehicle
 from latobs.validation import replay as rp
 
+from _mbds import SPLIT, setup
+
 QUANTILES = (None, 0.99, 0.995, 0.999, 0.9999, 1.0)    # None: exact measurements (the paper)
-SPLIT = 425.0          # s, the record's tuning / held-out split
 SETTLE = 2.0           # s, not scored after the start
 
 
@@ -52,11 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--more", action="store_true")
     args = ap.parse_args(argv)
-    out = args.out or Path(tempfile.mkdtemp(prefix="interval-mbds-"))
-    out.mkdir(parents=True, exist_ok=True)
-    path = rp.resolve_csv("mbds")
-    cols = rp.load_csv(path)
-    base = load_vehicle("mbds_250lm")
+    out, cols, base = setup(args.out, "interval-mbds-")
     res = ident.identify(cols, base, SPLIT)
     car = out / "mycar.toml"
     car.write_text(tomli_w.dumps(ident.vehicle_document(res, base, "mycar", "mbds", f"t < {SPLIT:g} s", __version__)))
