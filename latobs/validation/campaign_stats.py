@@ -111,15 +111,40 @@ def headline_columns(metrics: Mapping[str, Any], inputs: Mapping[str, list[str]]
 
 
 def _stats(x: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
-    x = x[np.isfinite(x)]
-    if not x.size:
-        return {"n": 0}
-    d: dict[str, Any] = {"n": int(x.size), "mean": float(np.mean(x)), "max": float(np.max(x)),
-                         "min": float(np.min(x))}
-    d.update({f"p{p}": float(np.percentile(x, p)) for p in PERCENTILES})
-    means = x[rng.integers(0, x.size, size=(BOOTSTRAP_RESAMPLES, x.size))].mean(axis=1)
-    d["mean_ci95"] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
-    return d
+    """Statistics of the finite values of ``x`` (:func:`stats_table` of one column)."""
+    return stats_table({"x": x}, rng)["x"]
+
+
+def stats_table(columns: Mapping[str, np.ndarray], rng: np.random.Generator) -> dict[str, dict[str, Any]]:
+    """Per column: n, mean, min, max, the :data:`PERCENTILES` and the 95 % bootstrap interval of the
+    mean over the column's finite values (:data:`BOOTSTRAP_RESAMPLES` resamples). The columns with
+    the same finite samples share their resamples (each column's interval is a bootstrap interval
+    of its own; the resampling counts of a group are one matrix W, the means W x / n)."""
+    out: dict[str, dict[str, Any]] = {}
+    groups: dict[bytes, list[str]] = {}
+    finite = {}
+    for name, x in columns.items():
+        x = np.asarray(x, dtype=float)
+        m = np.isfinite(x)
+        finite[name] = x[m]
+        if not m.any():
+            out[name] = {"n": 0}
+            continue
+        groups.setdefault(np.packbits(m).tobytes() + len(m).to_bytes(8, "little"), []).append(name)
+    for names in groups.values():
+        n = finite[names[0]].size
+        idx = rng.integers(0, n, size=(BOOTSTRAP_RESAMPLES, n))
+        W = np.bincount((idx + n * np.arange(BOOTSTRAP_RESAMPLES)[:, None]).ravel(),
+                        minlength=BOOTSTRAP_RESAMPLES * n).reshape(BOOTSTRAP_RESAMPLES, n)
+        means = (W @ np.column_stack([finite[k] for k in names])) / n
+        for j, name in enumerate(names):
+            x = finite[name]
+            d: dict[str, Any] = {"n": int(n), "mean": float(np.mean(x)), "max": float(np.max(x)),
+                                 "min": float(np.min(x))}
+            d.update({f"p{p}": float(v) for p, v in zip(PERCENTILES, np.percentile(x, PERCENTILES))})
+            d["mean_ci95"] = [float(v) for v in np.percentile(means[:, j], (2.5, 97.5))]
+            out[name] = d
+    return {name: out[name] for name in columns}
 
 
 def summarize(c: Campaign, rows: list[Mapping[str, Any]]) -> dict[str, Any]:
@@ -133,8 +158,8 @@ def summarize(c: Campaign, rows: list[Mapping[str, Any]]) -> dict[str, Any]:
     rng = np.random.default_rng(0)        # the bootstrap's resampling: fixed, the summary is reproducible
 
     def table(sel):
-        return {col: _stats(np.array([np.nan if r["metrics"].get(col) is None else r["metrics"][col]
-                                      for r in sel], dtype=float), rng) for col in cols}
+        return stats_table({col: np.array([np.nan if r["metrics"].get(col) is None else r["metrics"][col]
+                                           for r in sel], dtype=float) for col in cols}, rng)
 
     out: dict[str, Any] = {"campaign": c.name, "runs": len(rows), "ok": len(ok), "failed": len(failed),
                            "failures": [{"run": r["run"], "seed": r["seed"], "error": r["error"]}

@@ -287,6 +287,27 @@ def test_the_summary_gives_numpy_percentiles_enclosure_and_the_worst_runs(tmp_pa
     assert t.num_rows == 201 and t.column("O.beta.rms").to_pylist()[:3] == list(values[:3])
 
 
+def test_the_bootstrap_interval_is_the_plain_resampling_of_each_columns_finite_values():
+    """stats_table's shared resampling counts give, per column, the interval of resampling its own
+    finite values with the same draws (held against the plain gather); columns with other missing
+    runs are resampled apart."""
+    rng = np.random.default_rng(5)
+    a, b = rng.lognormal(size=300), rng.normal(size=300)
+    c = b.copy()
+    c[::7] = np.nan
+    got = cs.stats_table({"a": a, "b": b, "c": c, "none": np.full(300, np.nan)}, np.random.default_rng(9))
+    ref = np.random.default_rng(9)
+    idx = ref.integers(0, 300, size=(cs.BOOTSTRAP_RESAMPLES, 300))      # a and b: one group, drawn first
+    for name, x in (("a", a), ("b", b)):
+        assert got[name]["mean_ci95"] == pytest.approx(np.percentile(x[idx].mean(axis=1), (2.5, 97.5)), rel=1e-12)
+    cf = c[np.isfinite(c)]
+    idx = ref.integers(0, cf.size, size=(cs.BOOTSTRAP_RESAMPLES, cf.size))
+    assert got["c"]["n"] == cf.size and got["c"]["mean_ci95"] == pytest.approx(
+        np.percentile(cf[idx].mean(axis=1), (2.5, 97.5)), rel=1e-12)
+    assert got["none"] == {"n": 0} and list(got) == ["a", "b", "c", "none"]
+    assert got["a"]["p95"] == pytest.approx(np.percentile(a, 95), rel=1e-15)
+
+
 def test_an_interval_that_never_misses_is_plotted_and_ranked_by_its_width_in_degrees(tmp_path):
     """robustness-001 holds its enclosure: a histogram of zero violation counts says nothing, so the
     report plots each interval's mean width and lists the widest runs (angles in degrees)."""
