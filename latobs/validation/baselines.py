@@ -308,35 +308,53 @@ def regression_features(signals: Mapping[str, np.ndarray], dt: float) -> tuple[l
 def ridge_fit(X: np.ndarray, y: np.ndarray, alphas=REGRESSION_ALPHAS, folds: int = REGRESSION_FOLDS):
     """Ridge regression y ~ X w + b on standardised columns, the penalty chosen among ``alphas`` by
     the least RMS over ``folds`` contiguous blocks of the samples (each left out in turn: a time
-    series is not shuffled). Returns (w, b, alpha, cv_rms) with w for the unstandardised X."""
+    series is not shuffled). Returns (w, b, alpha, cv_rms) with w for the unstandardised X.
+
+    The normal equations of every training set come from per-block moments (X centred on its
+    overall mean first, against cancellation): one pass over the data, then a small solve per
+    fold and penalty."""
     X = np.asarray(X, dtype=float)
     y = np.asarray(y, dtype=float)
     n, k = X.shape
     if n < 10 * (k + 1):
         raise BaselineUnavailable(f"the regression needs at least {10 * (k + 1)} tuning samples, got {n}")
-
-    def solve(Xa, ya, alpha):
-        mu, sd = Xa.mean(axis=0), Xa.std(axis=0)
-        sd = np.where(sd > 0, sd, 1.0)
-        Z = (Xa - mu) / sd
-        ym = ya.mean()
-        w = np.linalg.solve(Z.T @ Z + alpha * len(ya) * np.eye(Z.shape[1]), Z.T @ (ya - ym))
-        return w / sd, ym - (mu / sd) @ w
-
+    shift, yshift = X.mean(axis=0), float(y.mean())
+    Xc, yc = X - shift, y - yshift
     edges = np.linspace(0, n, folds + 1).astype(int)
+    blocks = [slice(edges[i], edges[i + 1]) for i in range(folds)]
+    moments = [(Xc[b].T @ Xc[b], Xc[b].sum(axis=0), Xc[b].T @ yc[b], float(yc[b].sum()), b.stop - b.start)
+               for b in blocks]
+
+    def normal(parts):
+        """(Z'Z, Z'(y - ym), mu, sd, ym) of the union of the blocks ``parts`` (Z: standardised)."""
+        XtX = sum(m[0] for m in parts)
+        sx = sum(m[1] for m in parts)
+        Xty = sum(m[2] for m in parts)
+        sy = sum(m[3] for m in parts)
+        nt = sum(m[4] for m in parts)
+        mu, ym = sx / nt, sy / nt
+        C = XtX - nt * np.outer(mu, mu)
+        sd = np.sqrt(np.maximum(np.diag(C) / nt, 0.0))
+        sd = np.where(sd > 0, sd, 1.0)
+        return C / np.outer(sd, sd), (Xty - mu * sy) / sd, mu, sd, ym, nt
+
+    def solve(eq, alpha):
+        ZtZ, Zty, mu, sd, ym, nt = eq
+        w = np.linalg.solve(ZtZ + alpha * nt * np.eye(k), Zty) / sd
+        return w, ym - mu @ w                # in the centred coordinates
+
+    trains = [normal([m for j, m in enumerate(moments) if j != i]) for i in range(folds)]
     best = None
     for alpha in alphas:
         se = 0.0
-        for i in range(folds):
-            test = np.zeros(n, dtype=bool)
-            test[edges[i]:edges[i + 1]] = True
-            w, b = solve(X[~test], y[~test], alpha)
-            se += float(np.sum((X[test] @ w + b - y[test]) ** 2))
+        for i, b in enumerate(blocks):
+            w, c = solve(trains[i], alpha)
+            se += float(np.sum((Xc[b] @ w + c - yc[b]) ** 2))
         cv = math.sqrt(se / n)
         if best is None or cv < best[1]:
             best = (alpha, cv)
-    w, b = solve(X, y, best[0])
-    return w, float(b), float(best[0]), best[1]
+    w, c = solve(normal(moments), best[0])
+    return w, float(c + yshift - shift @ w), float(best[0]), best[1]
 
 
 def regression(time, signals: Mapping[str, np.ndarray], truth, train) -> tuple[np.ndarray, dict[str, Any]]:
