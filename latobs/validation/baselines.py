@@ -75,35 +75,12 @@ def zero(n: int, quantities) -> dict[str, np.ndarray]:
 
 
 # --------------------------------------------------------------------------------------------
-# matrix exponential of many small matrices
+# the exact zero-order hold of many small systems
 # --------------------------------------------------------------------------------------------
-def expm_batch(M: np.ndarray) -> np.ndarray:
-    """expm of each matrix of a stack ``M`` (shape (..., n, n)): scaling and squaring with a
-    Taylor series on matrices scaled to 1-norm theta <= 1/2, of the fewest terms K (at most 18)
-    whose remainder bound theta^(K+1) / (K+1)! * 2 is below 1e-22 for the stack's largest theta
-    (relative truncation error below 1e-22 / exp(-1/2), i.e. machine precision). Agrees with
-    scipy.linalg.expm to rounding; about 100 times faster than it on a stack of 3x3 matrices."""
-    M = np.asarray(M, dtype=float)
-    norm = np.abs(M).sum(axis=-2).max(axis=-1)                 # 1-norm per matrix
-    with np.errstate(divide="ignore"):
-        s = np.where(norm > 0.5, np.ceil(np.log2(np.maximum(norm, 1e-300) / 0.5)), 0.0).astype(int)
-    X = M / (2.0 ** s)[..., None, None]
-    terms = _taylor_terms(float(np.max(norm / 2.0 ** s)) if norm.size else 0.0)
-    eye = np.broadcast_to(np.eye(M.shape[-1]), M.shape)
-    E = eye.copy()
-    term = eye.copy()
-    for k in range(1, terms + 1):
-        term = term @ X / k
-        E = E + term
-    for j in range(int(s.max()) if s.size else 0):
-        sq = s > j
-        E[sq] = E[sq] @ E[sq]
-    return E
-
-
 def _taylor_terms(theta: float) -> int:
     """The fewest Taylor terms K (at most 18) of exp(X), ||X||_1 <= theta <= 1/2, whose remainder
-    bound 2 theta^(K+1) / (K+1)! is below 1e-22."""
+    bound 2 theta^(K+1) / (K+1)! is below 1e-22 (relative error below 1e-22 / exp(-1/2): machine
+    precision)."""
     bound = theta                     # theta^k / k!: the remainder bound after K = k - 1 terms, halved
     for k in range(1, 19):
         if 2.0 * bound <= 1e-22:
@@ -115,9 +92,9 @@ def _taylor_terms(theta: float) -> int:
 def zoh_2x2(A: np.ndarray, B: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(exp(A_k h_k), int_0^h_k exp(A_k s) ds B) of a stack of 2x2 matrices ``A`` (shape (m, 2, 2)),
     an input vector ``B`` (shape (2,) or (m, 2)) and steps ``h`` (shape (m,)): the top blocks of
-    exp([[A, B], [0, 0]] h): Taylor series with :func:`expm_batch`'s term count after one scaling
-    of the whole stack to 1-norm <= 1/2, then squaring; written out elementwise (2x2 products on
-    arrays: several times faster than a stacked matmul)."""
+    exp([[A, B], [0, 0]] h): a Taylor series of :func:`_taylor_terms` terms after one scaling of
+    the whole stack to 1-norm <= 1/2, then squaring; written out elementwise (2x2 products on
+    arrays: several times faster than a stacked matmul). Agrees with scipy.linalg.expm to rounding."""
     h = np.asarray(h, dtype=float)
     X = np.asarray(A, dtype=float) * h[:, None, None]
     y = np.broadcast_to(np.asarray(B, dtype=float), (h.size, 2)) * h[:, None]

@@ -113,14 +113,6 @@ def test_the_elementwise_zero_order_hold_and_scan_agree_with_scipy_and_the_plain
         assert np.allclose(P[k] @ x0 + q[k], x, rtol=1e-12, atol=1e-12 * (1 + np.abs(x).max())), k
 
 
-def test_expm_batch_agrees_with_scipy():
-    rng = np.random.default_rng(1)
-    M = rng.normal(size=(300, 3, 3)) * rng.uniform(1e-4, 5.0, size=(300, 1, 1))
-    ref = np.array([scipy.linalg.expm(m) for m in M])
-    err = np.abs(bl.expm_batch(M) - ref).max(axis=(1, 2)) / np.abs(ref).max(axis=(1, 2))
-    assert err.max() < 1e-12
-
-
 def test_steady_turn_balances_the_motorcycle_model():
     from latobs.synthesis.motorcycle_model import paper_coefficients
 
