@@ -35,6 +35,7 @@ class MotorcycleFaultObserver:
     PARAMETERS = {"vx_hold": 1.0}  # m/s: below this speed the estimates are held
     MAP_CACHE_SIZE = 64            # (design, mode, step size) maps kept at most, per process
     N, NF, NY = 5, 2, 3
+    I_ROLL, I_TORQUE = 5, 6        # in s, for both designs
 
     def __init__(self, data: dict, params: dict | None = None):
         params = dict(params or {})
@@ -46,7 +47,13 @@ class MotorcycleFaultObserver:
             self._G = [m["G"] for m in modes]
             self._C = [m["C"] for m in modes]
             self._F = [m["F"] for m in modes]
-            self._maps_h0 = [m["map_h0"] for m in modes]
+            self._measured = bool(t.get("measured", False))
+            if self._measured:
+                self._coef = [tuple((m[k], m[k + "_vx"], m[k + "_ivx"]) for k in ("M", "G", "F")) for m in modes]
+                self._ranges = [tuple(m["vx_range"]) for m in modes]
+                self._maps_h0 = None
+            else:
+                self._maps_h0 = [m["map_h0"] for m in modes]
             vx_hold = data.get("runtime", {}).get("vx_hold", self.PARAMETERS["vx_hold"])
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"design file: tables lack {exc!r} needed by the paper-003 observer runtime") from exc
@@ -54,6 +61,10 @@ class MotorcycleFaultObserver:
         if not (math.isfinite(self.vx_hold) and self.vx_hold >= 0):
             raise ValueError(f"parameter vx_hold must be finite and >= 0 m/s, got {self.vx_hold}")
         self.n_modes = len(modes)
+        self.N = len(self._C[0][0])               # x^ (5, or 6 with the roll angle a state)
+        self.NF = len(self._M[0]) - self.N        # f^ (the unknown inputs / torque integrators)
+        self._v = None                            # model speed of the last step (measured designs)
+        self._last = None                         # (mode, v, h, map) of the last measured step
         self._key = repr((self._M, self._G))
         self._fns: dict = {}               # (mode, h) -> map, this instance's
         self.mode = 0                      # 0-based; the output is 1-based
@@ -100,6 +111,29 @@ class MotorcycleFaultObserver:
         self._fns[(mode, h)] = W
         return W
 
+    def _speed(self, mode: int, vx: float) -> float:
+        """The model speed: vx clamped to the band's range (a documented clamp: outside it the
+        model of the band's edge is used, as the certificate covers the range only)."""
+        lo, hi = self._ranges[mode]
+        return lo if not vx >= lo else (hi if vx > hi else vx)
+
+    @staticmethod
+    def _at(coef, v: float):
+        """M + v M_vx + (1/v) M_ivx, entry by entry from the left (the C model's order)."""
+        M0, M1, M2 = coef
+        w = 1.0 / v
+        return [[a + v * b + w * c for a, b, c in zip(r0, r1, r2)] for r0, r1, r2 in zip(M0, M1, M2)]
+
+    def _measured_map(self, mode: int, v: float, h: float):
+        """[Phi | Gam] of s' = M(v) s + G(v) y over h (Van Loan), the last one reused."""
+        last = self._last
+        if last is not None and last[0] == mode and last[1] == v and last[2] == h:
+            return last[3]
+        cM, cG, _ = self._coef[mode]
+        W = step_map(self._at(cM, v), self._at(cG, v), h)
+        self._last = (mode, v, h, W)
+        return W
+
     # -- stepping --------------------------------------------------------------------------------
     def initialize(self, u: dict) -> None:
         """x^(0) = C' y(0) (measured states), f^(0) = 0, the mode of the initial speed."""
@@ -114,6 +148,8 @@ class MotorcycleFaultObserver:
         if abs(vx) >= self.vx_hold:
             self.mode = self._band(vx)
             self._check_grid(vx)
+        if self._measured:
+            self._v = self._speed(self.mode, vx if abs(vx) >= self.vx_hold else self._ranges[self.mode][0])
         self._publish(y)
 
     def _check_grid(self, vx: float) -> None:
@@ -145,7 +181,11 @@ class MotorcycleFaultObserver:
         self._check_grid(vx)
         self.mode = mode = self._select(vx)
         # eq. (13) in continuous time, stepped exactly with y held over h (zero-order hold)
-        W = self._fns.get((mode, h)) or self._map(mode, h)
+        if self._measured:
+            self._v = v = self._speed(mode, vx)
+            W = self._measured_map(mode, v, h)
+        else:
+            W = self._fns.get((mode, h)) or self._map(mode, h)
         v = self.s + y
         self.s = [dot(row, v) for row in W]
         self._publish(y)
@@ -158,9 +198,10 @@ class MotorcycleFaultObserver:
         for r in range(self.NY):
             e = y[r] - dot(C[r], s[:n])
             res += e * e
-        Ff, Fr = (dot(row, s) for row in self._F[self.mode])
-        out["roll_angle_hat"] = s[n]
-        out["rider_torque_hat"] = s[n + 1]
+        F = self._at(self._coef[self.mode][2], self._v) if self._measured else self._F[self.mode]
+        Ff, Fr = (dot(row, s) for row in F)
+        out["roll_angle_hat"] = s[self.I_ROLL]       # f^_1 of the paper's design, x^_6 of the measured-speed one
+        out["rider_torque_hat"] = s[self.I_TORQUE]
         out["vy_hat"] = s[0]
         out["steer_rate_hat"] = s[4]
         out["Ff_hat"] = Ff

@@ -24,6 +24,7 @@ MODULES = {
     "design_002": "latobs.synthesis.sideslip_fixed_order_estimator",
     "design_kalman": "latobs.synthesis.sideslip_kalman_filter",
     "design_003": "latobs.synthesis.motorcycle_fault_observer",
+    "design_003_measured": "latobs.synthesis.motorcycle_fault_observer_lpv",
     "certificate": "latobs.synthesis.certificate",
     "plant_data": "latobs.packaging",
     # runtime (latobs.fmu_src): the paper's equations, the FMU's declarations, the citations
@@ -198,8 +199,16 @@ ENTRIES: tuple[Entry, ...] = (
           certificate=_m("{m[certificate]}.sideslip_kalman_filter:certify"), plant="CarPlant", campaign="robustness-002",
           truth=_CG),
     Entry("MotorcycleFaultObserver", "observer", "003", _m("{m[papers]}:ICHALAL_2017"), "sharp_motorcycle",
-          "switched H-inf PI observer of a motorcycle's roll angle and rider torque (unknown inputs), one "
-          "Lyapunov matrix per speed mode 10..30 m/s, LMIs (20)-(23) with their misprints corrected",
+          "H-inf observer of a motorcycle's roll angle and rider torque at the measured speed: roll angle as a "
+          "state, PMI torque, one Lyapunov matrix for all speeds 7.5..32.5 m/s (paper 003 extended)",
+          model=_m("{m[models]}.motorcycle_fault_observer"), runtime=_m("{m[runtime_003]}:MotorcycleFaultObserver"),
+          c_model="motorcycle_fault_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
+          options=_m("{m[design_003_measured]}:DesignOptions"), design=_m("{m[design_003_measured]}:design"),
+          certificate=_m("{m[certificate]}.motorcycle_fault_observer:certify"),
+          plant="MotorcyclePlant", validate=True, campaign="robustness-003"),
+    Entry("MotorcycleFaultObserverPaper", "observer", "003", _m("{m[papers]}:ICHALAL_2017"), "sharp_motorcycle",
+          "the paper's switched H-inf PI observer as printed, for reproduction: roll angle and rider torque as "
+          "unknown inputs, one frozen model and Lyapunov matrix per grid speed 10..30 m/s, LMIs (20)-(23) corrected",
           model=_m("{m[models]}.motorcycle_fault_observer"), runtime=_m("{m[runtime_003]}:MotorcycleFaultObserver"),
           c_model="motorcycle_fault_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
           options=_m("{m[design_003]}:DesignOptions"), design=_m("{m[design_003]}:design"),

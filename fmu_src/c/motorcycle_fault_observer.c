@@ -21,7 +21,12 @@
  * mode is kept while vx is in its band widened by the hysteresis; the start (model_initialize, or
  * else the first step) sets x^ = C' y, f^ = 0 and the mode of the initial speed.
  *
- * ModelExchange: the continuous states are s (7), the derivatives eq. (13) at the current
+ * A measured-speed design (OBS_MEASURED 1: the roll angle a state, a PMI torque, synthesis/
+ * motorcycle_fault_observer_lpv.py) has M(v) = M + v M_vx + M_ivx / v (G, F likewise) at the model
+ * speed v, the measured vx clamped to the band's OBS_VX_RANGE; its step map is computed at each step
+ * with la_zoh_map (reused while mode, v and h repeat), F(v) at the last step's v.
+ *
+ * ModelExchange: the continuous states are s (7, or 6 + the torque integrators), the derivatives eq. (13) at the current
  * (continuous) y; 0 while frozen. The discrete state (mode, frozen, outside the grid) changes
  * only in model_me_event_update, at the zero crossings of the event indicators
  *     z0 = vx - (edges[s] - hyst)       (s > 0; else 1)      the active mode's widened band
@@ -45,7 +50,7 @@
 #define NW (OBS_NS + OBS_NY)       /* columns of a step map [Phi | Gam] */
 #define N_MODES OBS_N_MODES
 
-enum { S_VY, S_YAW_RATE, S_ROLL_RATE, S_STEER_ANGLE, S_STEER_RATE, S_PHI, S_TAU };  /* s = [x^; f^] */
+enum { S_VY, S_YAW_RATE, S_ROLL_RATE, S_STEER_ANGLE, S_STEER_RATE, S_PHI, S_TAU };  /* s = [x^; f^] (both designs) */
 
 typedef const double MapRow[NW];   /* a row of a step map */
 
@@ -61,7 +66,26 @@ struct Model {
     double cache_h;                /* s, the step of the cached maps (0: none) */
     int cached[N_MODES];           /* cache[mode] holds the map of cache_h */
     double cache[N_MODES][NS][NW];
+    double v;                      /* measured design: the model speed of the last step (m/s) */
+    double cache_v;                /* measured design: cache[cache_mode] is the map at (cache_v, cache_h) */
+    int cache_mode;
 };
+
+#if OBS_MEASURED
+/* M + v M_vx + (1/v) M_ivx for an r x c coefficient triple, entry by entry (the runtime's _at) */
+static void at_speed(int r, int c, const double *M0, const double *M1, const double *M2, double v, double *out)
+{
+    double w = 1.0 / v;
+    for (int i = 0; i < r * c; i++) out[i] = M0[i] + v * M1[i] + w * M2[i];
+}
+
+/* the model speed of `mode`: vx clamped to the band's range */
+static double model_speed(int mode, double vx)
+{
+    double lo = OBS_VX_RANGE[mode][0], hi = OBS_VX_RANGE[mode][1];
+    return !(vx >= lo) ? lo : (vx > hi ? hi : vx);
+}
+#endif
 
 size_t model_size(void)
 {
@@ -76,7 +100,7 @@ static void measurements(const double *u, double y[NY])
 }
 
 /* the outputs of state s in mode `mode` with measurement y (the runtime's _publish) */
-static void outputs_of(const double s[NS], int mode, const double y[NY], double *out, int *outi)
+static void outputs_of(const double s[NS], int mode, double v, const double y[NY], double *out, int *outi)
 {
     double res = 0.0;
     for (int r = 0; r < NY; r++) {
@@ -87,15 +111,23 @@ static void outputs_of(const double s[NS], int mode, const double y[NY], double 
     out[OUT_rider_torque_hat] = s[S_TAU];
     out[OUT_vy_hat] = s[S_VY];
     out[OUT_steer_rate_hat] = s[S_STEER_RATE];
+#if OBS_MEASURED
+    double F[2][NS];
+    at_speed(2, NS, &OBS_F[mode][0][0], &OBS_F_VX[mode][0][0], &OBS_F_IVX[mode][0][0], v, &F[0][0]);
+    out[OUT_Ff_hat] = dot_from(0.0, F[0], s, NS);
+    out[OUT_Fr_hat] = dot_from(0.0, F[1], s, NS);
+#else
+    (void)v;
     out[OUT_Ff_hat] = dot_from(0.0, OBS_F[mode][0], s, NS);
     out[OUT_Fr_hat] = dot_from(0.0, OBS_F[mode][1], s, NS);
+#endif
     out[OUT_residual_norm] = sqrt(res);
     outi[INT_mode] = mode + 1;
 }
 
 static void publish(Model *m, const double y[NY])
 {
-    outputs_of(m->s, m->mode, y, m->y, m->yi);
+    outputs_of(m->s, m->mode, m->v, y, m->y, m->yi);
 }
 
 /* The discrete rules (the runtime's) take a flag `me`: 0 in co-simulation; 1 at a ModelExchange
@@ -159,6 +191,9 @@ static void start(Model *m, const double *u, const Log *log)
         m->mode = band_of(vx, 0);           /* no active mode yet: no hysteresis */
         check_grid(m, vx, 0, log);
     }
+#if OBS_MEASURED
+    m->v = model_speed(m->mode, fabs(vx) >= m->vx_hold ? vx : OBS_VX_RANGE[m->mode][0]);
+#endif
     publish(m, y);
 }
 
@@ -182,8 +217,25 @@ void model_initialize(Model *m, const double *u, const Log *log)
 
 /* [Phi | Gam] of `mode` over h: the emitter's for the default step, else cached in the instance;
  * NULL if the map is not finite (h absurdly large) */
-static MapRow *step_map(Model *m, int mode, double h)
+static MapRow *step_map(Model *m, int mode, double vx, double h)
 {
+#if OBS_MEASURED
+    /* the map of s' = M(v) s + G(v) y at the model speed v, the last one reused */
+    double v = model_speed(mode, vx);
+    if (!(m->cache_h == h && m->cache_v == v && m->cache_mode == mode && m->cached[0])) {
+        double M[NS][NS], G[NS][NY];
+        at_speed(NS, NS, &OBS_M[mode][0][0], &OBS_M_VX[mode][0][0], &OBS_M_IVX[mode][0][0], v, &M[0][0]);
+        at_speed(NS, NY, &OBS_G[mode][0][0], &OBS_G_VX[mode][0][0], &OBS_G_IVX[mode][0][0], v, &G[0][0]);
+        m->cached[0] = 0;
+        if (la_zoh_map(NS, NY, &M[0][0], &G[0][0], h, &m->cache[0][0][0]) != 0) return NULL;
+        m->cache_h = h;
+        m->cache_v = v;
+        m->cache_mode = mode;
+        m->cached[0] = 1;
+    }
+    return (MapRow *)m->cache[0];
+#else
+    (void)vx;
     if (h == OBS_H0) return OBS_MAP_H0[mode];
     if (h != m->cache_h) {
         m->cache_h = h;
@@ -194,6 +246,7 @@ static MapRow *step_map(Model *m, int mode, double h)
         m->cached[mode] = 1;
     }
     return (MapRow *)m->cache[mode];
+#endif
 }
 
 /* frozen: |vx| < vx_hold (the runtime's -hold < vx < hold; me, while running: |vx| <= vx_hold) */
@@ -222,7 +275,7 @@ int model_do_step(Model *m, double h, const double *u, const Log *log)
     double vx = u[IN_vx], y[NY], v[NW];
     MapRow *W = NULL;
     if (!frozen_at(m, vx, 0)) {            /* the map first: a refused step changes nothing */
-        W = step_map(m, m->started ? select_mode(m, vx, 0) : band_of(vx, 0), h);   /* start's mode */
+        W = step_map(m, m->started ? select_mode(m, vx, 0) : band_of(vx, 0), vx, h);   /* start's mode */
         if (W == NULL) {
             log_event(log, LOG_ERROR, "step refused: the step map over h = %g s is not finite", h);
             return -1;
@@ -236,6 +289,9 @@ int model_do_step(Model *m, double h, const double *u, const Log *log)
     }
     check_grid(m, vx, 0, log);
     m->mode = select_mode(m, vx, 0);
+#if OBS_MEASURED
+    m->v = model_speed(m->mode, vx);
+#endif
     memcpy(v, m->s, sizeof m->s);
     memcpy(v + NS, y, sizeof y);
     for (int i = 0; i < NS; i++) m->s[i] = dot_from(0.0, W[i], v, NW);
@@ -271,8 +327,16 @@ void model_me_derivatives(const Model *m, const double *u, double *dx)
 {
     double y[NY];
     measurements(u, y);
+#if OBS_MEASURED
+    double M[NS][NS], G[NS][NY], v = model_speed(m->mode, u[IN_vx]);
+    at_speed(NS, NS, &OBS_M[m->mode][0][0], &OBS_M_VX[m->mode][0][0], &OBS_M_IVX[m->mode][0][0], v, &M[0][0]);
+    at_speed(NS, NY, &OBS_G[m->mode][0][0], &OBS_G_VX[m->mode][0][0], &OBS_G_IVX[m->mode][0][0], v, &G[0][0]);
+    for (int i = 0; i < NS; i++)
+        dx[i] = m->holding ? 0.0 : dot_from(0.0, M[i], m->s, NS) + dot_from(0.0, G[i], y, NY);
+#else
     for (int i = 0; i < NS; i++)
         dx[i] = m->holding ? 0.0 : dot_from(0.0, OBS_M[m->mode][i], m->s, NS) + dot_from(0.0, OBS_G[m->mode][i], y, NY);
+#endif
 }
 
 void model_me_event_indicators(const Model *m, const double *u, double *z)
@@ -302,5 +366,10 @@ void model_me_outputs(const Model *m, const double *u, double *y, int *yi)
 {
     double meas[NY];
     measurements(u, meas);
-    outputs_of(m->s, m->mode, meas, y, yi);
+#if OBS_MEASURED
+    double v = m->holding ? m->v : model_speed(m->mode, u[IN_vx]);
+#else
+    double v = 0.0;
+#endif
+    outputs_of(m->s, m->mode, v, meas, y, yi);
 }

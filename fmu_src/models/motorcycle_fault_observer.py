@@ -10,14 +10,20 @@ from ..spec import ANGLE, MOTORCYCLE, RATE, RIGHT, SPEED, ModelSpec, Var, design
 
 
 def _variant(data: dict) -> str:
+    if data.get("method") == "measured_speed":
+        bands = ", ".join(f"{m['band'][0]:g}-{m['band'][1]:g}" for m in data.get("modes", []))
+        nt = len(data.get("structure", {}).get("faults", []))
+        return (f"measured speed: model and gain L(vx) = L0 + vx L1 + L2/vx evaluated at the measured speed "
+                f"(bands {bands} m/s, one Lyapunov matrix), roll angle a state, {nt} torque integrator(s)")
     speeds = "/".join(f"{m['vx']:g}" for m in data.get("modes", []))
     return (f"speed modes: one PI gain pair per grid speed {speeds} m/s, switched on vx "
             f"(nearest grid speed, hysteresis {data.get('switching', {}).get('hysteresis', 0):g} m/s)")
 
 
 SPEC = ModelSpec(
-    description="Switched H-infinity PI observer of a motorcycle's roll angle and rider steering torque "
-                "(paper 003, eq. (13)) on the reduced Sharp 1971 lateral model",
+    description="H-infinity observer of a motorcycle's roll angle and rider steering torque (paper 003, "
+                "eq. (13): switched PI, or latobs's measured-speed PMI extension) on the reduced Sharp 1971 "
+                "lateral model",
     describe=_variant,
     runtime=MotorcycleFaultObserver,
     inputs=(
@@ -27,8 +33,8 @@ SPEC = ModelSpec(
         Var("roll_rate", "rad/s", "measured roll rate", **RATE, **MOTORCYCLE["roll_rate"]),
     ),
     outputs=(
-        Var("roll_angle_hat", "rad", "estimated roll angle (unknown input f1)", sign="> 0 leaning right"),
-        Var("rider_torque_hat", "N.m", "estimated rider steering torque (unknown input f2)",
+        Var("roll_angle_hat", "rad", "estimated roll angle (paper design: unknown input f1; measured-speed design: a state)", sign="> 0 leaning right"),
+        Var("rider_torque_hat", "N.m", "estimated rider steering torque (an unknown input)",
             sign="> 0 turning the handlebar right"),
         Var("vy_hat", "m/s", "estimated lateral velocity", sign=RIGHT),
         Var("steer_rate_hat", "rad/s", "estimated steering rate", sign="> 0 steering further right"),
@@ -47,7 +53,7 @@ SPEC = ModelSpec(
     ),
     starts=design_speed,   # vx starts inside the design grid: an unconnected run steps with fmi2OK
     # longest communication step (s), measured against 1 ms runs: exact step maps (matrix exponential):
-    # identical to 1 ms runs to 1e-11
+    # identical to 1 ms runs to 1e-11 (measured-speed design: the speed held over the step)
     max_step=1.0,
     stop_time=16.0,
     paper=ICHALAL_2017,

@@ -77,8 +77,9 @@ def pairings() -> list[Pairing]:
         Pairing("002", "w1-steer", "CarPlant", "delibasi",
                 ("SideslipFixedOrderEstimator", "SideslipKalmanFilter_delibasi"),
                 "demo run w1-steer [002], CarPlant for paper 002's vehicle"),
-        Pairing("003", "motorcycle-lane-change", "MotorcyclePlant", "sharp_motorcycle", ("MotorcycleFaultObserver",),
-                "demo run motorcycle-lane-change [003]"),
+        Pairing("003", "motorcycle-lane-change", "MotorcyclePlant", "sharp_motorcycle",
+                tuple(catalogue.default_observers("MotorcyclePlant")),
+                "demo run motorcycle-lane-change [003]: paper 003's observers"),
         Pairing("mbds", "double-lane-change", "CarPlant", "sedan",
                 tuple(n for n in catalogue.OBSERVERS if catalogue.get(n).default_vehicle == "mbds_250lm"),
                 "not a demo run: the observers designed for the MBDS record's vehicle (mbds_250lm), which the demo "

@@ -18,6 +18,9 @@ def certify(d: dict) -> list[Check]:
     """The checks of a paper-003 design file, independent of the LMI solver (``docs/certificates.md``)."""
     import scipy.linalg
 
+    if d.get("method") == "measured_speed":
+        return certify_measured(d)
+
     checks: list[Check] = []
     opts, sc = d["options"], d["scaling"]
     xs, fs, ds = (np.asarray(sc[k], float) for k in ("x_scale", "f_scale", "d_scale"))
@@ -172,6 +175,8 @@ def certify(d: dict) -> list[Check]:
 
 def summary(data: dict) -> dict:
     """Headline figures of a certified design (for notes and reports)."""
+    if data.get("method") == "measured_speed":
+        return summary_measured(data)
     per_mode = []
     for m in data["modes"]:
         L = np.vstack([np.asarray(m["gains"]["L_P"], float), np.asarray(m["gains"]["L_I"], float)])
@@ -182,3 +187,132 @@ def summary(data: dict) -> dict:
     dw = data.get("dwell_time", {})
     return {"gamma": data["gamma"], "per_mode": per_mode, "beta": data.get("beta"),
             "dwell_time_s": dw.get("tau_a"), "dwell_time_adjacent_s": dw.get("tau_a_adjacent")}
+
+
+# -- the measured-speed design (synthesis.motorcycle_fault_observer_lpv) -----------------------------
+def _augmented_003(r, nt: int):
+    """The measured-speed design's model rebuilt from a ReducedModel by blocks (not the design
+    module's code): x = [x_paper; phi] with phi' = e_roll_rate' x; s = [x; tau; tau' ...] with the
+    torque chain a shift matrix."""
+    e_p = np.eye(1, 5, 2)                                   # the roll rate's row selector
+    Ax = np.block([[r.A, np.reshape(r.E_phi, (5, 1))], [e_p, np.zeros((1, 1))]])
+    Bt = np.vstack([np.reshape(r.B_tau, (5, 1)), np.zeros((1, 1))]) @ np.eye(1, nt)
+    A = np.block([[Ax, Bt], [np.zeros((nt, 6)), np.eye(nt, k=1)]])
+    Ed = np.vstack([r.E_gamma, np.zeros((1 + nt, 2))])
+    C = np.hstack([r.C, np.zeros((3, 1 + nt))])
+    H = np.hstack([r.H_x, np.reshape(r.H_phi, (2, 1))])
+    return A, Ed, C, H
+
+
+def certify_measured(d: dict) -> list[Check]:
+    """Checks of a measured-speed paper-003 design: the model's (1, vx, 1/vx) coefficients against the
+    reduced model re-derived at other speeds; one P with the decay, disk and bounded-real LMIs at
+    every band's (vx, 1/vx) box corners (affine in (vx, 1/vx): they then hold at every speed of the
+    band, for any speed history and switching); poles and H-infinity norms on a dense speed grid."""
+    import scipy.linalg
+
+    checks: list[Check] = []
+    o = d["options"]
+    sym = lambda M: (M + M.T) / 2
+    mod = d["model"]
+    A, Ed, C, H = ([np.asarray(c, float) for c in mod[k]] for k in ("A", "E_d", "C", "H"))
+    na, nt = A[0].shape[0], len(d["structure"]["faults"])
+    at = lambda coef, v, w=None: coef[0] + v * coef[1] + (1.0 / v if w is None else w) * coef[2]
+    checks.append(_le("model sizes: s = [6 states; torque integrators] (|na - 6 - nt|)", abs(na - 6 - nt), 0.0))
+    if d["structure"].get("model_source") == "latobs.synthesis.motorcycle_model.reduced_model":
+        from ..motorcycle_model import reduced_model
+        vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
+        err = 0.0
+        for band in (m["band"] for m in d["modes"]):
+            for v in np.linspace(float(band[0]), float(band[1]), 5):
+                ref = _augmented_003(reduced_model(vehicle, float(v)), nt)
+                err = max(err, *(_rel_err(at(c, float(v)), r) for c, r in zip((A, Ed, C, H), ref)))
+        checks.append(_le("model A(vx), E_d, C, H(vx) in (1, vx, 1/vx) equal the reduced model re-derived at 5 speeds "
+                          "per band (max rel. error)", err, 1e-10))
+    C0 = C[0]
+    checks.append(_le("y = states: C a speed-independent 0/1 selection (max deviation)",
+                      float(np.max(np.abs(np.sort(C0, axis=1) - np.eye(1, na, na - 1)))) + float(np.max(np.abs(C[1])))
+                      + float(np.max(np.abs(C[2]))), 0.0))
+    xs, fs = np.asarray(o["x_scale"], float), np.asarray(o["f_scale"], float)
+    D = np.diag(np.concatenate([xs, fs]))
+    Di = np.linalg.inv(D)
+    Y = np.diag([xs[i] for i in np.argmax(C0, axis=1)])
+    Yi = np.linalg.inv(Y)
+    Bw = np.zeros((na, 8))
+    Bw[:, :2] = Di @ Ed[0] * float(o["d_scale"])
+    Bw[:5, 2:7] = float(o["xi_weight"]) * np.eye(5)
+    Bw[na - 1, 7] = float(o["w_weight"])
+    Cz = np.zeros((2, na))
+    Cz[0, 5] = 1.0
+    Cz[1, 6] = float(o["z_tau"])
+    ly = d["lyapunov"]
+    Praw = np.asarray(ly["P"], float)
+    P = sym(Praw)
+    gb, alpha, radius = float(ly["gamma_bar"]), float(ly["alpha"]), float(ly["radius"])
+    ev = np.linalg.eigvalsh(P)
+    checks.append(_le("P symmetric: max |P - P'|", float(np.max(np.abs(Praw - Praw.T))), 0.0))
+    checks.append(_ge("P >= I: min eig(P) - 1 (normalised)", float(ev[0] - 1.0), 0.0))
+    checks.append(_le("cond(P)", float(ev[-1] / ev[0]), float(o.get("cond_limit", 1e8))))
+    checks.append(_le("gamma = sqrt(gamma_bar) (relative error)", abs(float(d["gamma"]) - math.sqrt(max(gb, 0.0)))
+                      / max(float(d["gamma"]), 1e-300), 1e-12))
+    lam_min = math.inf
+    edges = [float(e) for e in d["switching"]["edges"]]
+    checks.append(_le("switching edges = the bands' ends (difference)",
+                      max([abs(len(edges) - len(d["modes"]) - 1)]
+                          + [abs(m["band"][0] - edges[k]) + abs(m["band"][1] - edges[k + 1])
+                             for k, m in enumerate(d["modes"]) if k + 1 < len(edges)]), 0.0))
+    for m in d["modes"]:
+        lo, hi = (float(b) for b in m["band"])
+        where = f"band {m['index']} [{lo:g}, {hi:g}] m/s"
+        L = [np.asarray(x, float) for x in m["gains"]["L"]]
+        bad = float(sum(np.sum(~np.isfinite(x)) for x in L))
+        checks.append(_le(f"gains L_b finite (count of non-finite entries), {where}", bad, 0.0))
+        if bad:
+            continue
+        checks.append(_le(f"largest gain entry of L(vx) on the band (SI), {where}",
+                          max(float(np.max(np.abs(at(L, v)))) for v in np.linspace(lo, hi, 21)),
+                          float(o.get("gain_limit", 1e6))))
+        U = [np.asarray(x, float) for x in m["U"]]
+        checks.append(_le(f"gains = D (-P^-1 U_b) Y^-1 of the stored P, U (max rel. error), {where}",
+                          max(_rel_err(l, D @ (-np.linalg.solve(P, u)) @ Yi) for l, u in zip(L, U)), 1e-8))
+        worst = {"decay": -math.inf, "disk": -math.inf, "bounded real": -math.inf}
+        for v, w in ((lo, 1 / lo), (lo, 1 / hi), (hi, 1 / lo), (hi, 1 / hi)):
+            An = Di @ (at(A, v, w) - at(L, v, w) @ C0) @ D
+            PA = P @ An
+            worst["decay"] = max(worst["decay"], float(np.max(np.linalg.eigvalsh(sym(PA + PA.T + 2 * alpha * P)))))
+            worst["disk"] = max(worst["disk"], float(np.max(np.linalg.eigvalsh(
+                sym(np.block([[-radius * P, PA], [PA.T, -radius * P]]))))))
+            br = np.block([[PA + PA.T + Cz.T @ Cz, P @ Bw], [(P @ Bw).T, -gb * np.eye(Bw.shape[1])]])
+            worst["bounded real"] = max(worst["bounded real"], float(np.max(np.linalg.eigvalsh(sym(br)))))
+            lam_min = min(lam_min, float(np.min(scipy.linalg.eigh(-sym(PA + PA.T), P, eigvals_only=True))))
+        checks.append(_le(f"decay LMI A_cl'P + P A_cl + 2 alpha P <= 0 at the 4 (vx, 1/vx) corners: max eig, {where}",
+                          worst["decay"], 0.0))
+        checks.append(_le(f"disk LMI |lambda| < radius at the 4 corners: max eig, {where}", worst["disk"], 0.0))
+        checks.append(_le(f"bounded-real LMI (gamma_bar, w -> z) at the 4 corners: max eig, {where}",
+                          worst["bounded real"], 0.0))
+        re_max, mod_max, hn_max = -math.inf, 0.0, 0.0
+        for v in np.linspace(lo, hi, 41):
+            Acl = at(A, float(v)) - at(L, float(v)) @ C0
+            eig = np.linalg.eigvals(Acl)
+            re_max, mod_max = max(re_max, float(np.max(eig.real))), max(mod_max, float(np.max(np.abs(eig))))
+        for v in np.linspace(lo, hi, 5):
+            Acln = Di @ (at(A, float(v)) - at(L, float(v)) @ C0) @ D
+            hn_max = max(hn_max, hinf.hinf_norm(Acln, Bw, Cz).norm if re_max < 0 else math.inf)
+        checks.append(_le(f"closed-loop poles at 41 speeds: max Re <= -alpha, {where}", re_max, -alpha))
+        checks.append(_le(f"closed-loop poles at 41 speeds: max |lambda| <= radius, {where}", mod_max, radius))
+        checks.append(_le(f"H-inf w -> z (Hamiltonian) at 5 frozen speeds, normalised <= gamma, {where}", hn_max,
+                          float(d["gamma"]) * (1 + REL_TOL)))
+    checks.append(_ge("one Lyapunov matrix: decay of x'Px at every corner of every band (1/s) >= 2 alpha (any speed "
+                      "history, any switching: no dwell time)", lam_min, 2 * float(ly["alpha"]) * (1 - 1e-9)))
+    return checks
+
+
+def summary_measured(data: dict) -> dict:
+    """Headline figures of a certified measured-speed design."""
+    per_mode = [{"mode": m["index"], "vx_band": m["band"], "band": m["band"], "slowest_pole": m["slowest_pole_re"],
+                 "fastest_pole": m["fastest_pole_abs"],
+                 "largest_gain": float(max(np.max(np.abs(np.asarray(x, float))) for x in m["gains"]["L"]))}
+                for m in data["modes"]]
+    P = np.asarray(data["lyapunov"]["P"], float)
+    return {"gamma": data["gamma"], "method": "measured_speed", "decay_rate": data["lyapunov"]["alpha"],
+            "cond_P": float(np.linalg.cond(P)), "per_mode": per_mode}

@@ -39,7 +39,7 @@ from c_models import REL, assert_equivalent, held_inputs, run_cs
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(find_compiler() is None, reason="no C compiler (set CC, or install cc/gcc)")]
 
-OBS, PLANT = "MotorcycleFaultObserver", "MotorcyclePlant"
+OBS, PLANT = "MotorcycleFaultObserverPaper", "MotorcyclePlant"
 VEHICLE = "sharp_motorcycle"
 SCENARIOS_003 = [name for name, sc in SCENARIOS.items() if sc.plant == PLANT]
 ME_DT = 1e-3        # s, the ModelExchange comparison's sample step

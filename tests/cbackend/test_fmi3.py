@@ -38,6 +38,7 @@ DESIGN_GAINS = {
     "E": lambda d: [m["E"] for m in d["modes"]],
     "L_P": lambda d: [m["gains"]["L_P"] for m in d["modes"]],
     "L_I": lambda d: [m["gains"]["L_I"] for m in d["modes"]],
+    "L": lambda d: [m["gains"]["L"] for m in d["modes"]],
     "estimator_num": lambda d: [m["estimator"]["num"] for m in d["modes"]],
     "estimator_den": lambda d: [m["estimator"]["den"] for m in d["modes"]],
     "Q": lambda d: d["modes"][0]["gains"]["Q"], "R": lambda d: d["modes"][0]["gains"]["R"],

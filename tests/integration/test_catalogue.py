@@ -180,7 +180,7 @@ def test_reference_experiments_and_validation_defaults_are_the_catalogues():
         assert (spec.scenario, spec.seconds, spec.overrides, spec.note) == (r.scenario, r.seconds, r.overrides, r.note)
     assert catalogue.default_observers("CarPlant") == ["SideslipBankObserver", "SideslipBankObserverTire",
                                                        "SideslipBankObserverPaper", "SideslipBankObserverTirePaper"]
-    assert catalogue.default_observers("MotorcyclePlant") == ["MotorcycleFaultObserver"]
+    assert catalogue.default_observers("MotorcyclePlant") == ["MotorcycleFaultObserver", "MotorcycleFaultObserverPaper"]
     assert metrics.REFERENCE_SIGNALS == {e.name: dict(e.truth) for e in catalogue.ENTRIES if e.truth}
     assert pipeline.PLANT_NOISE == {n: dict(ENTRIES[n].noise) for n in catalogue.PLANTS}
     assert list(pipeline.PLANT_NOISE["CarPlant"]) == ["yaw_rate", "roll_angle", "roll_rate", "delta", "vx"]

@@ -22,7 +22,10 @@ session build (``built_fmus`` in conftest.py):
   identically), and (2) on fmpy's own grid every output is within ``TOL`` times its peak
   magnitude over the run (at least 1) of libcosim's. Measured (issue 10): 0 on libcosim's grid;
   on fmpy's, 5.4e-13 of the peak for MotorcycleFaultObserver (4e-10 N on its 745 N rear-force
-  estimate), at most 1.5e-14 for every other FMU and pair (each test prints its figures, ``-s``).
+  estimate), at most 1.5e-14 for every other FMU and pair (each test prints its figures, ``-s``);
+  since paper 003's default observer evaluates its model at the measured speed it computes its step
+  map at every step from that step's h, so the few ulps of h move it by 2.6e-12 of the peak
+  (``TOL_OF``; paper 003's paper design reads the stored map of the 5 ms step).
   Alone, an FMU in fmpy gives exactly what it gave in the harness run.
 """
 from __future__ import annotations
@@ -55,6 +58,7 @@ DT = 0.005                   # s, communication step
 DT_NS = 5_000_000            # the same in libcosim's integer nanoseconds
 DURATION = 2.0               # s of each scenario
 TOL = 1e-12                  # |libcosim - fmpy| <= TOL * max(1, peak |fmpy|) per output, fmpy's grid
+TOL_OF = {"MotorcycleFaultObserver": 1e-11}   # its step map is computed from each step's h (docstring)
 
 #: the usual scenario of each paper's observers (002: the one of the design's vehicle range)
 PAPER_SCENARIO = {"000": "bank-braking", "001": "double-lane-change-15", "003": "motorcycle-lane-change"}
@@ -237,7 +241,8 @@ def _compare(run: dict, label: str):
     print(f"{label} [{run['scenario']}, {len(next(iter(next(iter(own.values())).values())))} steps]: "
           f"libcosim vs fmpy on fmpy's grid: max |diff| {worst_abs:.3g}, max |diff|/max(1, peak) {worst:.3g} "
           f"at {at}; on libcosim's grid: identical")
-    assert worst <= TOL, f"{label}: libcosim and fmpy differ by {worst:.3g} of the peak at {at} (tolerance {TOL:g})"
+    tol = TOL_OF.get(label.split()[0], TOL)
+    assert worst <= tol, f"{label}: libcosim and fmpy differ by {worst:.3g} of the peak at {at} (tolerance {tol:g})"
 
 
 @pytest.mark.parametrize("variant", FMU_VARIANTS)

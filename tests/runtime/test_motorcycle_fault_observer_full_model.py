@@ -28,7 +28,7 @@ AMP = 15.0           # N m (linear range: the tyres stay far from saturation in 
 
 @pytest.fixture(scope="module")
 def design(built_fmus):
-    return copy.deepcopy(built_fmus.design("MotorcycleFaultObserver"))     # (designs.run, once per test run)
+    return copy.deepcopy(built_fmus.design("MotorcycleFaultObserverPaper"))     # (designs.run, once per test run)
 
 
 def torque(t: float) -> float:

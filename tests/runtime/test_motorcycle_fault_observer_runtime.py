@@ -20,7 +20,7 @@ VEHICLE = load_vehicle("sharp_motorcycle")
 
 @pytest.fixture(scope="module")
 def d003(built_fmus) -> dict:
-    return built_fmus.design("MotorcycleFaultObserver")   # the session build's design (conftest.py)
+    return built_fmus.design("MotorcycleFaultObserverPaper")   # the session build's design (conftest.py)
 
 
 def _observer_matrices(mode: dict):
@@ -238,7 +238,7 @@ def test_fmu_equals_the_runtime_and_refuses_non_finite_inputs(d003, tmp_path):
     from latobs.validation.harness import FmuInstance
 
     path = packaging.package_design(design_file.write(d003, tmp_path), tmp_path)
-    assert path.name == "MotorcycleFaultObserver.fmu"
+    assert path.name == "MotorcycleFaultObserverPaper.fmu"
 
     def u_of(k):
         t = k * H

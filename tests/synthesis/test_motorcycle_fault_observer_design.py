@@ -20,7 +20,7 @@ VEHICLE = load_vehicle("sharp_motorcycle")
 @pytest.fixture(scope="module")
 def d003() -> dict:
     """The catalogue design (LMIs + certificate; designs.run raises if it is not certified)."""
-    return designs.run("MotorcycleFaultObserver")
+    return designs.run("MotorcycleFaultObserverPaper")
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def _failed(data: dict) -> set[str]:
 
 # -- the design file ------------------------------------------------------------------------------
 def test_design_file_has_the_contract_keys(d003):
-    assert d003["paper"] == "003" and d003["name"] == "MotorcycleFaultObserver" and d003["certified"] is True
+    assert d003["paper"] == "003" and d003["name"] == "MotorcycleFaultObserverPaper" and d003["certified"] is True
     assert d003["vehicle"]["name"] == "sharp_motorcycle" and "parameters" in d003["vehicle"]
     assert {"name", "status", "seconds"} <= set(d003["solver"]) and d003["solver"]["status"] == "optimal"
     assert all({"name", "value", "limit", "passed"} <= set(c) for c in d003["checks"])

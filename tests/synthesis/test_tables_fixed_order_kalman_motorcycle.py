@@ -24,7 +24,7 @@ def _kalman():
 
 
 def _motorcycle_observer(built_fmus):
-    d = copy.deepcopy(built_fmus.design("MotorcycleFaultObserver"))
+    d = copy.deepcopy(built_fmus.design("MotorcycleFaultObserverPaper"))
     d.pop("tables", None)
     return d
 

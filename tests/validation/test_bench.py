@@ -110,7 +110,9 @@ def test_pairings_are_the_demo_runs_and_their_bus_carries_every_input():
     from latobs import demo, packaging
     from latobs.validation.scenarios import get_scenario
 
-    runs = {(scen, tuple(bench.paper_000_observers() if obs is None else obs),
+    from latobs import catalogue
+
+    runs = {(scen, tuple(catalogue.default_observers(get_scenario(scen).plant) if obs is None else obs),
              veh or packaging.PLANTS[get_scenario(scen).plant].default_vehicle)
             for scen, _tag, params, _noise, obs, veh in demo.RUNS if not params}
     keys = set()
