@@ -72,14 +72,21 @@ def norm_inf(A) -> float:
     return max(total(map(abs, row)) for row in A) if A else 0.0
 
 
-def expm(M) -> list[list[float]]:
+def matmul_left(A, B):
+    """A B; each product summed from the left from 0.0 (``dot``): the C models' ``la_matmul``."""
+    return _matmul_left(A, B)
+
+
+def expm(M, mm=matmul) -> list[list[float]]:
     """exp(M) of a square matrix by scaling and squaring with a Taylor series.
 
     s = the least integer >= 0 with ||M||_inf 2^-s <= 1/2; E = sum_k (M 2^-s)^k / k!, summed
     until ||term||_inf <= 1e-18 ||E||_inf (at most 60 terms; every later term is at least 2x
     smaller than its predecessor, so the remainder is below ~2e-18 relative); exp(M) = E^(2^s).
     Raises OverflowError/ValueError for a non-finite norm (the callers turn that into a refused
-    step)."""
+    step). ``mm`` multiplies: ``matmul`` (fsum, correctly rounded dot products: the build-time
+    tables) or ``matmul_left`` (the C models' ``la_expm`` operation for operation: a runtime that
+    computes its maps at every step gives the C model's bits)."""
     n = len(M)
     norm = norm_inf(M)
     s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
@@ -88,22 +95,22 @@ def expm(M) -> list[list[float]]:
     E = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
     term = [row[:] for row in E]
     for k in range(1, 60):
-        term = [[x / k for x in row] for row in matmul(term, X)]
+        term = [[x / k for x in row] for row in mm(term, X)]
         E = [[e + t for e, t in zip(re, rt)] for re, rt in zip(E, term)]
         if norm_inf(term) <= 1e-18 * norm_inf(E):
             break
     for _ in range(s):
-        E = matmul(E, E)
+        E = mm(E, E)
     return E
 
 
-def zoh_map(A, B, h: float):
+def zoh_map(A, B, h: float, mm=matmul):
     """Exact zero-order-hold map of x' = A x + B u over h (u held), by Van Loan's block form
     [[Phi, Gam], [0, I]] = expm(h [[A, B], [0, 0]]). A: n x n, B: n x m (lists of rows).
-    Returns the top n rows [Phi | Gam] (each of length n + m)."""
+    Returns the top n rows [Phi | Gam] (each of length n + m). ``mm``: as in ``expm``."""
     n, m = len(A), len(B[0]) if B else 0
     big = [[h * a for a in A[i]] + [h * b for b in B[i]] for i in range(n)] + [[0.0] * (n + m) for _ in range(m)]
-    return expm(big)[:n]
+    return expm(big, mm)[:n]
 
 
 def matrix(x, rows: int, cols: int, what: str, source: str = "design file"):

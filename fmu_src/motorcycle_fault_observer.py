@@ -10,7 +10,7 @@ import math
 import threading
 from bisect import bisect_right
 
-from .linalg import dot, total, zoh_map
+from .linalg import dot, matmul_left, total, zoh_map
 from .spec import tables_of
 
 OUTPUT_NAMES = ("roll_angle_hat", "rider_torque_hat", "vy_hat", "steer_rate_hat", "Ff_hat", "Fr_hat",
@@ -130,7 +130,8 @@ class MotorcycleFaultObserver:
         if last is not None and last[0] == mode and last[1] == v and last[2] == h:
             return last[3]
         cM, cG, _ = self._coef[mode]
-        W = step_map(self._at(cM, v), self._at(cG, v), h)
+        # products summed from the left, as the C model's la_zoh_map: both give the same bits
+        W = tuple(tuple(row) for row in zoh_map(self._at(cM, v), self._at(cG, v), h, matmul_left))
         self._last = (mode, v, h, W)
         return W
 
