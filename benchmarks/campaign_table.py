@@ -22,7 +22,7 @@ P000 = ["SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserve
 #: (campaign, observers: None for the campaign's own)
 CAMPAIGNS = (("robustness-000", P000), ("robustness-000-flat", P000), ("robustness-001", None),
              ("robustness-002", None),
-             ("robustness-003", ["MotorcycleFaultObserver", "MotorcycleFaultObserverPaper"]))
+             ("robustness-003", None))
 #: the error statistics given beside the ratio (headline RMS of these quantities, SI: rad)
 RMS_DEG = ("beta", "bank_angle", "roll_angle")
 
