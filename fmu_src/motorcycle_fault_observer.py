@@ -183,8 +183,9 @@ class MotorcycleFaultObserver:
         self.mode = mode = self._select(vx)
         # eq. (13) in continuous time, stepped exactly with y held over h (zero-order hold)
         if self._measured:
-            self._v = v = self._speed(mode, vx)
-            W = self._measured_map(mode, v, h)
+            speed = self._speed(mode, vx)
+            W = self._measured_map(mode, speed, h)
+            self._v = speed                # the forces' model speed, once the step is certain
         else:
             W = self._fns.get((mode, h)) or self._map(mode, h)
         v = self.s + y
