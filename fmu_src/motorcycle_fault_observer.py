@@ -34,7 +34,7 @@ class MotorcycleFaultObserver:
 
     PARAMETERS = {"vx_hold": 1.0}  # m/s: below this speed the estimates are held
     MAP_CACHE_SIZE = 64            # (design, mode, step size) maps kept at most, per process
-    N, NF, NY = 5, 2, 3
+    NY = 3                         # y; x^ and f^ sizes (N, NF) come from the tables
     I_ROLL, I_TORQUE = 5, 6        # in s, for both designs
 
     def __init__(self, data: dict, params: dict | None = None):

@@ -195,43 +195,33 @@ def corners(band) -> list[tuple[float, float]]:
     return [(lo, 1 / lo), (lo, 1 / hi), (hi, 1 / lo), (hi, 1 / hi)]
 
 
-def scaling(opts) -> dict:
-    get = (lambda k: opts[k]) if isinstance(opts, dict) else (lambda k: getattr(opts, k))
-    xs, fs = np.asarray(get("x_scale"), float), np.asarray(get("f_scale"), float)
-    D = np.diag(np.concatenate([xs, fs]))
-    Y = np.diag([xs[STATES.index(m)] for m in MEASUREMENTS])
-    return {"D": D, "Y": Y, "Dx": np.diag(xs)}
+def scaling(opts: DesignOptions) -> dict:
+    """D = diag(x_scale, f_scale) (s = D s_n) and Y = diag(x_scale of the measured states) (y = Y y_n)."""
+    xs, fs = np.asarray(opts.x_scale, float), np.asarray(opts.f_scale, float)
+    return {"D": np.diag(np.concatenate([xs, fs])), "Y": np.diag([xs[STATES.index(m)] for m in MEASUREMENTS])}
 
 
-def performance(opts, na: int) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised disturbance columns B_w (na x (2 + 5 + 1)) and performance rows C_z (2 x na):
+def performance(opts: DesignOptions, na: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normalised disturbance columns (B_xi: na x 5, B_w: na x 1) and performance rows C_z (2 x na):
     w = [Gamma / d_scale, xi / x_scale (mechanical states), tau^(nt) / (f_scale[-1] / s)],
     z = [e_phi / x_scale_phi, z_tau e_tau / f_scale_tau]."""
-    get = (lambda k: opts[k]) if isinstance(opts, dict) else (lambda k: getattr(opts, k))
-    return _performance(float(get("xi_weight")), float(get("w_weight")), float(get("z_tau")), na)
-
-
-def _performance(xi_w, w_w, z_tau, na):
-    n = len(STATES)
     Bxi = np.zeros((na, MECHANICAL))
-    Bxi[:MECHANICAL, :MECHANICAL] = xi_w * np.eye(MECHANICAL)
+    Bxi[:MECHANICAL, :MECHANICAL] = opts.xi_weight * np.eye(MECHANICAL)
     Bw = np.zeros((na, 1))
-    Bw[-1, 0] = w_w
+    Bw[-1, 0] = opts.w_weight
     Cz = np.zeros((2, na))
     Cz[0, ROLL] = 1.0
-    Cz[1, n] = z_tau
+    Cz[1, len(STATES)] = opts.z_tau
     return Bxi, Bw, Cz
 
 
-def normalised(A, Ed, C, opts) -> tuple:
-    """An, Bn (all disturbances), Cn (measurements), Czn: the system in normalised units."""
+def normalised(A, Ed, C, opts: DesignOptions) -> tuple:
+    """An, Bn (all disturbances), Cn (measurements), Cz: the system in normalised units."""
     sc = scaling(opts)
     D, Y = sc["D"], sc["Y"]
     Di = np.linalg.inv(D)
-    get = (lambda k: opts[k]) if isinstance(opts, dict) else (lambda k: getattr(opts, k))
-    na = A.shape[0]
-    Bxi, Bw, Cz = performance(opts, na)
-    Bn = np.hstack([Di @ Ed * float(get("d_scale")), Bxi, Bw])
+    Bxi, Bw, Cz = performance(opts, A.shape[0])
+    Bn = np.hstack([Di @ Ed * float(opts.d_scale), Bxi, Bw])
     return Di @ A @ D, Bn, np.linalg.solve(Y, C @ D), Cz
 
 
@@ -242,6 +232,7 @@ def _lmis(P, U, g, An, Bn, Cn, Cz, opts, eps, cp):
     PA = P @ An + U @ Cn
     core = PA + PA.T
     nd = Bn.shape[1]
+    # departure from (20): the bound is on the estimation errors z of phi and tau, not the residual
     hinf = cp.bmat([[core + Cz.T @ Cz, P @ Bn], [(P @ Bn).T, -g * np.eye(nd)]])
     alpha, radius = opts.alpha * (1 + opts.region_margin), opts.radius * (1 - opts.region_margin)
     disk = cp.bmat([[-radius * P, PA], [PA.T, -radius * P]])
@@ -320,14 +311,9 @@ def _diagnose(fam: dict) -> str:
     return "each LMI family is feasible alone; together they are not"
 
 
-def closed_loop(mc_or_data, L: list, v: float, w: float | None = None):
-    """A(vx) - L(vx) C in SI at (vx, w = 1/vx unless given): coefficients in BASIS."""
-    A, C = mc_or_data["A"], mc_or_data["C"]
-    w = 1.0 / v if w is None else w
-    b = (1.0, v, w)
-    Av = sum(bk * np.asarray(c, float) for bk, c in zip(b, A))
-    Lv = sum(bk * np.asarray(c, float) for bk, c in zip(b, L))
-    return Av - Lv @ np.asarray(C[0], float)
+def closed_loop(mc: dict, L: list, v: float):
+    """A(vx) - L(vx) C in SI at the speed v (m/s)."""
+    return at(mc["A"], v) - at(L, v) @ mc["C"][0]
 
 
 def to_design_dict(vehicle, opts, mc, P, gamma_bar, bands, solver, source) -> dict:
