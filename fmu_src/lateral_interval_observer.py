@@ -711,7 +711,7 @@ class IntervalObserver:
         runtime.max_communication_step, which the synthesis decides with ``_find_max_communication_step``
         (the longest step at which the widths of vy and x4 still decay at >= MAX_COMM_STEP_DECAY 1/s
         from the initial box at zero inputs, at every band edge and grid speed; the decay falls with
-        h: bisection on a MAX_COMM_STEP_RESOLUTION grid). A design file without it gets it here, once."""
+        h: bisections on a MAX_COMM_STEP_RESOLUTION grid). A design file without it gets it here, once."""
         if self._max_comm_step is None:
             self._max_comm_step = self._find_max_communication_step()
         return self._max_comm_step
@@ -761,25 +761,28 @@ class IntervalObserver:
         return {**self._data, "tables": tb}
 
     def _find_max_communication_step(self) -> float:
+        """The largest k MAX_COMM_STEP_RESOLUTION at which every probe speed decays fast enough. The
+        decay rate falls with h at each speed, so that k is the least over the speeds of each one's
+        largest: the first speed's by bisection, then each other speed tried at the current k only
+        and bisected below it when it fails there (each speed but the limiting ones probed once)."""
         res = self.MAX_COMM_STEP_RESOLUTION
-        speeds = self._probe_speeds()
         probe = type(self)(self._probe_data(), PROBE_PARAMETERS)
-
-        def ok(k: int) -> bool:
-            for i, v in enumerate(speeds):
-                if not self.decay_rate(k * res, v, probe) >= self.MAX_COMM_STEP_DECAY:
-                    speeds.insert(0, speeds.pop(i))       # the failing speed first next time
-                    return False
-            return True
-
-        lo, hi = 0, int(round(self.MAX_COMM_STEP_CEILING / res)) + 1
-        while hi - lo > 1:                   # the decay rate falls with h: bisection
-            mid = (lo + hi) // 2
-            if ok(mid):
-                lo = mid
-            else:
-                hi = mid
-        return round(lo * res, 12)
+        k = int(round(self.MAX_COMM_STEP_CEILING / res)) + 1        # (no step tried yet: exclusive)
+        first = True
+        for v in self._probe_speeds():
+            if k == 0:                        # no step passes
+                break
+            if not first and self.decay_rate(k * res, v, probe) >= self.MAX_COMM_STEP_DECAY:
+                continue
+            lo, hi = 0, k                     # k fails at v (or is the exclusive ceiling)
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                if self.decay_rate(mid * res, v, probe) >= self.MAX_COMM_STEP_DECAY:
+                    lo = mid
+                else:
+                    hi = mid
+            k, first = lo, False
+        return round(k * res, 12)
 
     def initialize(self, u: dict) -> None:
         """The bounds at the start: vy in +-x0_halfwidth[0], x4 in +-x0_halfwidth[3], the measured

@@ -336,12 +336,16 @@ def demo(out: Path, verbose: bool = False, platforms: list[str] | None = None) -
          build, None, None, out, platforms=build_for, host_suffices=host_suffices)
     # each run's figures are drawn in worker processes while the next runs go on (drawing ~80
     # figures is most of a warm demo); every figure is written when the block ends
-    with _figures() as figures:
+    from .validation.plots import plot_all
+    from .validation.replay import write_plots
+
+    with _figures() as submit:
         for scen, tag, params, noise, observers, plant_vehicle in RUNS:
             step(f"running {scen}{' [' + tag + ']' if tag else ''}", run_validation, scen, observers, report, out,
                  plant_parameters=params, noise=noise, tag=tag, plant_vehicle=plant_vehicle, platforms=build_for,
-                 plots=figures)
-        replays = step("replaying the MBDS record", _replays, out, report, build_for)
+                 plots=lambda result, folder: submit(plot_all, result, Path(folder)))
+        replays = step("replaying the MBDS record", _replays, out, report, build_for,
+                       lambda run, metrics, folder, mass: submit(write_plots, run, metrics, Path(folder), mass))
     sections = [ReportSection(title="Designs and their certificates",
                               markdown="\n".join(_design_section(out / f"{n}.design.json") for n in designs.DESIGNS)),
                 ReportSection(title="Paper 000: default and paper-faithful designs, every scenario", markdown=_headline(report)),
@@ -379,35 +383,34 @@ def demo(out: Path, verbose: bool = False, platforms: list[str] | None = None) -
 
 @contextlib.contextmanager
 def _figures():
-    """``draw(result, folder)``: the run's figures (``validation.plots.plot_all``) drawn in worker
-    processes (spawned, one per core, at most ``$LATOBS_JOBS``; in this process when that is one),
-    all written when the block ends, where a figure's error is raised. A worker pool that breaks
-    draws the rest here."""
+    """``submit(fn, *args)``: figures drawn in worker processes (spawned, one per core, at most
+    ``$LATOBS_JOBS``; in this process when that is one) by ``fn(*args)`` (a run's
+    ``validation.plots.plot_all``, a replay's ``replay.write_plots``), all written when the block
+    ends, where a figure's error is raised. A worker pool that breaks draws the rest here."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     from .synthesis import lmi
-    from .validation.plots import plot_all
 
     if lmi.jobs(len(RUNS)) < 2:
-        yield plot_all
+        yield lambda fn, *args: fn(*args)
         return
     todo: list = []
     with lmi.main_not_run_again(), ProcessPoolExecutor(max_workers=lmi.jobs(len(RUNS)),
                                                       mp_context=multiprocessing.get_context("spawn")) as pool:
-        def draw(result, folder) -> None:
+        def submit(fn, *args) -> None:
             try:
-                todo.append((pool.submit(plot_all, result, Path(folder)), result, folder))
+                todo.append((pool.submit(fn, *args), fn, args))
             except BrokenProcessPool:
-                plot_all(result, Path(folder))
+                fn(*args)
 
-        yield draw
-        for future, result, folder in todo:
+        yield submit
+        for future, fn, args in todo:
             try:
                 future.result()
             except BrokenProcessPool:
-                plot_all(result, Path(folder))
+                fn(*args)
 
 
 def summary_text(header: list[str], rows: list[list]) -> str:
@@ -433,14 +436,16 @@ class _Tee:
             st.flush()
 
 
-def _replays(out: Path, report: Path, platforms: list[str] | None = None) -> dict:
-    """Paper 001 on the real MBDS record (vehicle mbds_250lm): the default design and a wider box."""
+def _replays(out: Path, report: Path, platforms: list[str] | None = None, plots=True) -> dict:
+    """Paper 001 on the real MBDS record (vehicle mbds_250lm): the default design and a wider box;
+    paper 002's estimators. ``plots``: as ``replay.run``'s (a callable draws them elsewhere)."""
     from . import packaging
     from .pipeline import package_design_data, replay, solve
     from .validation import replay as rp
 
     runs = {}
-    m = replay("mbds", "LateralIntervalObserver", "mbds_250lm", out=report, fmu_dir=out, platforms=platforms)
+    m = replay("mbds", "LateralIntervalObserver", "mbds_250lm", out=report, fmu_dir=out, platforms=platforms,
+               plots=plots)
     runs["LateralIntervalObserver_mbds_250lm, +-20 % box"] = (m, report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm")
     wide = solve("LateralIntervalObserver", "mbds_250lm", quiet=True, box=WIDE_BOX)
     wide_dir = out / "wide-box"
@@ -450,10 +455,10 @@ def _replays(out: Path, report: Path, platforms: list[str] | None = None) -> dic
                               platforms=platforms if backend == "c" else None)
     mdir = report / "replay_mbds_250lm_100hz_LateralIntervalObserver_mbds_250lm_wide_box"
     m, _ = rp.run(rp.resolve_csv("mbds"), fmu, mdir, split=rp.default_split(rp.resolve_csv("mbds")),
-                  observer="LateralIntervalObserver", vehicle="mbds_250lm", mass=wide["model"]["m"])
+                  observer="LateralIntervalObserver", vehicle="mbds_250lm", mass=wide["model"]["m"], plots=plots)
     runs[f"LateralIntervalObserver_mbds_250lm, +-{WIDE_BOX[0]:.0%} box"] = (m, mdir)
     for label, name, vehicle in REPLAYS_002:
-        m = replay("mbds", name, vehicle, out=report, fmu_dir=out, platforms=platforms)
+        m = replay("mbds", name, vehicle, out=report, fmu_dir=out, platforms=platforms, plots=plots)
         runs[f"002: {label}"] = (m, report / f"replay_mbds_250lm_100hz_{designs.artefact_name(name, vehicle)}")
     return runs
 

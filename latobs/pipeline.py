@@ -814,12 +814,13 @@ def observer_inputs(observer: str):
 
 
 def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("build"),
-           fmu_dir: Path = Path("build"), split: float | None | str = "auto", plots: bool = True,
+           fmu_dir: Path = Path("build"), split: float | None | str = "auto", plots=True,
            quiet: bool = False, platforms: list[str] | None = None) -> dict:
     """Drive the built observer FMU ``fmu_dir/NAME[_V].fmu`` (built if missing) with the columns of
     ``csv`` (a .csv/.csv.gz path, or ``"mbds"`` for the bundled MBDS record) and score it against
     the reference columns present; writes ``out/replay_<csv stem>_<NAME[_V]>/metrics.json`` and
-    PNGs (none with ``plots=False``). ``split``: a time in s scored separately before and after,
+    PNGs (none with ``plots=False``; a callable draws them instead, as in ``replay.run``). ``split``:
+    a time in s scored separately before and after,
     None for none, ``"auto"`` for the file's default (425 s for the MBDS record, else none).
     ``platforms``: of the native FMU when built (:func:`ensure_fmus`). Returns the metrics
     (structure in :func:`latobs.validation.replay.score`)."""

@@ -33,6 +33,24 @@ def _has_c_model(name: str) -> bool:
 
 #: the FMUs of the native C backend (those whose runtime has a C model)
 C_NAMES = [n for n in FMU_NAMES if _has_c_model(n)]
+#: seconds to design and build each FMU in both backends on one core (measured roughly; only the
+#: balance of the workers' shares in ``SessionBuild.build_share`` depends on them)
+BUILD_SECONDS = {"SideslipFixedOrderEstimatorScheduled": 40.0, "SideslipFixedOrderEstimator": 12.0,
+                 "MotorcycleFaultObserver": 9.0, "SideslipBankObserverTire": 9.0, "MotorcycleFaultObserverPaper": 8.0,
+                 "SideslipBankObserver": 8.0, "MotorcyclePlant": 8.0, "LateralIntervalObserver": 7.0,
+                 "CarPlant": 6.0, "SideslipBankObserverTirePaper": 6.0, "SideslipBankObserverPaper": 5.0,
+                 "SideslipKalmanFilter": 5.0}
+#: whether the workers build their shares of every FMU at the start (a whole run: set at collection)
+_BUILD_SHARES = {"on": False}
+
+
+def pytest_collection_modifyitems(config, items):
+    """A run where many tests use the session build (the whole suite, not a few tests) on several
+    workers: each worker starts by building its share of the FMUs (``SessionBuild.build_share``)."""
+    users = sum("built_fmus" in getattr(item, "fixturenames", ()) for item in items)
+    _BUILD_SHARES["on"] = users >= 200 and int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1
+
+
 #: (name, backend) of every FMU in both backends, ids "NAME" (pythonfmu) and "NAME[c]" (native C):
 #: the interop checks and the fuzz run on each; ``built_fmus.get(name, backend)`` gives the FMU
 FMU_VARIANTS = ([pytest.param((n, "python"), id=n) for n in FMU_NAMES]
@@ -67,13 +85,14 @@ class SessionBuild:
         key = name if vehicle is None else f"{name}_{vehicle}"
         if key not in self._designs:
             # as `latobs design` writes it (pipeline.solve): what only running the runtime decides
-            # included; solved by the first worker that needs it, read back from its file by all
+            # included; solved by the first worker that needs it (under a lock of its own: the other
+            # workers meanwhile solve other designs), read back from its file by all
             from latobs.atomic import atomic_write_text, locked_folder
             from latobs.synthesis import design_file
 
-            folder = self.out / "designs"
+            folder = self.out / "designs" / key
             with locked_folder(folder, "design"):
-                path = folder / f"{key}.json"
+                path = folder / "design.json"
                 if not path.is_file():
                     from latobs import pipeline
 
@@ -88,20 +107,60 @@ class SessionBuild:
         return self._paths[name]
 
     def _build(self, name: str, backend: str, out: Path, fmi: int = 2) -> Path:
-        """``latobs build NAME --backend BACKEND --out OUT [--fmi 3]``, the design solved once per session."""
+        """``latobs build NAME --backend BACKEND --out OUT [--fmi 3]``, the design solved once per session.
+
+        Each FMU is built in a folder of its own (``parts``; its plant copied in first, so that its
+        reference experiment runs beside this session's plant, as in one ``out``), so that the
+        workers build different FMUs at once (``latobs build`` locks the folder it writes); the
+        FMU and its design file are then installed into OUT, where the tests find them together."""
+        import shutil
+
         from latobs import pipeline
+        from latobs.atomic import atomic_path, locked_folder
         from latobs.synthesis import design_file
 
-        if name in packaging.OBSERVERS:
-            beside = pipeline.reference_plant(name, None)
-            if beside is not None and beside[1] is None:    # its reference runs beside this session's plant
-                self.c3_path(beside[0]) if fmi == 3 else self.get(beside[0], backend)
-            design_file.write(self.design(name), out)
-        elif name not in packaging.PLANTS:
-            raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
-        path, = pipeline.build([name], None, out, backend, fmi=fmi)
-        assert path == pipeline.fmi_folder(out, fmi) / f"{name}.fmu", path
-        return path
+        part = self.out / "parts" / f"{backend}-fmi{fmi}" / name
+        with locked_folder(part, "build"):
+            if name in packaging.OBSERVERS:
+                beside = pipeline.reference_plant(name, None)
+                if beside is not None and beside[1] is None:    # its reference runs beside this session's plant
+                    plant = self.c3_path(beside[0]) if fmi == 3 else self.get(beside[0], backend)
+                    there = pipeline.fmi_folder(part, fmi) / plant.name
+                    if not there.is_file():
+                        there.parent.mkdir(parents=True, exist_ok=True)
+                        shutil.copyfile(plant, there)
+                design_file.write(self.design(name), part)
+            elif name not in packaging.PLANTS:
+                raise KeyError(f"{name!r} is not an FMU of latobs build ({', '.join(FMU_NAMES)})")
+            built, = pipeline.build([name], None, part, backend, fmi=fmi)
+            assert built == pipeline.fmi_folder(part, fmi) / f"{name}.fmu", built
+            dest = pipeline.fmi_folder(out, fmi)
+            with locked_folder(dest, "build"):
+                for f in (built.with_name(f"{name}.design.json"), built):     # the FMU last
+                    if f.is_file():
+                        with atomic_path(dest / f.name) as tmp:
+                            shutil.copyfile(f, tmp)
+        return dest / f"{name}.fmu"
+
+    def build_share(self, worker: int, workers: int) -> None:
+        """Build this worker's share of every FMU (both backends, with its design), the shares
+        balanced by :data:`BUILD_SECONDS`: at the start of a whole run the workers build different
+        FMUs at once instead of queueing for the same ones (the tests ask for them in one order)."""
+        load, share = [0.0] * workers, [[] for _ in range(workers)]
+        for name in sorted(FMU_NAMES, key=lambda n: (-BUILD_SECONDS.get(n, 10.0), n)):
+            w = load.index(min(load))
+            load[w] += BUILD_SECONDS.get(name, 10.0)
+            share[w].append(name)
+        from latobs import cbackend
+
+        for name in sorted(share[worker], key=lambda n: n not in packaging.PLANTS):    # plants first
+            kind = packaging.OBSERVERS.get(name) or packaging.PLANTS[name]
+            try:
+                self.path(name)
+                if name in C_NAMES and cbackend.unavailable_reason(kind.model_module) is None:
+                    self.c_path(name)
+            except Exception:      # reported by the tests that need this FMU (they build it again)
+                pass
 
     def all(self) -> dict[str, Path]:
         return {name: self.path(name) for name in FMU_NAMES}
@@ -175,7 +234,11 @@ def built_fmus(tmp_path_factory) -> SessionBuild:
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
     out = shared / "session-fmus"
     out.mkdir(exist_ok=True)
-    return SessionBuild(out)
+    build = SessionBuild(out)
+    if _BUILD_SHARES["on"]:
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+        build.build_share(int(worker.removeprefix("gw")), int(os.environ["PYTEST_XDIST_WORKER_COUNT"]))
+    return build
 
 
 def bits(x) -> bytes:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import gzip
 import os
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
@@ -23,7 +24,9 @@ class RecordError(ValueError):
 
 
 def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read a ``.csv`` or ``.csv.gz`` file with a header row into {column: float array}.
+    """Read a ``.csv`` or ``.csv.gz`` file with a header row into {column: float array} (new
+    arrays on every call; a file read before in this process, unchanged since (its size and
+    modification time), is not parsed again).
 
     Checks: readable, a header of distinct non-empty names, a column ``t``, every row with as
     many fields as the header, every value a finite number, ``t`` strictly increasing. Errors
@@ -31,6 +34,22 @@ def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
     Blank lines are skipped.
     """
     path = Path(path)
+    try:
+        st = path.stat()
+    except OSError:
+        hit = _parse(path)                       # (raises the RecordError naming the file)
+    else:
+        hit = _parsed(os.path.realpath(path), st.st_size, st.st_mtime_ns)
+    return {n: a.copy() for n, a in hit.items()}
+
+
+@lru_cache(maxsize=4)
+def _parsed(path: str, size: int, mtime_ns: int) -> dict[str, np.ndarray]:
+    """:func:`_parse` of a file by its real path, size and modification time (the few last read)."""
+    return _parse(Path(path))
+
+
+def _parse(path: Path) -> dict[str, np.ndarray]:
     opener = gzip.open if path.name.lower().endswith(".gz") else open
     try:
         with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:

@@ -364,66 +364,11 @@ class CoSimulation:
                 routes.append((o.inputs[typ][2], np.array([j for j, _ in cols], dtype=np.intp), src, src_cols, nz,
                                None if typ == "Real" else _int_route(o, typ, cols, src, src_cols, nz, t)))
 
-        def route(k: int):
-            """Observer inputs at row k from the plant outputs at row k (plus their noise)."""
-            for dst, cols, src, src_cols, nz, int_route in routes:
-                if int_route is not None:
-                    int_route(k)
-                else:
-                    dst[k, cols] = src[k, src_cols] if nz is None else src[k, src_cols] + nz[k]
-
-        route(0)
+        _route_row(routes, 0)
 
         # ---- the stepping loop: at t_k set every FMU's inputs, step every FMU, get the outputs at t_k+1
-        sets = [s for port in ports for s in port.sets]
-        stepping = [(port.do_step, port.component, port) for port in ports]
-        gets = [g for port in ports for g in port.gets]
-        compiled = self._compiled(t, [plant, *observers.values()], sets, stepping, gets, routes)
         stepping_started = time.perf_counter()
-        if compiled is not None:
-            # the same calls in C (compiled_loop), in chunks when a progress bar is shown
-            chunk = n - 1 if not self.progress else max(1, (n - 1) // 100)
-            bar = None
-            if self.progress:
-                from tqdm import tqdm
-
-                bar = tqdm(total=n - 1, desc=f"{sc.name}", unit="step", leave=False)
-            try:
-                for k0 in range(0, n - 1, chunk):
-                    k1 = min(n - 1, k0 + chunk)
-                    failed = compiled.run(k0, k1)
-                    if failed is not None:
-                        k, what, port, st = failed
-                        port.fail(what, float(t[k + 1] if what == "getting outputs" else t[k]), st)
-                    if bar is not None:
-                        bar.update(k1 - k0)
-            finally:
-                if bar is not None:
-                    bar.close()
-            steps = range(0)
-        else:
-            steps = range(n - 1)
-            if self.progress:
-                from tqdm import tqdm
-
-                steps = tqdm(steps, desc=f"{sc.name}", unit="step", leave=False)
-        for k in steps:
-            tk = float(t[k])
-            k1 = k + 1
-            for fn, c, vr, m, a, stride, port in sets:
-                st = fn(c, vr, m, a + k * stride)
-                if st > 1:
-                    port.fail("setting inputs", tk, st)
-            for fn, c, port in stepping:
-                st = fn(c, tk, dt, 1)
-                if st > 1:
-                    port.fail("doStep", tk, st)
-            for fn, c, vr, m, a, stride, port in gets:
-                st = fn(c, vr, m, a + k1 * stride)
-                if st > 1:
-                    port.fail("getting outputs", t[k1], st)
-            if routes:
-                route(k1)
+        loop = step_ports(t, dt, ports, routes, fast=self.fast, progress=sc.name if self.progress else None)
 
         stepping_seconds = time.perf_counter() - stepping_started
 
@@ -459,24 +404,97 @@ class CoSimulation:
             "seed": self.seed,
             # which stepping loop ran ("compiled": compiled_loop; "python": the Python loop) and its
             # wall time (s, the steps alone: no extraction, instantiation or initialisation)
-            "master_loop": "compiled" if compiled is not None else "python",
+            "master_loop": loop,
             "stepping_seconds": stepping_seconds,
         }
         return SimResult(time=t, bus=bus, observers=obs_rec, logs=logs, scenario=sc.name, dt=dt,
                          settle_time=float(sc.settle_time), measured=measured, units=units,
                          inputs={PLANT_LABEL: plant_in, **obs_in}, info=info)
 
-    def _compiled(self, t, fmus, sets, stepping, gets, routes):
-        """The compiled loop (:mod:`.compiled_loop`) over these calls, or None: the Python loop
-        (fmpy's checked calls, an FMI 3.0 FMU, an Integer or Boolean route, no compiled loop here)."""
-        if not self.fast or any(f.fmi != 2 for f in fmus) or any(r[5] is not None for r in routes):
-            return None
-        from . import compiled_loop
 
-        lib = compiled_loop.library()
-        if lib is None:
-            return None
-        return compiled_loop.Loop(lib, t, self.dt, sets, stepping, gets, [r[:5] for r in routes])
+def step_ports(t: np.ndarray, dt: float, ports: list[_Port], routes=(), fast: bool = True,
+               progress: str | None = None) -> str:
+    """The stepping loop over ``ports`` (their input matrices filled, row 0 of their outputs set):
+    at each t_k every port's inputs set from row k, every FMU stepped by dt, every port's outputs
+    got into row k + 1, then ``routes`` (destination matrix, its columns, source matrix, its
+    columns, noise or None, Integer/Boolean route or None) fill row k + 1 of routed inputs. In C
+    (:mod:`.compiled_loop`) when it can run here: FMI 2.0 FMUs called directly (``fast``), Real
+    routes; else the same calls in Python. ``progress``: a bar's label (None: no bar). A failed
+    call is :meth:`_Port.fail` (CoSimulationError naming the FMU, the call and the time). Returns
+    which loop ran: "compiled" or "python"."""
+    n = len(t)
+    sets = [s for port in ports for s in port.sets]
+    stepping = [(port.do_step, port.component, port) for port in ports]
+    gets = [g for port in ports for g in port.gets]
+    compiled = _compiled(t, dt, ports, sets, stepping, gets, routes, fast)
+    if compiled is not None:
+        # the same calls in C (compiled_loop), in chunks when a progress bar is shown
+        chunk = n - 1 if not progress else max(1, (n - 1) // 100)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n - 1, desc=progress, unit="step", leave=False)
+        try:
+            for k0 in range(0, n - 1, chunk):
+                k1 = min(n - 1, k0 + chunk)
+                failed = compiled.run(k0, k1)
+                if failed is not None:
+                    k, what, port, st = failed
+                    port.fail(what, float(t[k + 1] if what == "getting outputs" else t[k]), st)
+                if bar is not None:
+                    bar.update(k1 - k0)
+        finally:
+            if bar is not None:
+                bar.close()
+        return "compiled"
+
+    steps = range(n - 1)
+    if progress:
+        from tqdm import tqdm
+
+        steps = tqdm(steps, desc=progress, unit="step", leave=False)
+    for k in steps:
+        tk = float(t[k])
+        k1 = k + 1
+        for fn, c, vr, m, a, stride, port in sets:
+            st = fn(c, vr, m, a + k * stride)
+            if st > 1:
+                port.fail("setting inputs", tk, st)
+        for fn, c, port in stepping:
+            st = fn(c, tk, dt, 1)
+            if st > 1:
+                port.fail("doStep", tk, st)
+        for fn, c, vr, m, a, stride, port in gets:
+            st = fn(c, vr, m, a + k1 * stride)
+            if st > 1:
+                port.fail("getting outputs", t[k1], st)
+        if routes:
+            _route_row(routes, k1)
+    return "python"
+
+
+def _route_row(routes, k: int) -> None:
+    """Routed inputs at row k from their sources at row k (an observer's from the plant's
+    outputs, plus their noise)."""
+    for dst, cols, src, src_cols, nz, int_route in routes:
+        if int_route is not None:
+            int_route(k)
+        else:
+            dst[k, cols] = src[k, src_cols] if nz is None else src[k, src_cols] + nz[k]
+
+
+def _compiled(t, dt, ports, sets, stepping, gets, routes, fast):
+    """The compiled loop (:mod:`.compiled_loop`) over these calls, or None: the Python loop
+    (fmpy's checked calls, an FMI 3.0 FMU, an Integer or Boolean route, no compiled loop here)."""
+    if not fast or any(p.f.fmi != 2 for p in ports) or any(r[5] is not None for r in routes):
+        return None
+    from . import compiled_loop
+
+    lib = compiled_loop.library()
+    if lib is None:
+        return None
+    return compiled_loop.Loop(lib, t, dt, sets, stepping, gets, [r[:5] for r in routes])
 
 
 def run(scenario: Scenario | str, plant_fmu: str | os.PathLike,

@@ -8,7 +8,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -179,7 +179,8 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
     ``unzipdir``: the folder the FMU is already extracted to (kept), else a temporary one.
     ``parameters``: FMU parameters set before initialisation (name: value)."""
     from .harness import FmuInstance, WiringError, _unit_of, observer_design
-    from .instance import fmi_type
+    from .instance import CoSimulationError, fmi_type
+    from .master import _Port, _store, step_ports
 
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
@@ -201,36 +202,26 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
         check_record(data, [InputSpec(v.name, _unit_of(v), v.min, v.max) for v in f.inputs], source, f.describe())
         units = {v.name: u for v in f.md.modelVariables if (u := _unit_of(v)) and v.causality in ("input", "output")}
         n = t.size
-        rec = {v.name: np.zeros(n, dtype=float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
-        rows = [dict(zip(in_names, r)) for r in zip(*(cols[x].tolist() for x in in_names))] if in_names \
-            else [{} for _ in range(n)]
-
-        def call(what: str, k: int, fn, *args):
-            try:
-                return fn(*args)
-            except Exception as exc:
-                raise ReplayError(f"{f.describe()} failed in {what} at t = {t[k]:.6g} s: {str(exc).rstrip('.')}. "
-                                  f"Last log messages: {f.log_tail()}") from None
-
-        def record(k: int, values: Mapping[str, float]):
-            for name, val in values.items():
-                rec[name][k] = val
-
-        record(0, call("initialisation", 0, f.start, rows[0], parameters, float(t[0]), float(t[-1])))
-        set_inputs, do_step, get_outputs = f.set_inputs, f.do_step, f.get_outputs
-        tl = t.tolist()
-        for k in range(n - 1):
-            what = "setting inputs"
-            try:
-                set_inputs(rows[k])
-                what = "doStep"
-                do_step(tl[k], dt)
-                what = "getting outputs"
-                values = get_outputs()
-            except Exception as exc:
-                raise ReplayError(f"{f.describe()} failed in {what} at t = {tl[k]:.6g} s: {str(exc).rstrip('.')}. "
-                                  f"Last log messages: {f.log_tail()}") from None
-            record(k + 1, values)
+        row0 = {x: float(cols[x][0]) for x in in_names}
+        try:
+            y0 = f.start(row0, parameters, float(t[0]), float(t[-1]))
+        except Exception as exc:
+            raise ReplayError(f"{f.describe()} failed in initialisation at t = {t[0]:.6g} s: "
+                              f"{str(exc).rstrip('.')}. Last log messages: {f.log_tail()}") from None
+        # the master's matrices and stepping loop (compiled where it can run): at t_k the record's
+        # row k in, one step, the outputs at t_k+1 out
+        port = _Port(f, in_names, n, checked=False)
+        try:
+            for x, (typ, j) in port.columns(port.inputs).items():
+                _store(port, typ, j, slice(None), cols[x], x, t)
+            out_cols = port.columns(port.outputs)
+            for x, (typ, j) in out_cols.items():
+                port.outputs[typ][2][0, j] = y0[x]
+            step_ports(t, dt, [port])
+        except CoSimulationError as exc:
+            raise ReplayError(str(exc)) from None
+        rec = {v.name: port.outputs[out_cols[v.name][0]][2][:, out_cols[v.name][1]].astype(
+            float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
         logs = list(f.logs)
         if f.dropped_logs:
             logs.append(f"[INFO] replay: {f.dropped_logs} further log messages dropped")
@@ -545,10 +536,11 @@ def write_plots(run: ReplayRun, metrics: Mapping[str, Any], out_dir: str | os.Pa
 # --------------------------------------------------------------------------------------------
 def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.PathLike,
         split: float | None | str = "auto", observer: str | None = None, vehicle: str | None = None,
-        mass: float | None = None, plots: bool = True,
+        mass: float | None = None, plots: bool | Callable = True,
         data: Mapping[str, np.ndarray] | None = None) -> tuple[dict[str, Any], list[Path]]:
     """Replay ``csv_file`` (a path or ``mbds``) through the FMU at ``fmu_path``; write
-    ``out_dir/metrics.json`` and (with ``plots``) the PNGs. ``split``: a time (s), None for none,
+    ``out_dir/metrics.json`` and (with ``plots``) the PNGs (a callable ``plots(run, metrics,
+    out_dir, mass)`` draws them instead, e.g. :func:`write_plots` in another process). ``split``: a time (s), None for none,
     or ``"auto"`` (:func:`default_split`). ``data``: the already loaded columns of ``csv_file``.
     Returns (metrics, [metrics.json, PNGs...])."""
     path = resolve_csv(csv_file)
@@ -570,6 +562,8 @@ def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str |
     m = score(rr, split=split, mass=mass, vehicle=vehicle, info=info)
     out_dir = Path(out_dir)
     paths = [_metrics.write(m, out_dir)]
-    if plots:
+    if callable(plots):                  # drawn elsewhere (the demo's worker processes)
+        plots(rr, m, out_dir, mass)
+    elif plots:
         paths += write_plots(rr, m, out_dir, mass=mass)
     return m, paths

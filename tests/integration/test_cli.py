@@ -462,9 +462,8 @@ def test_the_demos_figures_drawn_in_worker_processes_are_those_drawn_here(fmu_di
                          {"SideslipBankObserver": fmu_dir / "SideslipBankObserver.fmu"})
     here = plot_all(result, tmp_path / "here")
     monkeypatch.setenv("LATOBS_JOBS", "2")
-    with demo._figures() as draw:
-        draw(result, tmp_path / "workers")
-        assert draw is not plot_all                           # (two jobs: the worker processes draw)
+    with demo._figures() as submit:
+        submit(plot_all, result, tmp_path / "workers")        # (two jobs: the worker processes draw)
     made = sorted((tmp_path / "workers").iterdir())
     assert [p.name for p in made] == sorted(p.name for p in here)
     assert all(p.read_bytes() == (tmp_path / "here" / p.name).read_bytes() for p in made)

@@ -152,6 +152,28 @@ def test_replay_matches_the_cosimulation_and_scores_both_sides_of_the_split(cosi
 
 
 @pytest.mark.slow
+def test_replay_steps_in_the_compiled_loop_as_in_the_python_loop(built_fmus, monkeypatch):
+    """The replay steps its FMU in the master's stepping loop (compiled where it can be): on the
+    MBDS record the native interval observer's outputs and logs are those of the Python loop, bit
+    for bit, and the outputs at t_0 are the initialisation's."""
+    from latobs.validation import compiled_loop
+
+    if compiled_loop.unavailable_reason() is not None:
+        pytest.skip(f"no compiled loop here: {compiled_loop.unavailable_reason()}")
+    data = load_csv(resolve_csv("mbds"))
+    data = {k: v[:6000] for k, v in data.items()}                    # the first 60 s
+    fmu = built_fmus.c_path("LateralIntervalObserver")
+    compiled = drive(fmu, data)
+    monkeypatch.setattr(compiled_loop, "library", lambda: None)
+    python = drive(fmu, data)
+    assert compiled.outputs.keys() == python.outputs.keys()
+    for k, y in python.outputs.items():
+        assert compiled.outputs[k].dtype == y.dtype and np.array_equal(compiled.outputs[k], y), k
+    assert compiled.logs == python.logs
+    assert compiled.outputs["vy_lower"][0] < compiled.outputs["vy_upper"][0]    # the initial box, not zeros
+
+
+@pytest.mark.slow
 def test_replay_errors_exit_2_naming_the_culprit(cosim_csv, fmu_dir, tmp_path, capsys):
     _, sim = cosim_csv
     base = ["--observer", "SideslipBankObserver", "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out")]
