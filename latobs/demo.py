@@ -334,8 +334,8 @@ def demo(out: Path, verbose: bool = False, platforms: list[str] | None = None) -
 
     step(f"building every FMU (design, certificate, packaging; native FMUs for {', '.join(build_for or ['all'])})",
          build, None, None, out, platforms=build_for, host_suffices=host_suffices)
-    # each run's figures are drawn in worker processes while the next runs go on (drawing ~80
-    # figures is most of a warm demo); every figure is written when the block ends
+    # each run's and replay's figures are drawn in worker processes while the next runs go on
+    # (drawing ~90 figures is most of a warm demo); every figure is written when the block ends
     from .validation.plots import plot_all
     from .validation.replay import write_plots
 
