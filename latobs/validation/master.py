@@ -113,14 +113,14 @@ class SimResult:
 # --------------------------------------------------------------------------------------------
 # one FMU in the master
 # --------------------------------------------------------------------------------------------
-class _Port:
+class Port:
     """One FMU's inputs and outputs as matrices, one per FMI type (float64 for Real, int32 for
     Integer/Enumeration/Boolean, as FMI 2 passes them), one row per communication point, and its
     calls that set or get a row: ``sets``/``gets`` are (call, component, vr address, count, row 0
     address, row stride, port) with an empty type skipped, in the order Real, Integer, Boolean."""
 
     def __init__(self, f: FmuInstance, input_names: list[str], n: int, checked: bool):
-        self.f = f
+        self.f, self.checked = f, checked
         calls = f.row_calls(checked)
         self.component, self.do_step = calls.component, calls.do_step
         self.inputs = _matrices(f, [f.vars[x] for x in input_names], n)
@@ -151,7 +151,7 @@ def _matrices(f: FmuInstance, variables, n: int) -> dict[str, tuple[list[str], n
     return out
 
 
-def _store(port: _Port, typ: str, j: int, rows, values, name: str, t: np.ndarray):
+def store_input(port: Port, typ: str, j: int, rows, values, name: str, t: np.ndarray):
     """Write float ``values`` into input column j of ``port`` at ``rows``; an Integer or Boolean input
     takes the nearest integer, and a value that is not finite or beyond 32 bits there is a
     CoSimulationError (never a silently wrapped value)."""
@@ -168,12 +168,12 @@ def _store(port: _Port, typ: str, j: int, rows, values, name: str, t: np.ndarray
     m[rows, j] = np.rint(v) if np.ndim(values) else np.rint(v[0])
 
 
-def _int_route(o: _Port, typ: str, cols, src, src_cols, nz, t):
-    """The route into Integer/Boolean inputs of ``o``: each value stored by :func:`_store`."""
+def _int_route(o: Port, typ: str, cols, src, src_cols, nz, t):
+    """The route into Integer/Boolean inputs of ``o``: each value stored by :func:`store_input`."""
     def route(k: int):
         v = src[k, src_cols] if nz is None else src[k, src_cols] + nz[k]
         for (j, x), val in zip(cols, v):
-            _store(o, typ, j, k, float(val), x, t)
+            store_input(o, typ, j, k, float(val), x, t)
     return route
 
 
@@ -338,16 +338,16 @@ class CoSimulation:
         # ---- the buffers: a plant input column is the scenario's signal; an observer input column
         # is its measured signal, computed once for a scenario signal, after each step for a plant
         # output (a route)
-        p = _Port(plant, plant_in, n, not self.fast)
+        p = Port(plant, plant_in, n, not self.fast)
         for x, (typ, j) in p.columns(p.inputs).items():
-            _store(p, typ, j, slice(None), sig[x], x, t)
+            store_input(p, typ, j, slice(None), sig[x], x, t)
         p_out = p.columns(p.outputs)
         for x, (typ, j) in p_out.items():
             p.outputs[typ][2][0, j] = y0[x]
         ports = [p]
         routes = []   # (destination matrix, its columns, source matrix, its columns, noise or None, int store)
         for lab, f in observers.items():
-            o = _Port(f, obs_in[lab], n, not self.fast)
+            o = Port(f, obs_in[lab], n, not self.fast)
             ports.append(o)
             for x, (typ, j) in o.columns(o.outputs).items():
                 o.outputs[typ][2][0, j] = obs_y0[lab][x]
@@ -356,7 +356,7 @@ class CoSimulation:
                 if x in p_out:
                     from_plant.setdefault((typ, p_out[x][0], x in noise), []).append((j, x))
                 else:
-                    _store(o, typ, j, slice(None), sig[x] + noise[x] if x in noise else sig[x], x, t)
+                    store_input(o, typ, j, slice(None), sig[x] + noise[x] if x in noise else sig[x], x, t)
             for (typ, src_typ, noisy), cols in from_plant.items():
                 names = [x for _, x in cols]
                 src, src_cols = p.outputs[src_typ][2], np.array([p_out[x][1] for x in names], dtype=np.intp)
@@ -368,7 +368,7 @@ class CoSimulation:
 
         # ---- the stepping loop: at t_k set every FMU's inputs, step every FMU, get the outputs at t_k+1
         stepping_started = time.perf_counter()
-        loop = step_ports(t, dt, ports, routes, fast=self.fast, progress=sc.name if self.progress else None)
+        loop = step_ports(t, dt, ports, routes, progress=sc.name if self.progress else None)
 
         stepping_seconds = time.perf_counter() - stepping_started
 
@@ -412,21 +412,20 @@ class CoSimulation:
                          inputs={PLANT_LABEL: plant_in, **obs_in}, info=info)
 
 
-def step_ports(t: np.ndarray, dt: float, ports: list[_Port], routes=(), fast: bool = True,
-               progress: str | None = None) -> str:
+def step_ports(t: np.ndarray, dt: float, ports: list[Port], routes=(), progress: str | None = None) -> str:
     """The stepping loop over ``ports`` (their input matrices filled, row 0 of their outputs set):
     at each t_k every port's inputs set from row k, every FMU stepped by dt, every port's outputs
     got into row k + 1, then ``routes`` (destination matrix, its columns, source matrix, its
     columns, noise or None, Integer/Boolean route or None) fill row k + 1 of routed inputs. In C
-    (:mod:`.compiled_loop`) when it can run here: FMI 2.0 FMUs called directly (``fast``), Real
-    routes; else the same calls in Python. ``progress``: a bar's label (None: no bar). A failed
-    call is :meth:`_Port.fail` (CoSimulationError naming the FMU, the call and the time). Returns
+    (:mod:`.compiled_loop`) when it can run here: FMI 2.0 FMUs called directly (ports not
+    ``checked``), Real routes; else the same calls in Python. ``progress``: a bar's label (None: no bar). A failed
+    call is :meth:`Port.fail` (CoSimulationError naming the FMU, the call and the time). Returns
     which loop ran: "compiled" or "python"."""
     n = len(t)
     sets = [s for port in ports for s in port.sets]
     stepping = [(port.do_step, port.component, port) for port in ports]
     gets = [g for port in ports for g in port.gets]
-    compiled = _compiled(t, dt, ports, sets, stepping, gets, routes, fast)
+    compiled = _compiled(t, dt, ports, sets, stepping, gets, routes)
     if compiled is not None:
         # the same calls in C (compiled_loop), in chunks when a progress bar is shown
         chunk = n - 1 if not progress else max(1, (n - 1) // 100)
@@ -484,10 +483,10 @@ def _route_row(routes, k: int) -> None:
             dst[k, cols] = src[k, src_cols] if nz is None else src[k, src_cols] + nz[k]
 
 
-def _compiled(t, dt, ports, sets, stepping, gets, routes, fast):
+def _compiled(t, dt, ports, sets, stepping, gets, routes):
     """The compiled loop (:mod:`.compiled_loop`) over these calls, or None: the Python loop
     (fmpy's checked calls, an FMI 3.0 FMU, an Integer or Boolean route, no compiled loop here)."""
-    if not fast or any(p.f.fmi != 2 for p in ports) or any(r[5] is not None for r in routes):
+    if any(p.checked or p.f.fmi != 2 for p in ports) or any(r[5] is not None for r in routes):
         return None
     from . import compiled_loop
 

@@ -180,7 +180,7 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
     ``parameters``: FMU parameters set before initialisation (name: value)."""
     from .harness import FmuInstance, WiringError, _unit_of, observer_design
     from .instance import CoSimulationError, fmi_type
-    from .master import _Port, _store, step_ports
+    from .master import Port, store_input, step_ports
 
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
@@ -210,10 +210,10 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
                               f"{str(exc).rstrip('.')}. Last log messages: {f.log_tail()}") from None
         # the master's matrices and stepping loop (compiled where it can run): at t_k the record's
         # row k in, one step, the outputs at t_k+1 out
-        port = _Port(f, in_names, n, checked=False)
+        port = Port(f, in_names, n, checked=False)
         try:
             for x, (typ, j) in port.columns(port.inputs).items():
-                _store(port, typ, j, slice(None), cols[x], x, t)
+                store_input(port, typ, j, slice(None), cols[x], x, t)
             out_cols = port.columns(port.outputs)
             for x, (typ, j) in out_cols.items():
                 port.outputs[typ][2][0, j] = y0[x]
