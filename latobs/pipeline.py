@@ -243,8 +243,10 @@ def build(names: list[str] | None, vehicle: str | None, out: Path, backend: str 
 
 
 def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str, design_files: bool,
-           platforms: list[str] | None, host_suffices: bool, fmi: int) -> list[Path]:
-    """:func:`build` of one FMI version into ``out``."""
+           platforms: list[str] | None, host_suffices: bool, fmi: int,
+           reference_plants: Path | None = None) -> list[Path]:
+    """:func:`build` of one FMI version into ``out`` (``reference_plants``: the folder shared by
+    the parallel workers for the plants of the reference runs, :class:`_ReferencePlants`)."""
     from . import packaging
     from .atomic import locked_folder
     from .cbackend.fmi3 import folders as fmi3_folders
@@ -273,7 +275,7 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
             print(f"reusing {p.fmu.name} (identical inputs)")
         return [p.fmu for p in plans]
     built = {}
-    with locked_folder(out, "build"), _ReferencePlants(out) as plants:
+    with locked_folder(out, "build"), _ReferencePlants(out, reference_plants) as plants:
         plans = _plan(names, vehicle, out, backend, platforms, host_suffices, fmi)   # again: another build may have written
         made = _make_in_parallel(plans, design_files)
         # plants first: an observer's reference experiment runs beside the plant built here
@@ -307,18 +309,38 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
     return [built[p.name] for p in plans]
 
 
+#: rough seconds of one FMU's cold build on the 2-core reference machine (design, certificate, the
+#: compilations, the reference run): the parallel builds start the longest first, so that the
+#: longest one does not start last (names not here: :data:`DEFAULT_BUILD_SECONDS`)
+BUILD_SECONDS = {"SideslipFixedOrderEstimatorScheduled": 40.0, "SideslipFixedOrderEstimator": 12.0,
+                 "MotorcycleFaultObserver": 9.0, "SideslipBankObserverTire": 9.0, "MotorcycleFaultObserverPaper": 8.0,
+                 "SideslipBankObserver": 8.0, "MotorcyclePlant": 8.0, "LateralIntervalObserver": 7.0,
+                 "CarPlant": 6.0, "SideslipBankObserverTirePaper": 6.0, "SideslipBankObserverPaper": 5.0,
+                 "SideslipKalmanFilter": 5.0}
+DEFAULT_BUILD_SECONDS = 10.0
+
+
+def build_seconds(model: str) -> float:
+    """:data:`BUILD_SECONDS` of a catalogue design or plant (its FMU for any vehicle)."""
+    return BUILD_SECONDS.get(model, DEFAULT_BUILD_SECONDS)
+
+
 def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
     """Make the FMUs of ``plans`` (those not current, and not in the cache) at once in parallel
     processes (``lmi.parallel_map``: bounded by the cores and ``$LATOBS_JOBS``) when there are two
     or more: each worker builds one FMU, designed and packaged exactly as this process would, into
     a scratch folder of its own; each result is installed here (under this folder's lock, as one
     unit, the FMU last: :func:`_install`) and kept only if current. Returns the names installed;
-    one that failed is left to the build's own sequential step, which reports the failure."""
+    one that failed is left to the build's own sequential step, which reports the failure. The
+    plants of the observers' reference runs are built once, in a folder the workers share."""
+    import tempfile
+
     from . import cache
     from .synthesis import lmi
 
     states = {p.name: p.current(design_files) for p in plans}
     todo = [p for p in plans if not states[p.name][0] and cache.files("fmu", _cache_parts(p)) is None]
+    todo.sort(key=lambda p: -build_seconds(p.model))        # the longest first (a stable sort)
     n = lmi.jobs(len(todo))
     if len(todo) < 2 or n < 2:
         return set()
@@ -326,14 +348,15 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
         print(states[p.name][1])                           # building / rebuilding, saying what changed
     print(f"making {len(todo)} FMUs in {n} processes", flush=True)
     made = set()
-    items = [(p.model, p.vehicle, p.backend, p.platforms, p.fmi) for p in todo]
-    for p, (printed, scratch, files) in zip(todo, lmi.parallel_map(_make_worker, items)):
-        if files is not None and _install(p, files):
-            # what the worker's build said, of this folder
-            lines = [line.replace(scratch, str(p.fmu.parent)) for line in printed.splitlines()
-                     if line != f"building {p.fmu.name}"]
-            print("\n".join(lines), flush=True)
-            made.add(p.name)
+    with tempfile.TemporaryDirectory(prefix="latobs-reference-") as shared:   # the workers' reference plants
+        items = [(p.model, p.vehicle, p.backend, p.platforms, p.fmi, shared) for p in todo]
+        for p, (printed, scratch, files) in zip(todo, lmi.parallel_map(_make_worker, items)):
+            if files is not None and _install(p, files):
+                # what the worker's build said, of this folder
+                lines = [line.replace(scratch, str(p.fmu.parent)) for line in printed.splitlines()
+                         if line != f"building {p.fmu.name}"]
+                print("\n".join(lines), flush=True)
+                made.add(p.name)
     return made
 
 
@@ -345,13 +368,13 @@ def _make_worker(item: tuple) -> tuple[str, str, dict[str, bytes] | None]:
     import shutil
     import tempfile
 
-    model, vehicle, backend, platforms, fmi = item
+    model, vehicle, backend, platforms, fmi, shared = item
     scratch = Path(tempfile.mkdtemp(prefix="latobs-part-"))
     out = fmi_folder(scratch, fmi)
     buf = io.StringIO()
     try:
         with contextlib.redirect_stdout(buf):
-            path, = _build([model], vehicle, out, backend, True, platforms, False, fmi)
+            path, = _build([model], vehicle, out, backend, True, platforms, False, fmi, Path(shared))
         design = path.with_name(f"{path.stem}.design.json")
         return buf.getvalue(), str(out), {f.name: f.read_bytes() for f in (design, path) if f.is_file()}
     except Exception:                              # (reported by the build's own sequential step)
@@ -479,10 +502,13 @@ def reference_identity(model: str, vehicle, backend: str, fmi: int = 2) -> str:
 
 class _ReferencePlants:
     """The plant FMUs of one build's reference runs: the one in ``out`` when it is current, else
-    built once into a scratch folder (removed at the end)."""
+    built once into a scratch folder (removed at the end), or into ``shared``: a folder the parallel
+    workers of one build share (its owner removes it), where each plant is built once under the
+    folder's lock and reused by the other workers (``build`` reuses a current FMU)."""
 
-    def __init__(self, out: Path):
+    def __init__(self, out: Path, shared: Path | None = None):
         self.out = Path(out)
+        self.shared = None if shared is None else Path(shared)
         self._tmp = None
         self._made: dict[tuple, Path] = {}
 
@@ -494,6 +520,8 @@ class _ReferencePlants:
             self._tmp.cleanup()
 
     def get(self, plant: str, vehicle, backend: str, fmi: int = 2) -> Path:
+        import contextlib
+        import io
         import tempfile
 
         from .cbackend.toolchain import host_platform
@@ -508,12 +536,19 @@ class _ReferencePlants:
             if here:
                 self._made[key] = p.fmu
             else:
-                if self._tmp is None:
-                    self._tmp = tempfile.TemporaryDirectory(prefix="latobs-reference-")
-                print(f"{plant}: building it for the observers' reference experiments")
+                if self.shared is not None:
+                    where = self.shared
+                else:
+                    if self._tmp is None:
+                        self._tmp = tempfile.TemporaryDirectory(prefix="latobs-reference-")
+                    where = Path(self._tmp.name)
                 host = [host_platform()] if backend == "c" else None    # the reference runs here
-                self._made[key], = build([plant], vehicle, Path(self._tmp.name) / backend, backend,
-                                         design_files=False, platforms=host, fmi=fmi)
+                buf = io.StringIO()
+                with contextlib.redirect_stdout(buf):
+                    self._made[key], = build([plant], vehicle, where / backend, backend,
+                                             design_files=False, platforms=host, fmi=fmi)
+                if not buf.getvalue().startswith("reusing"):
+                    print(f"{plant}: built for the observers' reference experiments")
         return self._made[key]
 
 

