@@ -86,6 +86,8 @@ class Entry:
     truth            {estimated quantity: the plant's bus signal it is scored against}, when not its own name
     noise            plants: {measured signal: (std, bias)} in SI units, the sensors of ``latobs validate --noise``
     steer            plants: its steering input (scaled by a campaign's ``steer_scale``)
+    build_seconds    rough seconds of its cold build on the 2-core reference machine (design,
+                     certificate, compilations, reference run): parallel builds start the longest first
     """
     name: str
     kind: str
@@ -110,6 +112,7 @@ class Entry:
     truth: tuple[tuple[str, str], ...] = ()
     noise: tuple[tuple[str, tuple[float, float]], ...] = ()
     steer: str | None = None
+    build_seconds: float = 10.0
 
     @property
     def model_module(self) -> str:
@@ -138,7 +141,7 @@ _MOTORCYCLE = Reference("motorcycle-lane-change", _SECONDS,
 _CG = (("vy", "vy_cg"), ("beta", "beta_cg"))     # the bicycle model's states are the CG's
 
 
-def _paper_000(name: str, switching: str, faithful: bool, description: str) -> Entry:
+def _paper_000(name: str, switching: str, faithful: bool, description: str, build_seconds: float) -> Entry:
     """The four paper-000 FMUs: one design, model file, runtime and C model, other design options."""
     return Entry(
         name, "observer", "000", _m("{m[papers]}:MENHOUR_2014"), "sedan", description,
@@ -146,23 +149,24 @@ def _paper_000(name: str, switching: str, faithful: bool, description: str) -> E
         c_model="sideslip_bank_observer.c", emitter=_m("{m[emitter_000]}"), reference=_BANK_BRAKING,
         options=_m("{m[design_000]}:DesignOptions"), option_args=(("switching", switching), ("faithful", faithful)),
         design=_m("{m[design_000]}:design"), to_dict=_m("{m[design_000]}:to_design_dict"),
-        certificate=_m("{m[certificate]}.sideslip_bank_observer:certify"), plant="CarPlant", validate=True, campaign="robustness-000")
+        certificate=_m("{m[certificate]}.sideslip_bank_observer:certify"), plant="CarPlant", validate=True, campaign="robustness-000",
+        build_seconds=build_seconds)
 
 
 #: every FMU of ``latobs build``: the observers, then the plants
 ENTRIES: tuple[Entry, ...] = (
     _paper_000("SideslipBankObserver", "speed", False,
                "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model "
-               "at the measured speed, robust to model error, valid flag with integral freeze"),
+               "at the measured speed, robust to model error, valid flag with integral freeze", 8.0),
     _paper_000("SideslipBankObserverTire", "tire", False,
                "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) "
-               "at alpha* = 0.5 deg (eq. 27), robust to model error, valid flag with integral freeze"),
+               "at alpha* = 0.5 deg (eq. 27), robust to model error, valid flag with integral freeze", 9.0),
     _paper_000("SideslipBankObserverPaper", "speed", True,
                "the paper's speed-mode design as printed, for reproduction: LMI (20) + pole region only, each mode "
-               "at its grid speed (eq. 25 literally)"),
+               "at its grid speed (eq. 25 literally)", 5.0),
     _paper_000("SideslipBankObserverTirePaper", "tire", True,
                "the paper's tire-mode design as printed, for reproduction: LMI (20) + pole region only on the grid "
-               "speeds 36/63/90 km/h (eq. 27)"),
+               "speeds 36/63/90 km/h (eq. 27)", 6.0),
     Entry("LateralIntervalObserver", "observer", "001", _m("{m[papers]}:IFQIR_2020"), "sedan",
           "switched interval observer: guaranteed bounds of lateral velocity, sideslip, yaw rate and axle "
           "forces for cornering stiffnesses in a +-20 % box, speed modes 11.5/14.5/18 m/s (Theorem 1)",
@@ -171,7 +175,7 @@ ENTRIES: tuple[Entry, ...] = (
           reference=Reference("double-lane-change-15", _SECONDS, (("t_start", 0.2),), "the lane change from 0.2 s"),
           options=_m("{m[design_001]}:DesignOptions"), design=_m("{m[design_001]}:design"),
           to_dict=_m("{m[design_001]}:to_design_dict"), certificate=_m("{m[certificate]}.lateral_interval_observer:certify"),
-          plant="CarPlant", campaign="robustness-001", truth=_CG),
+          plant="CarPlant", campaign="robustness-001", truth=_CG, build_seconds=7.0),
     Entry("SideslipFixedOrderEstimator", "observer", "002", _m("{m[papers]}:DELIBASI_2014"), "delibasi",
           "fixed-order robust H-inf sideslip estimator beta^ = (y/x) r from the yaw rate alone, one filter for "
           "the whole (Cf, Cr, v) box, Lemma 5 + certified polish (Delibasi 2014)",
@@ -180,7 +184,7 @@ ENTRIES: tuple[Entry, ...] = (
           options=_m("{m[design_002]}:DesignOptions"), option_args=(("scheduled", False),),
           design=_m("{m[design_002]}:design_for_vehicle"), to_dict=_m("{m[design_002]}:to_design_dict"),
           certificate=_m("{m[certificate]}.sideslip_fixed_order_estimator:certify"), plant="CarPlant", campaign="robustness-002",
-          truth=_CG[1:]),
+          truth=_CG[1:], build_seconds=12.0),
     Entry("SideslipFixedOrderEstimatorScheduled", "observer", "002", _m("{m[papers]}:DELIBASI_2014"), "mbds_250lm",
           "speed-scheduled fixed-order robust H-inf sideslip estimator: one Lemma 5 design per speed band, "
           "switched on vx (extension of paper 002)",
@@ -189,7 +193,7 @@ ENTRIES: tuple[Entry, ...] = (
           reference=_LANE_CHANGE, options=_m("{m[design_002]}:DesignOptions"), option_args=(("scheduled", True),),
           design=_m("{m[design_002]}:design_for_vehicle"), to_dict=_m("{m[design_002]}:to_design_dict"),
           certificate=_m("{m[certificate]}.sideslip_fixed_order_estimator:certify"), plant="CarPlant", campaign="robustness-002",
-          truth=_CG[1:]),
+          truth=_CG[1:], build_seconds=40.0),
     Entry("SideslipKalmanFilter", "observer", "002", _m("{m[papers]}:LEANZA_2021"), "mbds_250lm",
           "baseline peer of paper 002: the linear bicycle-model Kalman filter of the MBDS dataset's authors "
           "(measurements ay and yaw rate), noise tuned on the record's t < 425 s",
@@ -197,7 +201,7 @@ ENTRIES: tuple[Entry, ...] = (
           c_model="sideslip_kalman_filter.c", emitter=_m("{m[emitter_kalman]}"), reference=_LANE_CHANGE,
           options=_m("{m[design_kalman]}:DesignOptions"), design=_m("{m[design_kalman]}:design"),
           certificate=_m("{m[certificate]}.sideslip_kalman_filter:certify"), plant="CarPlant", campaign="robustness-002",
-          truth=_CG),
+          truth=_CG, build_seconds=5.0),
     Entry("MotorcycleFaultObserver", "observer", "003", _m("{m[papers]}:ICHALAL_2017"), "sharp_motorcycle",
           "H-inf observer of a motorcycle's roll angle and rider torque at the measured speed: roll angle as a "
           "state, PMI torque, one Lyapunov matrix for all speeds 7.5..32.5 m/s (paper 003 extended)",
@@ -205,7 +209,7 @@ ENTRIES: tuple[Entry, ...] = (
           c_model="motorcycle_fault_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
           options=_m("{m[design_003_measured]}:DesignOptions"), design=_m("{m[design_003_measured]}:design"),
           certificate=_m("{m[certificate]}.motorcycle_fault_observer:certify"),
-          plant="MotorcyclePlant", validate=True, campaign="robustness-003"),
+          plant="MotorcyclePlant", validate=True, campaign="robustness-003", build_seconds=9.0),
     Entry("MotorcycleFaultObserverPaper", "observer", "003", _m("{m[papers]}:ICHALAL_2017"), "sharp_motorcycle",
           "the paper's switched H-inf PI observer as printed, for reproduction: roll angle and rider torque as "
           "unknown inputs, one frozen model and Lyapunov matrix per grid speed 10..30 m/s, LMIs (20)-(23) corrected",
@@ -213,7 +217,7 @@ ENTRIES: tuple[Entry, ...] = (
           c_model="motorcycle_fault_observer.c", emitter=_m("{m[emitter_003]}"), reference=_MOTORCYCLE,
           options=_m("{m[design_003]}:DesignOptions"), design=_m("{m[design_003]}:design"),
           to_dict=_m("{m[design_003]}:to_design_dict"), certificate=_m("{m[certificate]}.motorcycle_fault_observer:certify"),
-          plant="MotorcyclePlant", validate=True, campaign="robustness-003"),
+          plant="MotorcyclePlant", validate=True, campaign="robustness-003", build_seconds=8.0),
     Entry("CarPlant", "plant", None, None, "sedan",
           "two-track car with roll, nonlinear tires and load transfer, on a banked road",
           model=_m("{m[models]}.car_plant"), runtime=_m("{m[runtime_car]}:CarPlantModel"), c_model="car_plant.c",
@@ -224,7 +228,7 @@ ENTRIES: tuple[Entry, ...] = (
                  ("roll_rate", (0.003, 0.0005)),     # rad/s
                  ("delta", (0.0005, 0.0)),           # rad (road wheel)
                  ("vx", (0.05, 0.0))),               # m/s
-          steer="delta"),
+          steer="delta", build_seconds=6.0),
     Entry("MotorcyclePlant", "plant", "003", _m("{m[papers]}:SHARP_1971"), "sharp_motorcycle",
           "Sharp's motorcycle (1971), its equations derived for the vehicle at build time",
           model=_m("{m[models]}.motorcycle_plant"), runtime=_m("{m[runtime_motorcycle]}:MotorcyclePlantModel"),
@@ -236,7 +240,7 @@ ENTRIES: tuple[Entry, ...] = (
                  ("yaw_rate", (0.005, 0.0)),         # rad/s
                  ("roll_rate", (0.005, 0.0)),        # rad/s
                  ("vx", (0.05, 0.0))),               # m/s
-          steer="rider_torque"),
+          steer="rider_torque", build_seconds=8.0),
 )
 
 #: C models that are parts of other artefacts, not FMUs of ``latobs build``: {model file: emitter}

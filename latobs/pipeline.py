@@ -309,20 +309,16 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
     return [built[p.name] for p in plans]
 
 
-#: rough seconds of one FMU's cold build on the 2-core reference machine (design, certificate, the
-#: compilations, the reference run): the parallel builds start the longest first, so that the
-#: longest one does not start last (names not here: :data:`DEFAULT_BUILD_SECONDS`)
-BUILD_SECONDS = {"SideslipFixedOrderEstimatorScheduled": 40.0, "SideslipFixedOrderEstimator": 12.0,
-                 "MotorcycleFaultObserver": 9.0, "SideslipBankObserverTire": 9.0, "MotorcycleFaultObserverPaper": 8.0,
-                 "SideslipBankObserver": 8.0, "MotorcyclePlant": 8.0, "LateralIntervalObserver": 7.0,
-                 "CarPlant": 6.0, "SideslipBankObserverTirePaper": 6.0, "SideslipBankObserverPaper": 5.0,
-                 "SideslipKalmanFilter": 5.0}
-DEFAULT_BUILD_SECONDS = 10.0
-
-
 def build_seconds(model: str) -> float:
-    """:data:`BUILD_SECONDS` of a catalogue design or plant (its FMU for any vehicle)."""
-    return BUILD_SECONDS.get(model, DEFAULT_BUILD_SECONDS)
+    """The catalogue's estimate of a design's or plant's cold build (``Entry.build_seconds``, its
+    FMU for any vehicle; 10 s for a name it does not hold): the parallel builds start the longest
+    first, so that the longest one does not start last."""
+    from . import catalogue
+
+    try:
+        return catalogue.get(model).build_seconds
+    except KeyError:
+        return catalogue.Entry.build_seconds
 
 
 def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:

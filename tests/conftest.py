@@ -139,9 +139,9 @@ class SessionBuild:
 
     def build_share(self, worker: int, workers: int) -> None:
         """Build this worker's share of every FMU (both backends, with its design), the shares
-        balanced by :data:`latobs.pipeline.BUILD_SECONDS`: at the start of a whole run the workers
-        build different FMUs at once instead of queueing for the same ones (the tests ask for them
-        in one order)."""
+        balanced by ``latobs.pipeline.build_seconds`` (the catalogue's estimates): at the start of
+        a whole run the workers build different FMUs at once instead of queueing for the same ones
+        (the tests ask for them in one order)."""
         load, share = [0.0] * workers, [[] for _ in range(workers)]
         for name in sorted(FMU_NAMES, key=lambda n: (-pipeline.build_seconds(n), n)):
             w = load.index(min(load))
