@@ -3,8 +3,9 @@ the car identified on the tuning part (t < 425 s; with the record's beta and wit
 car observer designed and built for it, each replayed over the whole record and scored on the
 held-out part (t >= 425 s) beside the zero estimate, the open-loop bicycle with the identified
 parameters, and the ridge regression fitted on the tuning part (``latobs.validation.baselines``).
-The Kalman filter designed for the identified car is latobs's SideslipKalmanFilter. The table of the
-docs page "Which observer for which job".
+The Kalman filter designed for the identified car is latobs's SideslipKalmanFilter, scored by its
+prediction x(k|k-1) and its filtered estimate x(k|k). The table of the docs page "Which observer for
+which job".
 
     python benchmarks/mbds_table.py [--out DIR]
 
@@ -56,6 +57,9 @@ def main(argv=None) -> int:
             key = "beta_hat" if est else "beta"
             rms = est["after_split"]["rms"] if est else m["intervals"]["beta"]["midpoint"]["after_split"]["rms"]
             rows.append((tag, obs + ("" if est else " (interval midpoint)"), rms))
+            filt = m["estimates"].get("beta_filtered")       # the Kalman filter's x(k|k)
+            if filt is not None:
+                rows.append((tag, obs + " (filtered, x(k|k))", filt["after_split"]["rms"]))
             for bl in BASELINES:
                 e = m["baselines"].get(bl, {}).get(key)
                 if e is not None:

@@ -13,7 +13,7 @@ from operator import add, mul
 from .linalg import total
 from .spec import tables_of
 
-OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat")
+OUTPUT_NAMES = ("beta_hat", "vy_hat", "yaw_rate_hat", "beta_filtered", "vy_filtered", "yaw_rate_filtered")
 
 
 # Small dense algebra on lists of rows. Every dot product is summed left to right from its first
@@ -113,7 +113,7 @@ class KalmanObserver:
         self._started = False
         self._outside = False
         self.events: list = []
-        self.y = {"beta_hat": 0.0, "vy_hat": 0.0, "yaw_rate_hat": 0.0}
+        self.y = {name: 0.0 for name in OUTPUT_NAMES}
 
     @classmethod
     def parameter_defaults(cls, data: dict) -> dict:
@@ -130,11 +130,17 @@ class KalmanObserver:
         self._outside = True
         return self.vx_min if vx < self.vx_min else self.vx_max
 
-    def _publish(self, v: float) -> None:
+    def _publish(self, v: float, xf=None) -> None:
+        """The outputs: the prediction x_{k+1|k} and the filtered x_{k|k} of the step's start
+        (``xf``; None at the start: the initial state), both at the speed v of the step's start."""
         vy, r = self.x
         self.y["beta_hat"] = math.atan(vy / v)
         self.y["vy_hat"] = vy
         self.y["yaw_rate_hat"] = r
+        fvy, fr = self.x if xf is None else xf
+        self.y["beta_filtered"] = math.atan(fvy / v)
+        self.y["vy_filtered"] = fvy
+        self.y["yaw_rate_filtered"] = fr
 
     def model(self, v: float):
         """(A, B, C, D) of the model at the speed v (m/s, already clamped) as lists: A 2x2 (1/s),
@@ -160,7 +166,9 @@ class KalmanObserver:
 
     def step(self, h: float, u: dict) -> None:
         """Update with y = [ay, yaw_rate], then predict over h (s) with the inputs u held; the
-        outputs are the prediction x_{k+1|k}."""
+        outputs are the prediction x_{k+1|k} (``*_hat``) and the filtered estimate x_{k|k} of the
+        step's start t (``*_filtered``: one step behind; a filtered estimate of the current time
+        would make the outputs depend on the inputs at that time, a direct feedthrough)."""
         delta, vx, ay, yr = u["delta"], u["vx"], u["ay"], u["yaw_rate"]
         if not (math.isfinite(delta) and math.isfinite(vx) and math.isfinite(ay) and math.isfinite(yr)):
             self.events.append(("warning", f"non-finite input (delta, vx, ay, yaw_rate) = {(delta, vx, ay, yr)!r}: "
@@ -182,6 +190,7 @@ class KalmanObserver:
         K = _matmul(_transpose(CP), Sinv)
         e = [y - _dot(c, x) - d * delta for y, c, d in zip((ay, yr), C, D)]
         x = [xi + _dot(k, e) for xi, k in zip(x, K)]
+        xf = x                                             # x_{k|k}
         KC = _matmul(K, C)
         IKC = [[(1.0 - kc) if i == j else -kc for j, kc in enumerate(row)] for i, row in enumerate(KC)]
         P = _symmetric(_matmul(IKC, P))                    # P = (I - K C) P
@@ -203,4 +212,4 @@ class KalmanObserver:
             return
         self.x = x
         self.P = P
-        self._publish(v)
+        self._publish(v, xf)

@@ -92,11 +92,16 @@ static Bicycle bicycle_at(double v)
     return s;
 }
 
-static void publish(Model *m, double v)
+/* the outputs: the prediction x_{k+1|k} and the filtered xf = x_{k|k} of the step's start (the
+ * runtime's _publish; xf = x at the start), both at the speed v of the step's start */
+static void publish(Model *m, double v, const double xf[2])
 {
     m->y[OUT_beta_hat] = atan(m->x[0] / v);
     m->y[OUT_vy_hat] = m->x[0];
     m->y[OUT_yaw_rate_hat] = m->x[1];
+    m->y[OUT_beta_filtered] = atan(xf[0] / v);
+    m->y[OUT_vy_filtered] = xf[0];
+    m->y[OUT_yaw_rate_filtered] = xf[1];
 }
 
 /* x = [0, yaw_rate], P = P0; the outputs at vx */
@@ -106,7 +111,7 @@ static void start(Model *m, const double *u, const Log *log)
     m->x[1] = u[IN_yaw_rate];
     memcpy(m->P, KF_P0, sizeof m->P);
     m->started = 1;
-    publish(m, speed(m, u[IN_vx], log));
+    publish(m, speed(m, u[IN_vx], log), m->x);
 }
 
 int model_setup(Model *m, const double *p, const Log *log)
@@ -168,13 +173,14 @@ static int predict(const Bicycle *s, double h, double delta, double x[2], double
 
 int model_do_step(Model *m, double h, const double *u, const Log *log)
 {
-    double x[2], P[2][2];
+    double x[2], P[2][2], xf[2];
     if (!m->started) start(m, u, log);
     const double v = speed(m, u[IN_vx], log);
     const Bicycle s = bicycle_at(v);
     memcpy(x, m->x, sizeof x);
     memcpy(P, m->P, sizeof P);
     update(&s, u, x, P);
+    memcpy(xf, x, sizeof xf);                  /* x_{k|k} */
     if (predict(&s, h, u[IN_delta], x, P) != 0) {
         char text[32];
         log_event(log, LOG_WARNING, "the model discretised over h = %s s is not finite: step refused, state held",
@@ -187,7 +193,7 @@ int model_do_step(Model *m, double h, const double *u, const Log *log)
     }
     memcpy(m->x, x, sizeof x);
     memcpy(m->P, P, sizeof P);
-    publish(m, v);
+    publish(m, v, xf);
     return 0;
 }
 

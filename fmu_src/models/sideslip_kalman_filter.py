@@ -35,7 +35,8 @@ def _variant(data: dict) -> str:
 SPEC = ModelSpec(
     description="Baseline peer of paper 002: linear bicycle-model Kalman filter of sideslip, lateral velocity and "
                 "yaw rate from the lateral acceleration and the yaw rate, the estimator of the MBDS dataset's "
-                "authors (Leanza, Reina, Blanco-Claraco, Sensors 2021); outputs the one-step prediction",
+                "authors (Leanza, Reina, Blanco-Claraco, Sensors 2021); outputs the one-step prediction x(k+1|k) and, one "
+                "step behind, the filtered estimate x(k|k)",
     describe=_variant,
     runtime=KalmanObserver,
     inputs=(
@@ -49,6 +50,12 @@ SPEC = ModelSpec(
         Var("beta_hat", "rad", "estimated sideslip angle atan(vy_hat/vx) at the centre of gravity", sign=CAR_BETA),
         Var("vy_hat", "m/s", "estimated lateral velocity at the centre of gravity", sign=LEFT),
         Var("yaw_rate_hat", "rad/s", "estimated yaw rate", sign=CAR["yaw_rate"]["sign"]),
+        Var("beta_filtered", "rad", "filtered sideslip estimate atan(vy_filtered/vx) of the previous communication "
+            "point (one step behind: x(k|k), updated with that point's measurements)", sign=CAR_BETA),
+        Var("vy_filtered", "m/s", "filtered lateral velocity estimate of the previous communication point (one "
+            "step behind)", sign=LEFT),
+        Var("yaw_rate_filtered", "rad/s", "filtered yaw rate estimate of the previous communication point (one "
+            "step behind)", sign=CAR["yaw_rate"]["sign"]),
     ),
     # longest communication step (s), measured against 1 ms runs: a discrete filter over the communication
     # step (its gain depends on the step, its error does not grow with it): bounded at every step to 1 s

@@ -68,8 +68,8 @@ TERMINALS = {
          ("mode", "valid", "consistent", "residual_norm")),
     ),
 }
-#: suffixes of an estimate's name (beta_hat, vy_lower, ...): the terminal is the quantity's
-_SUFFIXES = ("_hat", "_lower", "_upper")
+#: suffixes of an estimate's name (beta_hat, vy_lower, beta_filtered, ...): the terminal is the quantity's
+_SUFFIXES = ("_hat", "_lower", "_upper", "_filtered")
 
 
 class GainArray(NamedTuple):

@@ -50,6 +50,31 @@ def truth_signal(quantity: str, available, model_name: str | None = None) -> str
     return quantity if quantity in available else None
 
 
+FILTERED = "_filtered"
+
+
+def filtered_outputs(outputs) -> list[str]:
+    """Every ``X_filtered`` output: a filter's estimate x(k|k) of X at the previous communication
+    point, published one step behind (a filtered estimate of the current time would make the
+    outputs depend on the current inputs: a direct feedthrough). Its value at row k + 1 is scored
+    against the truth at row k (:func:`one_step_behind`)."""
+    return [n for n in outputs if n.endswith(FILTERED)]
+
+
+def one_step_behind(y, truth, mask):
+    """(y[1:], truth[:-1], mask[:-1]): the samples of a ``X_filtered`` output (row k + 1) beside
+    the truth and the sample selection of the time they estimate (row k)."""
+    return np.asarray(y, dtype=float)[1:], np.asarray(truth, dtype=float)[:-1], np.asarray(mask)[:-1]
+
+
+def quantity_of(name: str) -> str:
+    """X of an estimate ``X_hat`` or ``X_filtered`` (the name itself otherwise)."""
+    for suffix in ("_hat", FILTERED):
+        if name.endswith(suffix):
+            return name[:-len(suffix)]
+    return name
+
+
 def estimated_quantities(outputs) -> tuple[list[str], list[str]]:
     """(X of every ``X_hat`` output, X of every ``X_lower``/``X_upper`` pair) of an observer."""
     hats = [n[:-4] for n in outputs if n.endswith("_hat")]
@@ -143,6 +168,13 @@ def compute(result: SimResult, settle_time: float | None = None) -> dict[str, An
             if truth is not None:
                 o["estimates"][name] = estimate_entry(y, bus[truth], after, truth,
                                                       result.units.get(name) or result.units.get(truth))
+                scored.add(name)
+        for name in filtered_outputs(outs):
+            truth = truth_signal(quantity_of(name), bus, model)
+            if truth is not None and t.size > 1:
+                o["estimates"][name] = {**estimate_entry(*one_step_behind(outs[name], bus[truth], after), truth,
+                                                         result.units.get(name) or result.units.get(truth)),
+                                        "lag_steps": 1}
                 scored.add(name)
         for name in outs:
             if name.endswith("_lower"):
@@ -408,7 +440,7 @@ def simulation_baselines(result: SimResult, label: str, quantities) -> dict[str,
 def _simulation_baselines(result: SimResult, label: str, o: dict[str, Any], after: np.ndarray) -> dict[str, Any]:
     """The ``baselines`` entry of observer ``label`` (its estimates and intervals already scored in ``o``)."""
     bus = result.bus
-    targets = {name: (name[:-4], e) for name, e in o["estimates"].items()}
+    targets = {name: (quantity_of(name), e) for name, e in o["estimates"].items()}
     targets.update({name: (name, e) for name, e in o["intervals"].items()})
     b = simulation_baselines(result, label, [q for q, _ in targets.values()])
     out: dict[str, Any] = {}

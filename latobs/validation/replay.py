@@ -257,7 +257,8 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
          "scored": [scored outputs], "nothing_scored": bool,
          "observers": {label: {
              "estimates": {"X_hat": {"truth": column, "unit", SEG: {"n_samples", "rms", "max_abs",
-                                                                    "mean_error", "nonfinite_samples"}}},
+                                                                    "mean_error", "nonfinite_samples"}},
+                           "X_filtered": {as X_hat, "lag_steps": 1: row k + 1 against the truth at row k}},
              "intervals": {"X": {"truth": column, "lower", "upper", "unit",
                                  SEG: {"n_samples", "enclosure_violations", "violation_rate",
                                        "enclosure_rate", "max_violation", "mean_width",
@@ -300,6 +301,17 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
         y, x = np.asarray(outs[name], dtype=float), cols[truth]
         o["estimates"][name] = {"truth": truth, "unit": run.units.get(name) or run.units.get(truth),
                                 **{s: _metrics.error_stats(y[m], x[m]) for s, m in segs.items()}}
+        scored.add(name)
+    for name in _metrics.filtered_outputs(outs):       # x(k|k), published one step behind
+        truth = _metrics.truth_signal(_metrics.quantity_of(name), cols, run.model_name)
+        if truth is None or t.size < 2:
+            continue
+        stats = {}
+        for s, m in segs.items():
+            y, x, mk = _metrics.one_step_behind(outs[name], cols[truth], m)
+            stats[s] = _metrics.error_stats(y[mk], x[mk])
+        o["estimates"][name] = {"truth": truth, "unit": run.units.get(name) or run.units.get(truth), "lag_steps": 1,
+                                **stats}
         scored.add(name)
     for q in pairs:
         truth = _metrics.truth_signal(q, cols, run.model_name)
@@ -369,7 +381,7 @@ def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, n
                       seg: str) -> dict[str, Any]:
     """The ``baselines`` entry of a replay (see :func:`score`)."""
     cols = run.columns
-    targets = {name: (name[:-4], e) for name, e in o["estimates"].items()}
+    targets = {name: (_metrics.quantity_of(name), e) for name, e in o["estimates"].items()}
     targets.update({name: (name, e) for name, e in o["intervals"].items()})
     # with a split, the regression baseline is fitted on the tuning part (before it) only
     fit = ((segs["before_split"], {q: cols[e["truth"]] for q, e in targets.values()})

@@ -483,7 +483,10 @@ def test_the_declared_longest_step_keeps_the_outputs_close_to_1_ms(worker, built
         runs[h] = [c[2] for c in res["calls"] if c[0] == "get"]
     ref, got = runs[1e-3], runs[w.max_step]
     for name in ref[0]:
-        if isinstance(ref[0][name], int):
+        # an X_filtered output estimates X one communication step earlier (the Kalman filter's
+        # x(k|k)): at a 1 s step, 1 s before the whole second, so not comparable here; its values
+        # are held to an independent filter's in tests/runtime (the runtime) and to the bit in C
+        if isinstance(ref[0][name], int) or name.endswith("_filtered"):
             continue
         peak = max(abs(r[name]) for r in ref) + 1e-9
         err = max(abs(a[name] - b[name]) for a, b in zip(got, ref))

@@ -30,7 +30,7 @@ from latobs.validation import replay as rp
 from latobs.validation.harness import FmuInstance
 
 INPUTS = ("delta", "vx", "yaw_rate", "ay")
-OUTPUTS = ("beta_hat", "vy_hat", "yaw_rate_hat")
+OUTPUTS = ("beta_hat", "vy_hat", "yaw_rate_hat", "beta_filtered", "vy_filtered", "yaw_rate_filtered")
 
 
 @pytest.fixture(scope="module")
@@ -201,7 +201,7 @@ def test_fmu_interface(built):
     assert [x.name for x in md.modelVariables if x.causality == "output"] == list(OUTPUTS)
     assert not [x for x in md.modelVariables if x.causality == "parameter"]
     assert [v[n].unit for n in INPUTS] == ["rad", "m/s", "rad/s", "m/s2"]
-    assert [v[n].unit for n in OUTPUTS] == ["rad", "m/s", "rad/s"]
+    assert [v[n].unit for n in OUTPUTS] == ["rad", "m/s", "rad/s"] * 2
     assert "Leanza, Reina, Blanco-Claraco" in md.description and "paper 002" in md.description
     assert "vehicle mbds_250lm" in md.description
     assert all(u.dependencies == [] for u in md.outputs)

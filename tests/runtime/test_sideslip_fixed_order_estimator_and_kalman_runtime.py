@@ -155,18 +155,26 @@ def test_kalman_runtime_equals_run_kalman(mbds):
     sel = cols["t"] < cols["t"][0] + 20.0
     part = {k: v[sel] for k, v in cols.items()}
     beta, states = kb.run_kalman(part, vals, q, rm, estimate="predicted", return_states=True)
+    fbeta, fstates = kb.run_kalman(part, vals, q, rm, estimate="filtered", return_states=True)
     obs = _kf(kb.to_data_dict(vals, q, rm))
     t = part["t"]
     u = {k: float(part[k][0]) for k in ("delta", "vx", "yaw_rate", "ay")}
     obs.initialize(u)
-    out = [(obs.y["beta_hat"], obs.y["vy_hat"])]
+    names = ("beta_hat", "vy_hat", "yaw_rate_hat", "beta_filtered", "vy_filtered", "yaw_rate_filtered")
+    out = [[obs.y[n] for n in names]]
     for k in range(len(t) - 1):
         u = {k_: float(part[k_][k]) for k_ in ("delta", "vx", "yaw_rate", "ay")}
         obs.step(float(t[k + 1] - t[k]), u)
-        out.append((obs.y["beta_hat"], obs.y["vy_hat"]))
+        out.append([obs.y[n] for n in names])
     out = np.array(out)
     assert np.abs(out[:, 0] - beta).max() < 1e-9
     assert np.abs(out[:, 1] - states[:, 0]).max() < 1e-9
+    assert np.abs(out[:, 2] - states[:, 1]).max() < 1e-9
+    # the filtered x(k|k), published one step behind (after the step from t_k), against numpy's
+    assert np.abs(out[1:, 3] - fbeta[:-1]).max() < 1e-9
+    assert np.abs(out[1:, 4] - fstates[:-1, 0]).max() < 1e-9
+    assert np.abs(out[1:, 5] - fstates[:-1, 1]).max() < 1e-9
+    assert out[0, 4] == 0.0 and out[0, 5] == part["yaw_rate"][0]      # at the start: the initial state
     assert not obs.events
 
 

@@ -243,6 +243,29 @@ def test_may_in_force_sum_and_cg_truth_in_replay():
     assert "m*ay" in report.text_table(score(_run(outs, {"ay": ay}), mass=mass, info={"csv": "r.csv"}))
 
 
+def test_a_filtered_output_is_scored_one_step_behind_in_replay_and_validate():
+    """X_filtered (the Kalman filter's x(k|k)) at row k + 1 estimates the truth at row k: an output
+    that is the truth delayed by one row scores zero, and the truth itself does not."""
+    n = 12
+    beta = np.sin(np.arange(n, dtype=float))
+    behind = np.concatenate([[0.0], beta[:-1]])               # row k + 1 holds the truth of row k
+    outs = {"beta_hat": beta.copy(), "beta_filtered": behind, "vy_filtered": beta.copy()}
+    cols = {"beta": beta, "vy": beta}
+    o = score(_run(outs, cols), split=10.55)["observers"]["Obs"]
+    f = o["estimates"]["beta_filtered"]
+    assert f["lag_steps"] == 1 and f["truth"] == "beta"
+    assert f["all"]["rms"] == 0.0 and f["all"]["n_samples"] == n - 1
+    assert f["before_split"]["n_samples"] == 6 and f["after_split"]["n_samples"] == 5
+    assert o["estimates"]["vy_filtered"]["all"]["rms"] > 0.5          # not delayed: wrong by a step
+    assert o["estimates"]["beta_hat"]["all"]["rms"] == 0.0 and "lag_steps" not in o["estimates"]["beta_hat"]
+    assert "beta_filtered" in o["baselines"]["summary"]                # beside the baselines too
+    t = 0.1 * np.arange(n)
+    r = SimResult(time=t, bus=cols, observers={"kf": outs}, logs={}, scenario="x", dt=0.1, info={})
+    e = metrics.compute(r, settle_time=0.0)["observers"]["kf"]["estimates"]
+    assert e["beta_filtered"]["rms"] == 0.0 and e["beta_filtered"]["lag_steps"] == 1
+    assert e["vy_filtered"]["rms"] > 0.5
+
+
 def test_reference_signals_map_observer_to_the_truth_at_its_point(tmp_path):
     assert metrics.reference_map("LateralIntervalObserver") == {"vy": "vy_cg", "beta": "beta_cg"}
     assert metrics.reference_map("LateralIntervalObserver_mbds_250lm") == metrics.reference_map("LateralIntervalObserver")
