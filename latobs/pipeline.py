@@ -365,6 +365,14 @@ def _make_worker(item: tuple) -> tuple[str, str, dict[str, bytes] | None]:
     import tempfile
 
     model, vehicle, backend, platforms, fmi, shared = item
+    import os
+
+    from .synthesis import lmi
+
+    # the build's processes already use the cores: this one's design runs its own parallel parts
+    # (paper 002's speed bands) in itself, not in processes of its own (each would import the
+    # solver stack again; the results are those of the parallel map, tested)
+    os.environ[lmi.JOBS_ENV] = "1"
     scratch = Path(tempfile.mkdtemp(prefix="latobs-part-"))
     out = fmi_folder(scratch, fmi)
     buf = io.StringIO()
