@@ -4,6 +4,7 @@ replay, reference experiments), each calling its package; no maths here."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 from . import catalogue
@@ -98,11 +99,7 @@ class _Artefact:
         """(True, "") if the FMU (and the design file beside it) is what this build would make,
         else (False, what to say). A design file beside an observer FMU that is not the design
         inside it is never current; a missing one only when ``design_file_needed``."""
-        import json
-        import zipfile
-
         from . import identity
-        from .synthesis import design_file
 
         if not self.fmu.is_file():
             return False, f"building {self.fmu.name}"
@@ -117,15 +114,40 @@ class _Artefact:
                            "plant, scenario or code")
         if self.design_path is not None and (design_file_needed or self.design_path.exists()):
             try:
-                with zipfile.ZipFile(self.fmu) as z:
-                    inner = json.loads(z.read(f"resources/{self.name}.design.json"))
-                beside = json.loads(self.design_path.read_text(encoding="utf-8"))
-            except (OSError, KeyError, ValueError, zipfile.BadZipFile):
-                inner = beside = None
-            if beside is None or design_file.reproducible(beside) != inner:
+                same = _design_inside(str(self.fmu), _file_key(self.fmu), str(self.design_path),
+                                      _file_key(self.design_path), self.name)
+            except OSError:
+                same = False
+            if not same:
                 return False, (f"rebuilding {self.fmu.name}: {self.design_path.name} beside it is missing or is not "
                                "the design inside it")
         return True, ""
+
+
+def _file_key(path: Path) -> tuple[int, int, int]:
+    """(inode, size, modification time in ns) of a file: a file rewritten (as latobs writes them,
+    atomically: a new inode) or changed in place has another key. OSError if it is missing."""
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
+
+
+@lru_cache(maxsize=256)
+def _design_inside(fmu: str, fmu_key: tuple, design: str, design_key: tuple, name: str) -> bool:
+    """Whether the design file ``design`` is the design inside the FMU ``fmu`` (its reproducible
+    part), once per version of the two files (the keys of :func:`_file_key`) in a process: a design
+    file is large and the commands check the same FMUs many times."""
+    import json
+    import zipfile
+
+    from .synthesis import design_file
+
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            inner = json.loads(z.read(f"resources/{name}.design.json"))
+        beside = json.loads(Path(design).read_text(encoding="utf-8"))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return False
+    return design_file.reproducible(beside) == inner
 
 
 def _plan(names: list[str], vehicle, out: Path, backend: str, platforms: list[str] | None = None,
