@@ -23,6 +23,13 @@ class ReportSection:
     markdown: str = ""
 
 
+def estimate_label(name: str, entry) -> str:
+    """An estimate's name as the tables show it: an output scored one step behind (``X_filtered``,
+    ``"lag_steps"``) says so."""
+    lag = (entry or {}).get("lag_steps")
+    return f"{name} ({lag} step behind)" if lag else name
+
+
 def _fmt(x) -> str:
     if x is None:
         return "—"
@@ -190,9 +197,9 @@ def replay_rows(metrics: Mapping[str, Any], mark: str | None = None) -> tuple[li
         for name, e in o.get("estimates", {}).items():
             first = len(rows)
             for key, what in (("rms", "RMS error"), ("max_abs", "max abs error"), ("mean_error", "mean error")):
-                rows.append([lab, name, e.get("truth"), f"{what} [{e.get('unit') or 'SI'}]",
+                rows.append([lab, estimate_label(name, e), e.get("truth"), f"{what} [{e.get('unit') or 'SI'}]",
                              *[(e.get(s) or {}).get(key) for s in segs]])
-            baseline_rows(lab, name, o, name, e, first)
+            baseline_rows(lab, estimate_label(name, e), o, name, e, first)
         for name, e in o.get("intervals", {}).items():
             shown = f"[{e.get('lower')}, {e.get('upper')}]"
             for key, what in (("violation_rate", "violation rate"), ("enclosure_violations", "violations"),
@@ -264,7 +271,7 @@ def metrics_markdown(metrics: Mapping[str, Any]) -> str:
     for lab, o in obs.items():
         summ = (o.get("baselines") or {}).get("summary") or {}
         for name, e in o.get("estimates", {}).items():
-            row = [lab, name, e.get("truth"), e.get("unit"), e.get("rms"), e.get("max_abs"),
+            row = [lab, estimate_label(name, e), e.get("truth"), e.get("unit"), e.get("rms"), e.get("max_abs"),
                    _observer_cell(o, name, e.get("rms_after_settle"), bases), e.get("max_abs_after_settle")]
             if bases:
                 row += _baseline_cells(o, name, (summ.get(name) or {}).get("observer_rms"), bases)
@@ -578,7 +585,7 @@ def text_table(metrics: Mapping[str, Any]) -> str:
         summ = (o.get("baselines") or {}).get("summary") or {}
         for name, e in o.get("estimates", {}).items():
             with_baselines(lab, o, name, (e.get("rms"), e.get("max_abs"), e.get("rms_after_settle"),
-                                          e.get("max_abs_after_settle")), name)
+                                          e.get("max_abs_after_settle")), estimate_label(name, e))
         for name, e in o.get("intervals", {}).items():
             rows.append((lab, f"[{name}] violations/width", _fmt(e.get("enclosure_violations")),
                          _fmt(e.get("mean_width")), _fmt(e.get("enclosure_violations_after_settle")),

@@ -259,6 +259,9 @@ def test_a_filtered_output_is_scored_one_step_behind_in_replay_and_validate():
     assert o["estimates"]["vy_filtered"]["all"]["rms"] > 0.5          # not delayed: wrong by a step
     assert o["estimates"]["beta_hat"]["all"]["rms"] == 0.0 and "lag_steps" not in o["estimates"]["beta_hat"]
     assert "beta_filtered" in o["baselines"]["summary"]                # beside the baselines too
+    m = score(_run(outs, cols), split=10.55, info={"csv": "r.csv"})
+    assert "beta_filtered (1 step behind)" in report.text_table(m)     # the tables say so
+    assert "beta_filtered (1 step behind)" in report.metrics_markdown(m)
     t = 0.1 * np.arange(n)
     r = SimResult(time=t, bus=cols, observers={"kf": outs}, logs={}, scenario="x", dt=0.1, info={})
     e = metrics.compute(r, settle_time=0.0)["observers"]["kf"]["estimates"]
