@@ -11,7 +11,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -65,6 +65,15 @@ def one_step_behind(y, truth, mask):
     """(y[1:], truth[:-1], mask[:-1]): the samples of a ``X_filtered`` output (row k + 1) beside
     the truth and the sample selection of the time they estimate (row k)."""
     return np.asarray(y, dtype=float)[1:], np.asarray(truth, dtype=float)[:-1], np.asarray(mask)[:-1]
+
+
+def same_samples(series, truth, mask, entry: Mapping[str, Any]):
+    """(series, truth, mask) on the samples the estimate ``entry`` was scored on, for a baseline
+    beside it: all of them, or, for one scored one step behind (``"lag_steps"``: its rows k + 1
+    estimate rows k), rows 0 .. n - 2, the times it estimates."""
+    if entry.get("lag_steps"):
+        return np.asarray(series, dtype=float)[:-1], np.asarray(truth, dtype=float)[:-1], np.asarray(mask)[:-1]
+    return series, truth, mask
 
 
 def quantity_of(name: str) -> str:
@@ -445,7 +454,8 @@ def _simulation_baselines(result: SimResult, label: str, o: dict[str, Any], afte
     b = simulation_baselines(result, label, [q for q, _ in targets.values()])
     out: dict[str, Any] = {}
     for base, ser in b["series"].items():
-        out[base] = {name: estimate_entry(ser[q], bus[e["truth"]], after, e["truth"], e.get("unit"))
+        out[base] = {name: estimate_entry(*same_samples(ser[q], bus[e["truth"]], after, e), e["truth"],
+                                          e.get("unit"))
                      for name, (q, e) in targets.items() if q in ser}
     summary = {}
     outs = result.observers[label]

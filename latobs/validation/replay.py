@@ -306,10 +306,8 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
         truth = _metrics.truth_signal(_metrics.quantity_of(name), cols, run.model_name)
         if truth is None or t.size < 2:
             continue
-        stats = {}
-        for s, m in segs.items():
-            y, x, mk = _metrics.one_step_behind(outs[name], cols[truth], m)
-            stats[s] = _metrics.error_stats(y[mk], x[mk])
+        stats = {s: _metrics.error_stats(*_selected(*_metrics.one_step_behind(outs[name], cols[truth], m)))
+                 for s, m in segs.items()}
         o["estimates"][name] = {"truth": truth, "unit": run.units.get(name) or run.units.get(truth), "lag_steps": 1,
                                 **stats}
         scored.add(name)
@@ -377,6 +375,11 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
     return out
 
 
+def _selected(y, x, mask):
+    """(y[mask], x[mask])."""
+    return np.asarray(y)[mask], np.asarray(x)[mask]
+
+
 def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, np.ndarray],
                       seg: str) -> dict[str, Any]:
     """The ``baselines`` entry of a replay (see :func:`score`)."""
@@ -391,7 +394,9 @@ def _replay_baselines(run: ReplayRun, o: Mapping[str, Any], segs: Mapping[str, n
     out: dict[str, Any] = {}
     for base, ser in b["series"].items():
         out[base] = {name: {"truth": e["truth"], "unit": e.get("unit"),
-                            **{s: _metrics.error_stats(ser[q][m], cols[e["truth"]][m]) for s, m in segs.items()}}
+                            **{s: _metrics.error_stats(*_selected(*_metrics.same_samples(ser[q], cols[e["truth"]],
+                                                                                         m, e)))
+                               for s, m in segs.items()}}
                      for name, (q, e) in targets.items() if q in ser}
     summary = {}
     for name, (q, e) in targets.items():

@@ -258,7 +258,10 @@ def test_a_filtered_output_is_scored_one_step_behind_in_replay_and_validate():
     assert f["before_split"]["n_samples"] == 6 and f["after_split"]["n_samples"] == 5
     assert o["estimates"]["vy_filtered"]["all"]["rms"] > 0.5          # not delayed: wrong by a step
     assert o["estimates"]["beta_hat"]["all"]["rms"] == 0.0 and "lag_steps" not in o["estimates"]["beta_hat"]
-    assert "beta_filtered" in o["baselines"]["summary"]                # beside the baselines too
+    assert "beta_filtered" in o["baselines"]["summary"]                # beside the baselines too,
+    zero = o["baselines"]["zero"]                                      # on the times it estimates
+    assert zero["beta_filtered"]["all"]["n_samples"] == n - 1 and zero["beta_hat"]["all"]["n_samples"] == n
+    assert zero["beta_filtered"]["all"]["rms"] == pytest.approx(np.sqrt(np.mean(beta[:-1] ** 2)))
     m = score(_run(outs, cols), split=10.55, info={"csv": "r.csv"})
     assert "beta_filtered (1 step behind)" in report.text_table(m)     # the tables say so
     assert "beta_filtered (1 step behind)" in report.metrics_markdown(m)
@@ -267,6 +270,8 @@ def test_a_filtered_output_is_scored_one_step_behind_in_replay_and_validate():
     e = metrics.compute(r, settle_time=0.0)["observers"]["kf"]["estimates"]
     assert e["beta_filtered"]["rms"] == 0.0 and e["beta_filtered"]["lag_steps"] == 1
     assert e["vy_filtered"]["rms"] > 0.5
+    zero = metrics.compute(r, settle_time=0.0)["observers"]["kf"]["baselines"]["zero"]
+    assert zero["beta_filtered"]["rms"] == pytest.approx(np.sqrt(np.mean(beta[:-1] ** 2)))
 
 
 def test_reference_signals_map_observer_to_the_truth_at_its_point(tmp_path):
