@@ -67,19 +67,81 @@ def _acc_abs(s, coeffs, x):
 
 
 def _mid_rad(X):
-    return [(X[j] + X[_N + j]) * 0.5 for j in _R], [(X[_N + j] - X[j]) * 0.5 for j in _R]
+    """Midpoint c and radius r of the box X = [lower0..3, upper0..3], r rounded up so that the box
+    lies in [c - r, c + r] exactly."""
+    n = len(X) // 2
+    c = [(X[j] + X[n + j]) * 0.5 for j in range(n)]
+    return c, [_na(max(X[n + j] - c[j], c[j] - X[j]), _INF) for j in range(n)]
 
 
-def expm_gamma(A, h: float):
-    """(exp(A h), int_0^h exp(A s) ds) for any square A: the top blocks of exp([[A, I], [0, 0]] h)."""
+# -- rigorous rounding (DEPARTURE, not in the paper: its bounds are real numbers) -------------------
+# Every bound the observer computes contains the exact real value of what it bounds for the doubles
+# it is given. Sums of n products in midpoint-radius form (mid s = sum c_k m_k, rad t = sum |c_k| r_k,
+# shadow a = sum |c_k| |m_k|, all added from the left in round to nearest) contain the exact
+# sum c_k [m_k -+ r_k] within s -+ R, R = t + e + k u (a + t + e) + k eta, k = 2 n + 4 (Higham,
+# Accuracy and Stability, 2nd ed., eq. 3.13: |fl(sum) - sum| <= gamma_n sum |terms| + n eta; the
+# margin k u covers gamma_n twice over and the roundings of R itself), e the coefficients' own
+# errors (coefficient error bound x sum of |m_k| + r_k) and the design residuals' effect. A single
+# operation's result is rounded outward by one ulp (``_na``: the exact result lies within half an
+# ulp of the rounded one); libm's exp and expm1 by 3 ulps (within 2).
+_ETA = 2.0 ** -1074
+
+
+_na = math.nextafter    # _na(x, _NINF): the next double below x (above the exact result x rounds); _INF: above
+_NINF = -_INF
+
+
+def _radius(t: float, a: float, e: float, n: int) -> float:
+    """R >= |exact - s| for a chain of at most n terms (see above): t its radius, a its shadow, e the
+    coefficients' errors."""
+    k = 2 * n + 4
+    return _na(t + e + k * _U * (a + t + e) + k * _ETA, _INF)
+
+
+def expm_gamma(A, h: float, dA: float = 0.0):
+    """(exp(A h), int_0^h exp(A s) ds, e) for any square A: the top blocks of exp([[A, I], [0, 0]] h),
+    and e >= every entry's error for any exact A' with ||A' - A||_inf <= dA (``expm_taylor``'s bound,
+    plus ||D|| e^(||M|| + ||D||) for the perturbation D of the block matrix: dA h and the roundings
+    of A h). Infinite e: no useful bound."""
     n = len(A)
     M = [[0.0] * (2 * n) for _ in range(2 * n)]
     for i in range(n):
         for j in range(n):
             M[i][j] = A[i][j] * h
         M[i][n + i] = h
-    E = _expm_taylor(M)
-    return [row[:n] for row in E[:n]], [row[n:] for row in E[:n]]
+    E, e = _expm_taylor(M, with_error=True)
+    nM = max(total(map(abs, row)) for row in M)
+    nD = (dA * h + 2.0 * _U * nM) * (1.0 + 2.0 ** -20) + 2 * n * _ETA
+    e = _na((e + nD * math.exp(nM + nD)) * (1.0 + 2.0 ** -20), _INF)
+    return [row[:n] for row in E[:n]], [row[n:] for row in E[:n]], e if math.isfinite(e) else _INF
+
+
+def _norm_rows(A) -> float:
+    """max row sum of |A| (rounded up: a bound)."""
+    return _na(max(total(map(abs, row)) for row in A) * (1.0 + 4.0 * _U), _INF)
+
+
+def _mm_err(A, eA: float, B, eB: float):
+    """(A B, e): the product summed from the left and e >= each entry's error against the exact
+    product of matrices within eA, eB (entrywise) of A, B: ||A|| eB + eA ||B||_1 + n eA eB (the
+    factors' errors) + (n + 2) u ||A|| max|B| (the rounding of the sums), rounded up."""
+    C = _matmul(A, B)
+    n = len(B)
+    ra = _norm_rows(A)
+    cb = _norm_rows(list(zip(*B)))
+    bmax = max(abs(x) for row in B for x in row)
+    e = (ra * eB + eA * cb + n * eA * eB + (n + 2) * _U * ra * bmax) * (1.0 + 2.0 ** -20) + n * _ETA
+    return C, _na(e, _INF)
+
+
+def _mv_err(A, eA: float, v, ev: float):
+    """(A v, e) as ``_mm_err`` for a vector v (entries within ev)."""
+    n = len(v)
+    ra = _norm_rows(A)
+    va = total(map(abs, v))
+    vmax = max(abs(x) for x in v)
+    e = (ra * ev + eA * va + n * eA * ev + (n + 2) * _U * ra * vmax) * (1.0 + 2.0 ** -20) + n * _ETA
+    return _matvec(A, v), _na(e, _INF)
 
 
 # -- Lemma 3 and eq. (24) ---------------------------------------------------------------------------
@@ -131,18 +193,30 @@ def _measured_box(y: float, nu: float) -> tuple[float, float]:
 
 
 def _product_hull(al, au, l, u):
-    """The exact interval product [al, au] [l, u] (contained in the bound of eq. (21), which it
-    tightens when both factors change sign), by the signs of the constant factor."""
+    """The interval product [al, au] [l, u] (contained in the bound of eq. (21), which it tightens
+    when both factors change sign), by the signs of the constant factor, rounded outward."""
     if al == au:
-        return (al * l, al * u) if al >= 0 else (al * u, al * l)
+        return (_na(al * l, _NINF), _na(al * u, _INF)) if al >= 0 else (_na(al * u, _NINF), _na(al * l, _INF))
     if al >= 0.0:
-        return (l * al if l >= 0.0 else l * au), (u * au if u >= 0.0 else u * al)
+        return _na(l * al if l >= 0.0 else l * au, _NINF), _na(u * au if u >= 0.0 else u * al, _INF)
     if au <= 0.0:
-        return (u * al if u >= 0.0 else u * au), (l * au if l >= 0.0 else l * al)
+        return _na(u * al if u >= 0.0 else u * au, _NINF), _na(l * au if l >= 0.0 else l * al, _INF)
     if abs(al + au) <= 1e-9 * max(-al, au):      # symmetric up to rounding: the outer magnitude
         a, mag = max(-al, au), (u if u > -l else -l)
-        return -a * mag, a * mag
-    return min(l * au, u * al), max(l * al, u * au)
+        return _na(-a * mag, _NINF), _na(a * mag, _INF)
+    return _na(min(l * au, u * al), _NINF), _na(max(l * al, u * au), _INF)
+
+
+def _theta(alo: float, ahi: float, h: float) -> tuple[float, float]:
+    """[th_lo, th_hi] containing theta(a, h) = (1 - exp(-a h)) / a for every a in [alo, ahi], alo > 0
+    (theta falls with a): libm's expm1 within 2 ulps, the argument and the quotient rounded."""
+    hi = -math.expm1(_na(-alo * h, _NINF))
+    for _ in range(3):
+        hi = _na(hi, _INF)
+    lo = -math.expm1(_na(-ahi * h, _INF))
+    for _ in range(3):
+        lo = _na(lo, _NINF)
+    return max(0.0, _na(lo / ahi, _NINF)), _na(hi / alo, _INF)
 
 
 class IntervalObserver:
@@ -228,15 +302,20 @@ class IntervalObserver:
             dA x + vx dB1 delta = [0, 0, k3 (p + q), k4f p - k4r q],  p = dcf uf,  q = dcr ur,
         exact interval products and interval addition with signs (p, q independent). An asymmetric
         box: intersected with the elementwise bound [dA][x] + vd [dB1] (both contain the value)."""
+        # every operation rounded outward (vd = fl(vx delta): the exact product within [_dn, _up])
         sk, md = self._sk, self.model
         lf, lr = sk["lf"], sk["lr"]
-        ufl = (-u[0] if vd is None else vd - u[0]) - lf * u[1]
-        ufu = (-l[0] if vd is None else vd - l[0]) - lf * l[1]
-        url, uru = lr * l[1] - u[0], lr * u[1] - l[0]
+        if vd is None:
+            ufl, ufu = _na(-u[0] - _na(lf * u[1], _INF), _NINF), _na(-l[0] - _na(lf * l[1], _NINF), _INF)
+        else:
+            ufl = _na(_na(_na(vd, _NINF) - u[0], _NINF) - _na(lf * u[1], _INF), _NINF)
+            ufu = _na(_na(_na(vd, _INF) - l[0], _INF) - _na(lf * l[1], _NINF), _INF)
+        url, uru = _na(_na(lr * l[1], _NINF) - u[0], _NINF), _na(_na(lr * u[1], _INF) - l[0], _INF)
         pl, pu = _product_hull(sk["dcf"][0], sk["dcf"][1], ufl, ufu)
         ql, qu = _product_hull(sk["dcr"][0], sk["dcr"][1], url, uru)
-        rl = [sk["k3"] * (pl + ql), sk["k4f"] * pl - sk["k4r"] * qu]
-        ru = [sk["k3"] * (pu + qu), sk["k4f"] * pu - sk["k4r"] * ql]
+        k3, k4f, k4r = sk["k3"], sk["k4f"], sk["k4r"]
+        rl = [_na(k3 * _na(pl + ql, _NINF), _NINF), _na(_na(k4f * pl, _NINF) - _na(k4r * qu, _INF), _NINF)]
+        ru = [_na(k3 * _na(pu + qu, _INF), _INF), _na(_na(k4f * pu, _INF) - _na(k4r * ql, _NINF), _INF)]
         if not sk["symmetric"]:
             for k, i in enumerate(STIFF_ROWS):
                 el = eu = 0.0
@@ -244,17 +323,18 @@ class IntervalObserver:
                     al, au = md["dA_lower"][i][j], md["dA_upper"][i][j]
                     if al != 0.0 or au != 0.0:
                         a, b = _product_hull(al, au, l[j], u[j])
-                        el += a
-                        eu += b
+                        el = _na(el + a, _NINF)
+                        eu = _na(eu + b, _INF)
                 bl, bu = md["dB1_lower"][i], md["dB1_upper"][i]
                 if vd is not None and (bl != 0.0 or bu != 0.0):
-                    el += vd * (bl if vd >= 0.0 else bu)
-                    eu += vd * (bu if vd >= 0.0 else bl)
+                    a, b = _product_hull(bl, bu, _na(vd, _NINF), _na(vd, _INF))
+                    el = _na(el + a, _NINF)
+                    eu = _na(eu + b, _INF)
                 sl, su = max(rl[k], el), min(ru[k], eu)
-                rl[k], ru[k] = (su, sl) if sl > su else (sl, su)     # swapped: rounding only
+                rl[k], ru[k] = (su, sl) if sl > su else (sl, su)     # (both contain the value: never)
         for k, i in enumerate(STIFF_ROWS):
-            lo[i] += rl[k]
-            hi[i] += ru[k]
+            lo[i] = _na(lo[i] + rl[k], _NINF)
+            hi[i] = _na(hi[i] + ru[k], _INF)
 
     def stiffness_bounds(self, vx: float, d: float, box):
         """(lower0..3, upper0..3): the bound of dA(dc) x + vx dB1(dc) d over the box and the stiffness box."""
@@ -267,30 +347,37 @@ class IntervalObserver:
         damped rows' diagonal terms: the point matrix A0 + vx A1 by eq. (20) in midpoint-radius form."""
         avx, vd = abs(vx), vx * d
         c, r = _mid_rad(X)
+        ac = [abs(x) for x in c]
         lo, hi = [0.0] * _N, [0.0] * _N
         for i, (nz0, nz1, only0, only1, both, b1, wi) in enumerate(self._g_rows):
-            m = w = 0.0
-            for j, a in nz0:
-                m += a * c[j]
-            for j, a in only0:
-                w += a * r[j]
+            m = w = a = 0.0           # mid, radius, shadow (rigorous rounding, above)
+            for j, c0 in nz0:
+                m += c0 * c[j]
+                a += abs(c0) * ac[j]
+            for j, c0 in only0:
+                w += c0 * r[j]
             if nz1:
-                m1 = 0.0
-                for j, a in nz1:
-                    m1 += a * c[j]
+                m1 = a1 = 0.0
+                for j, c1 in nz1:
+                    m1 += c1 * c[j]
+                    a1 += abs(c1) * ac[j]
                 m += vx * m1
+                a += avx * a1
             if only1:
                 w1 = 0.0
-                for j, a in only1:
-                    w1 += a * r[j]
+                for j, c1 in only1:
+                    w1 += c1 * r[j]
                 w += avx * w1
-            for j, a0, a1 in both:
+            for j, a0, a1 in both:    # |a0 + vx a1| within 2 u (|a0| + |vx a1|) of its exact value
                 w += abs(a0 + vx * a1) * r[j]
-            if b1 != 0.0:
+                a += (abs(a0) + avx * abs(a1)) * r[j]
+            if b1 != 0.0:             # vd = fl(vx d): one more rounding
                 m += vd * b1
+                a += abs(vd * b1)
             if wi != 0.0:      # runtime.disturbance_bound (not in the paper)
                 w += wi
-            lo[i], hi[i] = m - w, m + w
+            R = _radius(w, a, 0.0, 16)
+            lo[i], hi[i] = _na(m - R, _NINF), _na(m + R, _INF)
         self._stiffness(X[:_N], X[_N:], vd, lo, hi)
         return lo + hi
 
@@ -299,35 +386,40 @@ class IntervalObserver:
         f = self.G(vx, d, box)
         for i in _R:
             if self._damped[i]:
-                t = self.model["A0"][i][i] + vx * self.model["A1"][i][i]
-                f[i] += t * box[i] if t >= 0 else t * box[_N + i]
-                f[_N + i] += t * box[_N + i] if t >= 0 else t * box[i]
+                alo, ahi = self._decay(i, vx)
+                pl, pu = _product_hull(-ahi, -alo, box[i], box[_N + i])
+                f[i], f[_N + i] = _na(f[i] + pl, _NINF), _na(f[_N + i] + pu, _INF)
         return f
 
     def _decay(self, i, vx):
-        """a = -d_i(vx) = -(A0_ii + vx A1_ii): the known decay rate of a damped row (1/s)."""
-        return -(self.model["A0"][i][i] + vx * self.model["A1"][i][i])
+        """[alo, ahi] containing a = -d_i(vx) = -(A0_ii + vx A1_ii): the known decay rate of a damped
+        row (1/s), its evaluation rounded outward."""
+        a0, a1 = self.model["A0"][i][i], self.model["A1"][i][i]
+        return _na(-a0 - _na(vx * a1, _INF), _NINF), _na(-a0 - _na(vx * a1, _NINF), _INF)
 
     # -- a priori enclosure of x over a (sub)step ----------------------------------------------------
     def _extents(self, hs, a, th, X, g, S):
-        """T(S): a damped row with a > 0 by the convex combination x_i(s) = x_i(0) + theta(s)
-        (gbar/a - x_i(0)), th = (1 - exp(-a hs))/a (no wrapping); the others x_i(0) + [0, hs] F_i(S)."""
+        """T(S), rounded outward: a damped row with a > 0 (a in [alo, ahi] = a[i]) by the convex
+        combination x_i(s) = x_i(0) + theta(s) (g - a x_i(0)), theta(s) in [0, th] (no wrapping),
+        th >= (1 - exp(-alo hs))/alo; another damped row x_i(0) + [0, hs] (g - a S_i); the others
+        x_i(0) + [0, hs] G_i(S)."""
         T = [0.0] * (2 * _N)
         for i in _R:
             l, u, gl, gu = X[i], X[_N + i], g[i], g[_N + i]
-            if self._damped[i] and a[i] > 0.0:
-                t = gl - a[i] * l
-                T[i] = l + th[i] * t if t < 0.0 else l
-                t = gu - a[i] * u
-                T[_N + i] = u + th[i] * t if t > 0.0 else u
-            elif self._damped[i]:
-                t = gl - a[i] * S[i]
-                T[i] = l + hs * t if t < 0.0 else l
-                t = gu - a[i] * S[_N + i]
-                T[_N + i] = u + hs * t if t > 0.0 else u
-            else:
-                T[i] = l + hs * gl if gl < 0.0 else l
-                T[_N + i] = u + hs * gu if gu > 0.0 else u
+            if self._damped[i]:
+                alo, ahi = a[i]
+                if alo > 0.0:
+                    pl, pu = _product_hull(alo, ahi, l, l)
+                    t = _na(gl - pu, _NINF)
+                    T[i] = _na(l + _na(th[i] * t, _NINF), _NINF) if t < 0.0 else l
+                    pl, pu = _product_hull(alo, ahi, u, u)
+                    t = _na(gu - pl, _INF)
+                    T[_N + i] = _na(u + _na(th[i] * t, _INF), _INF) if t > 0.0 else u
+                    continue
+                pl, pu = _product_hull(alo, ahi, S[i], S[_N + i])
+                gl, gu = _na(gl - pu, _NINF), _na(gu - pl, _INF)
+            T[i] = _na(l + _na(hs * gl, _NINF), _NINF) if gl < 0.0 else l
+            T[_N + i] = _na(u + _na(hs * gu, _INF), _INF) if gu > 0.0 else u
         return T
 
     def _enclose(self, hs, vx, d, X):
@@ -335,11 +427,12 @@ class IntervalObserver:
         one refining pass T(T)). S: X extended by ``enclosure_grow`` times the extents of T(X), then of
         the last T(S) (never shrinking); None after ``enclosure_tries`` tries."""
         tu = self._tu
-        a, th = [0.0] * _N, [0.0] * _N
+        a, th = [(0.0, 0.0)] * _N, [0.0] * _N
         for i in _R:
             if self._damped[i]:
                 a[i] = self._decay(i, vx)
-                th[i] = -math.expm1(-a[i] * hs) / a[i] if a[i] > 0.0 else hs
+                if a[i][0] > 0.0:
+                    th[i] = _theta(a[i][0], a[i][1], hs)[1]
         T = self._extents(hs, a, th, X, self.G(vx, d, X), X)
         e = [T[i] - X[i] for i in range(2 * _N)]
         grow = tu["enclosure_grow"]
@@ -358,49 +451,59 @@ class IntervalObserver:
         return None
 
     def _majorant(self, vx: float):
-        """Metzler majorant of A(vx, c) over the stiffness box: largest diagonal, largest |off-diagonal|."""
+        """Metzler majorant of A(vx, c) over the stiffness box: largest diagonal, largest |off-diagonal|
+        (rounded up)."""
         md = self.model
         M = [[0.0] * _N for _ in _R]
         for i in _R:
             for j in _R:
-                a = md["A0"][i][j] + vx * md["A1"][i][j]
-                lo, hi = a + md["dA_lower"][i][j], a + md["dA_upper"][i][j]
+                a0, a1 = md["A0"][i][j], md["A1"][i][j]
+                lo = _na(_na(a0 + _na(vx * a1, _NINF), _NINF) + md["dA_lower"][i][j], _NINF)
+                hi = _na(_na(a0 + _na(vx * a1, _INF), _INF) + md["dA_upper"][i][j], _INF)
                 M[i][j] = hi if i == j else max(abs(lo), abs(hi))
         return M
 
     def _comparison_enclosure(self, hs, vx, d, box):
         """Fallback for any hs: d(s) = x(s) - x_k obeys |d|' <= M |d| + g (M the Metzler majorant,
-        g = max |F(X_k)|), so |d(s)| <= Gamma(M, hs) g (comparison principle); intersected with
-        X_k + [0, hs] F(S)."""
+        g = max |F(X_k)|), so |d(s)| <= Gamma(M, hs) g (comparison principle; Gamma's entries within
+        its bracket e, the sum rounded up); intersected with X_k + [0, hs] F(S)."""
         f = self.F(vx, d, box)
         g = [max(abs(f[i]), abs(f[_N + i])) for i in _R]
         M = self._majorant(vx)
         shift = max(0.0, max(-M[i][i] for i in _R))
-        R = _matvec(phi_gamma(M, hs, shift)[1], g)
-        S = [box[i] - R[i] for i in _R] + [box[_N + i] + R[i] for i in _R]
+        _, Gam, e = phi_gamma(M, hs, shift, with_error=True)
+        if not math.isfinite(e):
+            raise ValueError(f"no finite comparison bound (hs = {hs!r} s, vx = {vx!r} m/s)")
+        sg = total(g)
+        R = [_na(x * (1.0 + 8.0 * _U) + e * sg * (1.0 + 8.0 * _U), _INF) for x in _matvec(Gam, g)]
+        S = [_na(box[i] - R[i], _NINF) for i in _R] + [_na(box[_N + i] + R[i], _INF) for i in _R]
         f = self.F(vx, d, S)
-        T = [box[i] + min(0.0, hs * f[i]) for i in _R] + [box[_N + i] + max(0.0, hs * f[_N + i]) for i in _R]
+        T = [_na(box[i] + _na(hs * f[i], _NINF), _NINF) if f[i] < 0.0 else box[i] for i in _R] + \
+            [_na(box[_N + i] + _na(hs * f[_N + i], _INF), _INF) if f[_N + i] > 0.0 else box[_N + i] for i in _R]
         return [max(S[i], T[i]) for i in _R] + [min(S[_N + i], T[_N + i]) for i in _R]
 
     def _predict(self, h, vx, d, X, T):
         """(Fbar, B): Fbar the hull of F over the enclosure T, B the box of x(t + h) from the box X of
-        x(t): a damped row with a > 0 exactly (x_i(h) = x_i(0) + th (gbar - a x_i(0))), the others
-        x(h) in x(0) + h Fbar; intersected with T."""
+        x(t): a damped row with a > 0 exactly (x_i(h) = x_i(0) + theta(h) (gbar - a x_i(0)), theta(h)
+        in [th_lo, th_hi]), the others x(h) in x(0) + h Fbar; intersected with T; rounded outward."""
         F = self.G(vx, d, T)
         B = [0.0] * (2 * _N)
         for i in _R:
             l, u = X[i], X[_N + i]
-            a = self._decay(i, vx) if self._damped[i] else 0.0
-            if self._damped[i] and a > 0.0:
-                th = -math.expm1(-a * h) / a
-                B[i], B[_N + i] = l + th * (F[i] - a * l), u + th * (F[_N + i] - a * u)
-                F[i] -= a * T[_N + i]
-                F[_N + i] -= a * T[i]
+            if self._damped[i]:
+                alo, ahi = self._decay(i, vx)
+                if alo > 0.0:
+                    tl, th = _theta(alo, ahi, h)
+                    t = _na(F[i] - _product_hull(alo, ahi, l, l)[1], _NINF)
+                    B[i] = _na(l + min(_na(tl * t, _NINF), _na(th * t, _NINF)), _NINF)
+                    t = _na(F[_N + i] - _product_hull(alo, ahi, u, u)[0], _INF)
+                    B[_N + i] = _na(u + max(_na(tl * t, _INF), _na(th * t, _INF)), _INF)
+                pl, pu = _product_hull(-ahi, -alo, T[i], T[_N + i])
+                F[i], F[_N + i] = _na(F[i] + pl, _NINF), _na(F[_N + i] + pu, _INF)
+                if alo <= 0.0:
+                    B[i], B[_N + i] = _na(l + _na(h * F[i], _NINF), _NINF), _na(u + _na(h * F[_N + i], _INF), _INF)
             else:
-                if self._damped[i]:
-                    F[i] -= a * T[i]
-                    F[_N + i] -= a * T[_N + i]
-                B[i], B[_N + i] = l + h * F[i], u + h * F[_N + i]
+                B[i], B[_N + i] = _na(l + _na(h * F[i], _NINF), _NINF), _na(u + _na(h * F[_N + i], _INF), _INF)
             if B[i] < T[i]:
                 B[i] = T[i]
             if B[_N + i] > T[_N + i]:
@@ -409,36 +512,62 @@ class IntervalObserver:
 
     # -- the sampled-measurement correction (a continuous-discrete interval observer; not in the paper)
     def _sampled_maps(self, vx: float, h: float):
-        """The maps of a step h at the model speed vx, n substeps of hs = h / n (A = A0 + vx A1,
-        Bv = vx B1): phi[m] = exp(A m hs), aphi[m] = |phi[m]|, gamb[m] = int_0^(m hs) exp(A s) ds Bv,
-        pg[i] = exp(A i hs) Gam(hs), apg[i] = |exp(A i hs)| Gam_M(hs) (M the Metzler majorant of A:
-        |exp(A t)| <= exp(M t)), and the gains L (K = I - L C): L = 0, the deadbeat gain that lets the
-        two samples determine vy and x4, and the gains cancelling one unmeasured column by one
-        measurement. Each gain: (L, K phi[n], |K phi[n]|, K gamb[n], [K pg[i]], [|K phi[i]| Gam_M], |L|)."""
+        """The maps of a step h at the model speed vx, n substeps of hs = h / n, n a power of two (so
+        n hs = h exactly) (A = A0 + vx A1, Bv = vx B1): phi[m] = exp(A m hs), aphi[m] = |phi[m]|,
+        gamb[m] = int_0^(m hs) exp(A s) ds Bv, pg[i] = exp(A i hs) Gam(hs), apg[i] = |exp(A i hs)|
+        Gam_M(hs) (M the Metzler majorant of A: |exp(A t)| <= exp(M t)), each with e >= its entries'
+        errors (``ephi``, ...: the bracket of the exact map), and the gains L (K = I - L C): L = 0, the
+        deadbeat gain that lets the two samples determine vy and x4, and the gains cancelling one
+        unmeasured column by one measurement. Each gain: (L, K phi[n], |K phi[n]|, K gamb[n],
+        [K pg[i]], [|K phi[i]| Gam_M], |L|, and the errors of K phi[n], K gamb[n], [K pg[i]],
+        [|K phi[i]| Gam_M]); K = I - L C exactly up to its rounding (within u |K|)."""
         key = (vx, h)
         sm = self._sampled.get(key)
         if sm is not None:
             return sm
         md, tu = self.model, self._tu
         A = [[a + vx * b for a, b in zip(r0, r1)] for r0, r1 in zip(md["A0"], md["A1"])]
+        Al = [[_na(a + _na(vx * b, _NINF), _NINF) for a, b in zip(r0, r1)] for r0, r1 in zip(md["A0"], md["A1"])]
+        Au = [[_na(a + _na(vx * b, _INF), _INF) for a, b in zip(r0, r1)] for r0, r1 in zip(md["A0"], md["A1"])]
+        dA = _norm_rows([[u - l for l, u in zip(rl, ru)] for rl, ru in zip(Al, Au)])
         Bv = [vx * b for b in md["B1"]]
+        eBv = _na(max(map(abs, Bv)) * 2.0 * _U, _INF)
         n = min(max(1, math.ceil(h / tu["sampled_substep"] - 1e-9)), tu["sampled_max_substeps"])
+        n = 1 << (n - 1).bit_length()          # a power of two: h / n exact
+        if n > tu["sampled_max_substeps"]:
+            raise ValueError(f"sampled_max_substeps = {tu['sampled_max_substeps']} is not a power of two")
         hs = h / n
         norm = max(total(map(abs, row)) for row in A) * hs
         if not norm <= tu["sampled_max_norm"]:        # |vx| far beyond any vehicle
             raise ValueError(f"no sampled step map at vx = {vx!r} m/s (||A hs|| = {norm:g})")
-        phid, gamd = expm_gamma(A, hs)
-        Mj = [[A[i][j] if i == j else abs(A[i][j]) for j in _R] for i in _R]
-        gamM = phi_gamma(Mj, hs, max(0.0, max(-Mj[i][i] for i in _R)))[1]
-        gdb = _matvec(gamd, Bv)
+        phid, gamd, ed = expm_gamma(A, hs, dA)
+        Mj = [[Au[i][j] if i == j else max(abs(Al[i][j]), abs(Au[i][j])) for j in _R] for i in _R]
+        _, gamM, eM = phi_gamma(Mj, hs, max(0.0, max(-Mj[i][i] for i in _R)), with_error=True)
+        gdb, egdb = _mv_err(gamd, ed, Bv, eBv)
         eye = [[1.0 if i == j else 0.0 for j in _R] for i in _R]
-        phi, gamb = [eye], [[0.0] * _N]
-        for _ in range(n):
-            gamb.append(_addv(gamb[-1], _matvec(phi[-1], gdb)))
+        # phi[m] = phi[m-1] phid: with Phi = exp(A hs) exact, phi[m] - Phi^m = sum_k delta_k Phi^(m-k),
+        # ||delta_k|| <= c_k = ||phi[k-1]|| ed + 6 u ||phi[k-1]|| ||phid|| (the product's rounding) and
+        # ||Phi^j|| <= ||phi[j]|| + ephi[j]: errors grow linearly in m, not as ||phid||^m
+        phi, ephi, gamb, egamb = [eye], [0.0], [[0.0] * _N], [0.0]
+        nphi, cs, nd = [1.0], [], _norm_rows(phid)
+        for m in range(1, n + 1):
+            g, eg = _mv_err(phi[-1], ephi[-1], gdb, egdb)
+            gamb.append(_addv(gamb[-1], g))
+            egamb.append(_na((egamb[-1] + eg + 2.0 * _U * max(map(abs, gamb[-1]))) * (1.0 + 2.0 ** -20), _INF))
+            cs.append((nphi[-1] * ed + 6.0 * _U * nphi[-1] * nd) * (1.0 + 2.0 ** -20) + _N * _ETA)
             phi.append(_matmul(phi[-1], phid))
+            nphi.append(_norm_rows(phi[-1]))
+            ephi.append(_na(total(cs[k - 1] * (nphi[m - k] + ephi[m - k]) for k in range(1, m + 1))
+                            * (1.0 + 2.0 ** -20), _INF))
         aphi = [_absm(p) for p in phi]
-        pg = [_matmul(p, gamd) for p in phi[:n]]
-        apg = [_matmul(a, gamM) for a in aphi[:n]]
+        pg, epg, apg, eapg = [], [], [], []
+        for p, ep, ap in zip(phi[:n], ephi[:n], aphi[:n]):
+            x, ex = _mm_err(p, ep, gamd, ed)
+            pg.append(x)
+            epg.append(ex)
+            x, ex = _mm_err(ap, ep, gamM, eM)
+            apg.append(x)
+            eapg.append(ex)
         ph = phi[n]
         options = []                    # the unmeasured rows' L (one entry per measurement)
         D = [[ph[q][j] for j in UNMEAS] for q in MEAS]
@@ -461,10 +590,20 @@ class IntervalObserver:
             if not all(math.isfinite(x) for r in L for x in r):
                 continue
             K = [[eye[i][j] - total(L[i][q] for q, jm in enumerate(MEAS) if jm == j) for j in _R] for i in _R]
-            Kphi = _matmul(K, ph)
-            gains.append((L, Kphi, _absm(Kphi), _matvec(K, gamb[n]), [_matmul(K, p) for p in pg],
-                          [_matmul(_absm(_matmul(K, p)), gamM) for p in phi[:n]], _absm(L)))
-        sm = (n, hs, phi, aphi, gamb, pg, apg, gains)
+            eK = _na(max(abs(x) for r in K for x in r) * _U, _INF)
+            Kphi, eKphi = _mm_err(K, eK, ph, ephi[n])
+            Kgb, eKgb = _mv_err(K, eK, gamb[n], egamb[n])
+            Kpg, eKpg, aKpg, eaKpg = [], [], [], []
+            for x, ex, p, ep in zip(pg, epg, phi[:n], ephi[:n]):
+                y, ey = _mm_err(K, eK, x, ex)
+                Kpg.append(y)
+                eKpg.append(ey)
+                y, ey = _mm_err(K, eK, p, ep)
+                y, ey = _mm_err(_absm(y), ey, gamM, eM)
+                aKpg.append(y)
+                eaKpg.append(ey)
+            gains.append((L, Kphi, _absm(Kphi), Kgb, Kpg, aKpg, _absm(L), eKphi, eKgb, eKpg, eaKpg))
+        sm = (n, hs, phi, aphi, gamb, pg, apg, gains, ephi, egamb, epg, eapg)
         if len(self._sampled) >= CACHE_SIZE:
             self._sampled.pop(next(iter(self._sampled)))
         self._sampled[key] = sm
@@ -475,21 +614,31 @@ class IntervalObserver:
             x(s) = exp(A s) x(t) + int_0^s exp(A u) du Bv d + int_0^s exp(A (s - u)) omega(u) du,
         omega the stiffness part (over each substep's a priori enclosure, any stiffness in the box),
         the speed mismatch vx - vq and the disturbance: [mo_m -+ ro_m] per substep; in
-        midpoint-radius form from x(t) (no wrapping). Also what ``_sampled_correct`` needs."""
+        midpoint-radius form from x(t) (no wrapping), rounded rigorously (the maps' brackets and the
+        sums' rounding). Also what ``_sampled_correct`` needs."""
         vq = self._tu["sampled_dv"] * round(vx / self._tu["sampled_dv"])
-        n, hs, phi, aphi, gamb, pg, apg, _ = sm = self._sampled_maps(vq, h)
+        sm = self._sampled_maps(vq, h)
+        n, hs, phi, aphi, gamb, pg, apg, _, ephi, egamb, epg, eapg = sm
         c0, r0 = _mid_rad(X)
+        ac0 = [abs(x) for x in c0]
+        s0 = total(ac0) + total(r0)
         md = self.model
         dv = vx - vq
-        adv = abs(dv)
-        mo, ro = [], []
+        adv, ad = abs(dv), abs(d)
+        mo, ro, so = [], [], []
         for m in range(n + 1):
             c = _addv(_matvec(phi[m], c0), [g * d for g in gamb[m]])
             r = _matvec(aphi[m], r0)
+            a = _addv(_matvec(aphi[m], ac0), [abs(g * d) for g in gamb[m]])
+            e = ephi[m] * s0 + egamb[m] * ad
             for i in range(m):
-                c = _addv(c, _matvec(pg[m - 1 - i], mo[i]))
-                r = _addv(r, _matvec(apg[m - 1 - i], ro[i]))
-            Bm = [a - b for a, b in zip(c, r)] + [a + b for a, b in zip(c, r)]
+                P, aP = pg[m - 1 - i], apg[m - 1 - i]
+                c = _addv(c, _matvec(P, mo[i]))
+                r = _addv(r, _matvec(aP, ro[i]))
+                a = _addv(a, _matvec(_absm(P), [abs(x) for x in mo[i]]))
+                e += epg[m - 1 - i] * so[i] + eapg[m - 1 - i] * total(ro[i])
+            R = [_radius(r[i], a[i], e, 8 * m + 8) for i in _R]
+            Bm = [_na(c[i] - R[i], _NINF) for i in _R] + [_na(c[i] + R[i], _INF) for i in _R]
             if m == n:
                 break
             T = self._enclose(hs, vx, d, Bm)
@@ -497,33 +646,51 @@ class IntervalObserver:
                 T = self._comparison_enclosure(hs, vx, d, Bm)
             S = self.stiffness_bounds(vx, d, T)
             tc, tr = _mid_rad(T)
-            mo.append([(S[i] + S[_N + i]) * 0.5 + dv * (dot(md["A1"][i], tc) + md["B1"][i] * d)
-                       for i in _R])
-            ro.append([(S[_N + i] - S[i]) * 0.5 + md["w"][i] + adv * dot(map(abs, md["A1"][i]), tr)
-                       for i in _R])
+            ms, rs = _mid_rad(S)
+            om, orr = [], []
+            for i in _R:              # (vx - vq) (A1 x + B1 d) over T: dv = fl(vx - vq) one rounding
+                a1, b1 = md["A1"][i], md["B1"][i]
+                x = dot(a1, tc) + b1 * d
+                om.append(ms[i] + dv * x)
+                t = rs[i] + md["w"][i] + adv * dot(map(abs, a1), tr)
+                sa = abs(ms[i]) + adv * (dot(map(abs, a1), map(abs, tc)) + abs(b1 * d))
+                orr.append(_radius(t, sa, 0.0, 12))
+            mo.append(om)
+            ro.append(orr)
+            so.append(total(map(abs, om)) + total(orr))
         if not all(map(math.isfinite, Bm)):
             return None, None
-        return Bm, (sm, c0, r0, d, mo, ro)
+        return Bm, (sm, c0, r0, d, mo, ro, so, s0)
 
     def _sampled_correct(self, state, Y):
         """x(t + h) = (I - L C) x(t + h) + L y(t + h) exactly for every gain L, with y in Y = [yl, yu]:
         K phi[n] c0 + K gamb[n] d + sum_i K pg[n-1-i] mo_i + L yc
-        +- (|K phi[n]| r0 + sum_i |K phi[n-1-i]| Gam_M ro_i + |L| yr), intersected over the gains."""
-        (n, _, _, _, _, _, _, gains), c0, r0, d, mo, ro = state
-        yc = [(Y[q] + Y[2 + q]) * 0.5 for q in range(2)]
-        yr = [(Y[2 + q] - Y[q]) * 0.5 for q in range(2)]
+        +- (|K phi[n]| r0 + sum_i |K phi[n-1-i]| Gam_M ro_i + |L| yr), intersected over the gains;
+        rounded rigorously (the maps' brackets, K's rounding and the sums')."""
+        sm, c0, r0, d, mo, ro, so, s0 = state
+        n, gains = sm[0], sm[7]
+        yc, yr = _mid_rad(Y)
+        ac0, ayc, ad = [abs(x) for x in c0], [abs(x) for x in yc], abs(d)
+        amo = [[abs(x) for x in v] for v in mo]
+        sro = [total(v) for v in ro]
         lo, hi = [-_INF] * _N, [_INF] * _N
-        for L, Kphi, aKphi, Kgb, Kpg, aKpg, aL in gains:
+        for L, Kphi, aKphi, Kgb, Kpg, aKpg, aL, eKphi, eKgb, eKpg, eaKpg in gains:
             c = _addv(_addv(_matvec(Kphi, c0), [g * d for g in Kgb]), _matvec(L, yc))
             r = _addv(_matvec(aKphi, r0), _matvec(aL, yr))
+            a = _addv(_addv(_matvec(aKphi, ac0), [abs(g * d) for g in Kgb]), _matvec(aL, ayc))
+            e = eKphi * s0 + eKgb * ad
             for i in range(n):
-                c = _addv(c, _matvec(Kpg[n - 1 - i], mo[i]))
+                P = Kpg[n - 1 - i]
+                c = _addv(c, _matvec(P, mo[i]))
                 r = _addv(r, _matvec(aKpg[n - 1 - i], ro[i]))
+                a = _addv(a, _matvec(_absm(P), amo[i]))
+                e += eKpg[n - 1 - i] * so[i] + eaKpg[n - 1 - i] * sro[i]
             for i in _R:
-                if c[i] - r[i] > lo[i]:
-                    lo[i] = c[i] - r[i]
-                if c[i] + r[i] < hi[i]:
-                    hi[i] = c[i] + r[i]
+                R = _radius(r[i], a[i], e, 8 * n + 8)
+                if _na(c[i] - R, _NINF) > lo[i]:
+                    lo[i] = _na(c[i] - R, _NINF)
+                if _na(c[i] + R, _INF) < hi[i]:
+                    hi[i] = _na(c[i] + R, _INF)
         return lo + hi
 
     # -- eq. (23) over a step ------------------------------------------------------------------------
@@ -537,17 +704,41 @@ class IntervalObserver:
             return core
         m, tb = self.modes[mode], self.tables
         nsub = max(1, math.ceil(h * m["rho"] / self._tu["substep_rho_h"] - 1e-9))
-        Phi, Gam, Gam1, Gam2 = m["maps_h0"] if h == tb["h0"] else phi_gamma(m["N"], h, m["eta"], order=3)
+        if h == tb["h0"]:
+            (Phi, Gam, Gam1, Gam2), e = m["maps_h0"], m["maps_h0_error"]
+        else:
+            Phi, Gam, Gam1, Gam2, e = phi_gamma(m["N"], h, m["eta"], order=3, with_error=True)
+            if not math.isfinite(e):
+                raise ValueError(f"no finite step map of mode {mode + 1} for h = {h!r} s")
         J, P = m["J"], m["P"]
-        W1 = [[g / h for g in row] for row in Gam1]
-        W0 = [[g - w for g, w in zip(rg, rw)] for rg, rw in zip(Gam, W1)]
+        W1 = [[x / h for x in row] for row in Gam1]
+        W0 = [[x - w for x, w in zip(rg, rw)] for rg, rw in zip(Gam, W1)]
         W2 = [[abs(h * g1 / 2 - g2) for g1, g2 in zip(r1, r2)] for r1, r2 in zip(Gam1, Gam2)]
         W3 = [[2 * w / h for w in row] for row in W2]
         W0J, W1J, W2J, W2aJ, W3aJ = (_matmul(W0, J), _matmul(W1, J), _matmul(W2, J), _matmul(W2, _absm(J)),
                                      _matmul(W3, _absm(J)))
         sm = [self._smooth[j] for j in MEAS]
-        core = {"nsub": nsub, "hs": h / nsub, "phi": Phi, "w0j": W0J, "aw0j": _absm(W0J), "w1j": W1J,
-                "aw1j": _absm(W1J),
+        # the coefficients' error bounds (each entry against the exact maps' coefficients), from the maps'
+        # e (g: their largest entry): W1 = Gam1/h, W0 = Gam - W1, W2 = |h Gam1/2 - Gam2|, W3 = 2 W2/h,
+        # then the products with J, |J| (column sums <= cJ), P, |P| (cP) and H with their rounding (5 u)
+        g = max(abs(x) for M in (Phi, Gam, Gam1, Gam2) for row in M for x in row)
+        H = m["H"]
+        cJ = max(total(abs(row[j]) for row in J) for j in range(2))
+        cP = max(total(abs(row[j]) for row in P) for j in _R)
+        eW1 = (e + _U * g) / h
+        eW0 = e + eW1 + _U * (g + g / h)
+        eW2 = e * (1.0 + h) + 2.0 * _U * g * (1.0 + h)
+        eW3 = 2.0 * eW2 / h + _U * g * (1.0 + 2.0 / h)
+        gW = g * (2.0 + 2.0 / h)              # >= every entry of W0 .. W3
+        slack = 1.0 + 2.0 ** -20
+        up = lambda x: _na(x * slack, _INF)     # noqa: E731
+        err = {"phi": e, "w0j": up((eW0 + 5.0 * _U * gW) * cJ), "w1j": up((eW1 + 5.0 * _U * gW) * cJ),
+               "w2j": up((eW2 + 5.0 * _U * gW) * cJ), "w3j": up(2.0 * (eW3 + 5.0 * _U * gW) * cJ),
+               "gp": up((e + 5.0 * _U * g) * cP), "gh": up((e + 5.0 * _U * g) * total(map(abs, H)))}
+        # the row sums of Gam (rounded up, with its bracket): the weight of the design residuals
+        gsum = [_na(total(row) * (1.0 + 8.0 * _U) + 4.0 * e, _INF) for row in Gam]
+        core = {"nsub": nsub, "err": err, "gsum": gsum, "hs": h / nsub, "phi": Phi, "w0j": W0J,
+                "aw0j": _absm(W0J), "w1j": W1J, "aw1j": _absm(W1J),
                 "w2j_neg": [[-x if s else 0.0 for x, s in zip(row, sm)] for row in W2J],
                 "w2aj": [[x if s else 0.0 for x, s in zip(row, sm)] for row in W2aJ],
                 "w3aj2": [[0.0 if s else 2.0 * x for x, s in zip(row, sm)] for row in W3aJ],
@@ -562,41 +753,50 @@ class IntervalObserver:
         """Midpoint and radius of omega = (A(vx, c) - A_j) x + (B(vx, c) - B_j) d over the box X (eq. 25
         via Lemma 3). DEPARTURE: the paper's A_sigma is the grid speed's model and ignores the speed
         mismatch inside a band; here (vx - vx_j) A1 x is bounded by eq. (20), (vx - vx_j) B1 d exactly
-        (with_input), the stiffness part by its structure (``_stiffness``), plus the disturbance."""
+        (with_input), the stiffness part by its structure (``_stiffness``), plus the disturbance.
+        The radius is rigorous (dv = fl(vx - vx_j) one rounding; the shadow counts it)."""
         md = self.model
         dv = vx - self.modes[mode]["vx"]
         adv, dvd = abs(dv), dv * d
+        ac = [abs(x) for x in c]
         sl, su = [0.0] * _N, [0.0] * _N
         self._stiffness(X[:_N], X[_N:], vx * d if with_input else None, sl, su)
         oc, orad = [0.0] * _N, [0.0] * _N
         for i in _R:
-            mid = rad = 0.0
+            mid = rad = sh = 0.0
             if any(a != 0.0 for a in md["A1"][i]):
                 mid += dv * _acc(0.0, md["A1"][i], c)
                 rad += adv * _acc_abs(0.0, md["A1"][i], r)
+                sh += adv * _acc_abs(0.0, md["A1"][i], ac)
             if with_input and md["B1"][i] != 0.0:
                 mid += dvd * md["B1"][i]
+                sh += abs(dvd * md["B1"][i])
             if with_input and md["w"][i] != 0.0:
                 rad += md["w"][i]
             if i in STIFF_ROWS:
-                mid += (sl[i] + su[i]) * 0.5
-                rad += (su[i] - sl[i]) * 0.5
-            oc[i], orad[i] = mid, rad
+                ms = (sl[i] + su[i]) * 0.5
+                mid += ms
+                rad += _na(max(su[i] - ms, ms - sl[i]), _INF)
+                sh += abs(ms)
+            oc[i], orad[i] = mid, _radius(rad, sh, 0.0, 12)
         return oc, orad
 
     @staticmethod
     def _rebase(P, c, r, xi):
-        """xi := xi intersected with the hull of P x over the box (midpoint c, radius r; eq. 20): both
-        contain P x; after a mode switch (no xi: +-inf) the hull alone, so the bounds of x stay
-        continuous across switches (the paper re-uses xi with the new P)."""
+        """xi := xi intersected with the hull of P x over the box (midpoint c, radius r; eq. 20, rounded
+        outward): both contain P x; after a mode switch (no xi: +-inf) the hull alone, so the bounds
+        of x stay continuous across switches (the paper re-uses xi with the new P)."""
+        ac = [abs(x) for x in c]
         for i in _R:
             p, q = _acc(0.0, P[i], c), _acc_abs(0.0, P[i], r)
-            if p - q > xi[i]:
-                xi[i] = p - q
-            if p + q < xi[_N + i]:
-                xi[_N + i] = p + q
+            R = _radius(q, _acc_abs(0.0, P[i], ac), 0.0, 4)
+            pl, pu = _na(p - R, _NINF), _na(p + R, _INF)
+            if pl > xi[i]:
+                xi[i] = pl
+            if pu < xi[_N + i]:
+                xi[_N + i] = pu
             if xi[i] > xi[_N + i]:
-                xi[i], xi[_N + i] = p - q, p + q
+                xi[i], xi[_N + i] = pl, pu
         return xi
 
     def _correct(self, k, p, Y, B):
@@ -609,29 +809,49 @@ class IntervalObserver:
         Fbar; weight W2), +-(s (h - s)/h) width(Fbar_j) otherwise (weight W3); omega over the box at
         the start (weight Gam) plus its growth over Fbar (Gam1); Omega by eq. (24) and J y alike in
         midpoint-radius form. Then the box x = xi + E y(t), intersected with the predicted box B and,
-        on the measured rows, with Y. Returns box + xi."""
-        mode, _, vx, d, X, xi, Fb = p[:7]
+        on the measured rows, with Y. DEPARTURE (floating point): rounded rigorously, with the
+        coefficients' error bound (``_core``) and the design residuals' effect: with R1 = P A_j - N P
+        - J C, R2 = P B_j - H, R3 = I - E C - P (exactly 0 in the paper; the tables bound their
+        doubles' ||.||_inf, rho), xi' gains R1 x + R2 d (<= rho1 |x| + rho2 |d|, weighted by Gam's
+        row sums) and x = xi + E y + R3 x. Returns box + xi."""
+        mode, h, vx, d, X, xi, Fb = p[:7]
         md, m = self.model, self.modes[mode]
         c, r = _mid_rad(X)
         xc, xr = _mid_rad(self._rebase(m["P"], c, r, list(xi)))
         fc, fr = _mid_rad(Fb)
-        yc = [(Y[q] + Y[2 + q]) * 0.5 for q in range(2)]
-        yr = [(Y[2 + q] - Y[q]) * 0.5 for q in range(2)]
+        yc, yr = _mid_rad(Y)
         c0, r0, frm = [c[j] for j in MEAS], [r[j] for j in MEAS], [fr[j] for j in MEAS]
         dc, dr = [0.0, 0.0], [0.0, 0.0]
         for q, j in enumerate(MEAS):
             if self._smooth[j]:         # [y''] of a smooth row: (A0 + vx A1)[j, :] over Fbar
+                sh = 0.0
                 dc[q] = _acc(0.0, md["A0"][j], fc)
+                sh = _acc_abs(0.0, md["A0"][j], [abs(x) for x in fc])
                 if any(a != 0.0 for a in md["A1"][j]):
                     dc[q] += vx * _acc(0.0, md["A1"][j], fc)
+                    sh += abs(vx) * _acc_abs(0.0, md["A1"][j], [abs(x) for x in fc])
                 for i in _R:
                     if md["A1"][j][i] == 0.0 and md["A0"][j][i] != 0.0:
                         dr[q] += abs(md["A0"][j][i]) * fr[i]
                 for i in _R:
                     if md["A1"][j][i] != 0.0:
                         dr[q] += abs(md["A0"][j][i] + vx * md["A1"][j][i]) * fr[i]
+                        sh += (abs(md["A0"][j][i]) + abs(vx) * abs(md["A1"][j][i])) * fr[i]
+                dr[q] = _radius(dr[q], sh, 0.0, 16)
         oc0, or0 = self._omega(mode, vx, d, X, c, r, True)
         oc1, or1 = self._omega(mode, vx, d, Fb, fc, fr, False)
+        # the coefficients' errors (each term's coefficient error x sum of |mid| + rad) ..
+        S = lambda mid, rad: total(map(abs, mid)) + total(rad)     # noqa: E731
+        ad = abs(d)
+        er = k["err"]
+        e = (er["phi"] * S(xc, xr) + er["w0j"] * S(c0, r0) + er["w1j"] * S(yc, yr) + er["w2j"] * S(dc, dr)
+             + er["w3j"] * total(frm) + er["gp"] * S(oc0, or0) + er["gp"] * S(oc1, or1) + er["gh"] * ad)
+        # .. and the design residuals': |x| <= xmax over the step (x in X + [0, h] Fbar)
+        xmax = max(abs(c[j]) + r[j] + h * max(abs(Fb[j]), abs(Fb[_N + j])) for j in _R) * (1.0 + 8.0 * _U)
+        rho1, rho2, rho3 = m["residual"]
+        eres = rho1 * xmax + rho2 * ad
+        ax = [abs(x) for x in xc]
+        a0, ay, adc, ao0, ao1 = ([abs(x) for x in v] for v in (c0, yc, dc, oc0, oc1))
         out = [0.0] * (4 * _N)
         for i in _R:
             nc = _acc(0.0, k["phi"][i], xc)
@@ -649,15 +869,25 @@ class IntervalObserver:
             nr = _acc(nr, k["w3aj2"][i], frm)
             nr = _acc(nr, k["gap"][i], or0)
             nr = _acc(nr, k["g1ap"][i], or1)
+            na = _acc(0.0, k["phi"][i], ax)          # the shadow of nc
+            na = _acc(na, k["aw0j"][i], a0)
+            na = _acc(na, k["aw1j"][i], ay)
+            na = _acc(na, k["w2aj"][i], adc)
+            na = _acc(na, k["gap"][i], ao0)
+            na = _acc(na, k["g1ap"][i], ao1)
+            na += abs(k["gh"][i] * d)
+            ei = e + k["gsum"][i] * eres
+            R = _radius(nr, na, ei, 24)
             bc, br = _acc(nc, m["E"][i], yc), _acc_abs(nr, m["E"][i], yr)
-            xl, xu = bc - br, bc + br
+            Rb = _radius(br, _acc_abs(na, m["E"][i], ay), ei + rho3 * xmax, 26)
+            xl, xu = _na(bc - Rb, _NINF), _na(bc + Rb, _INF)
             if xl < B[i]:
                 xl = B[i]
             if xu > B[_N + i]:
                 xu = B[_N + i]
             if xl > xu:
                 xl, xu = B[i], B[_N + i]
-            out[i], out[_N + i], out[2 * _N + i], out[3 * _N + i] = xl, xu, nc - nr, nc + nr
+            out[i], out[_N + i], out[2 * _N + i], out[3 * _N + i] = xl, xu, _na(nc - R, _NINF), _na(nc + R, _INF)
         for q, j in enumerate(MEAS):    # the measured states: with their measurement
             if out[j] < Y[q]:
                 out[j] = Y[q]

@@ -127,11 +127,29 @@ def matrix(x, rows: int, cols: int, what: str, source: str = "design file"):
     return M
 
 
-def expm_taylor(M):
+_U = 2.0 ** -53                 # unit roundoff of doubles (round to nearest)
+_ETA = 2.0 ** -1074             # the smallest subnormal: the absolute floor of a rounding error
+
+
+def _up(x: float) -> float:
+    """The next double above x: above the exact value of an operation that x rounds to nearest."""
+    return math.nextafter(x, math.inf)
+
+
+def expm_taylor(M, with_error: bool = False):
     """exp(M): scaling X = M / 2^s with ||X||_inf <= 1/2, Horner's Taylor series of degree 16
     (truncation < 0.5^17/17! ~ 2e-20 relative), s squarings, products summed from the left: the
     interval observer's step maps (its tables at the default step and the runtime at any other).
-    ValueError if ||M||_inf is not finite or above 1e300."""
+    ValueError if ||M||_inf is not finite or above 1e300.
+
+    ``with_error``: also returns a bound e >= ||E - exp(M)||_inf (so >= every entry's error) for the
+    doubles M given, a running bound of the evaluation (Higham, Accuracy and Stability, 2nd ed.,
+    eq. 3.13: a dot product of m terms added from the left is within gamma_m = m u / (1 - m u) of
+    sum |a_k b_k|): Horner step k, E' = I + (X E)/k, adds (gamma_m + 2 u) ||X|| ||E|| / k + u ||E'||
+    to ||X|| e / k; the series remainder is ||X||^17 / 17! / (1 - ||X|| / 18); a squaring
+    E' = E E turns e into e (2 ||E|| + e) + gamma_m ||E||^2. The bound is evaluated in doubles
+    and multiplied by 1 + 2^-20 (far above the ~100 u of its own roundings) and rounded up; norms
+    of E by row sums, also inflated. Underflow adds at most m eta per product (counted)."""
     m = len(M)
     norm = max(total(map(abs, row)) for row in M)
     if not norm <= 1e300:
@@ -140,19 +158,43 @@ def expm_taylor(M):
     scale = 0.5 ** s
     X = [[x * scale for x in row] for row in M]
     E = [[1.0 if i == j else 0.0 for j in range(m)] for i in range(m)]
+    if with_error:
+        nx = max(total(map(abs, row)) for row in X) * (1.0 + 2.0 ** -40) + m * _ETA
+        gam = (m + 2) * _U * 1.01          # gamma_m + 2 u (m u << 1)
+        nE, err = 1.0, 0.0
     for k in range(16, 0, -1):
         XE = _matmul_left(X, E)
         E = [[(1.0 if i == j else 0.0) + XE[i][j] / k for j in range(m)] for i in range(m)]
+        if with_error:
+            nE1 = max(total(map(abs, row)) for row in E) * (1.0 + 2.0 ** -40)
+            err = (nx * err + gam * nx * nE + m * _ETA) / k + _U * nE1
+            nE = nE1
+    if not with_error:
+        for _ in range(s):
+            E = _matmul_left(E, E)
+        return E
+    # the series remainder: sum_{j >= 17} nx^j / j!, nx <= 1/2
+    err += nx ** 17 / math.factorial(17) / (1.0 - nx / 18.0)
+    gm = m * _U * 1.01
     for _ in range(s):
+        err = err * (2.0 * nE + err) + gm * nE * nE + m * _ETA
         E = _matmul_left(E, E)
-    return E
+        nE = max(total(map(abs, row)) for row in E) * (1.0 + 2.0 ** -40)
+    return E, _up(err * (1.0 + 2.0 ** -20))
 
 
-def phi_gamma(N, h: float, eta: float, order: int = 1):
+def phi_gamma(N, h: float, eta: float, order: int = 1, with_error: bool = False):
     """(Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, int_0^h exp(N (h - s)) s ds,
     int_0^h exp(N (h - s)) s^2/2 ds) for a Metzler N with N + eta I >= 0: the top blocks of the
     exponential of the nonnegative block matrix [[N + eta I, I, ..], [0, eta I, I, ..], ..] h
-    times exp(-eta h), so every entry is >= 0 in floating point too (Lemma 2: order preserving)."""
+    times exp(-eta h), so every entry is >= 0 in floating point too (Lemma 2: order preserving).
+
+    ``with_error``: the maps and then e >= the error of every entry, for the exact N, h, eta
+    (the maps' bracket [map - e, map + e]): ``expm_taylor``'s bound for the doubles of the block
+    matrix, plus the rounding of those doubles (each entry of M >= 0 within 2 u of its exact value:
+    |exp(M') - exp(M)| <= 2u M exp(M (1 + 2u)) for |M' - M| <= 2u M, M >= 0, so in norm at most
+    2u ||M|| e^(2u ||M||) (||E|| + e)), times exp(-eta h) and its rounding (its argument within u,
+    libm's exp within 2 ulps, the product within u). An infinite e: no useful bound."""
     n = len(N)
     if not (h > 0 and math.isfinite(h)):
         raise ValueError(f"step size must be finite and > 0 s, got {h!r}")
@@ -168,6 +210,18 @@ def phi_gamma(N, h: float, eta: float, order: int = 1):
             M[b * n + i][b * n + i] = eta * h
     if min(min(row) for row in M) < 0:
         raise ValueError("phi_gamma needs N + eta I >= 0 elementwise (N Metzler, eta large enough)")
-    E = expm_taylor(M)
     damp = math.exp(-eta * h)
-    return tuple([[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb))
+    if not with_error:
+        E = expm_taylor(M)
+        return tuple([[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb))
+    nM = max(total(row) for row in M) * (1.0 + 2.0 ** -40)
+    E, err = expm_taylor(M, with_error=True)
+    nE = max(total(map(abs, row)) for row in E) * (1.0 + 2.0 ** -40)
+    eps = 2.01 * _U
+    err += eps * nM * math.exp(eps * nM) * (nE + err)
+    eh = eta * h
+    err = _up((err * (1.0 + 8.0 * _U) + nE * (6.0 * _U + 2.0 * _U * eh)) * damp * (1.0 + 2.0 ** -20))
+    if not math.isfinite(err):
+        err = math.inf
+    maps = tuple([[E[i][b * n + j] * damp for j in range(n)] for i in range(n)] for b in range(nb))
+    return maps + (err,)

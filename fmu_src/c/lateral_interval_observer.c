@@ -55,6 +55,7 @@
  * (an event located exactly on a threshold must switch; a constant vx on one must not).
  */
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 #include "model.h"
@@ -87,6 +88,10 @@ typedef struct {
     double w3aj2[NX][NY];          /* 2 W3 |J| on the other measured rows (else 0) */
     double gp[NX][NX], gap[NX][NX], g1p[NX][NX], g1ap[NX][NX];      /* Gam P, Gam |P|, Gam1 P, Gam1 |P| */
     double gh[NX];                 /* Gam H */
+    /* the coefficients' error bounds (each entry; the runtime's ``_core``): of phi, the W0 J, W1 J,
+     * W2 J and 2 W3 |J| groups, Gam P and Gam1 P (and their |P| forms), Gam H */
+    double err_phi, err_w0j, err_w1j, err_w2j, err_w3j, err_gp, err_gh;
+    double gsum[NX];               /* Gam's row sums, rounded up: the weight of the design residuals */
 } Core;
 
 /* the step awaiting its correction (the runtime's ``_pending``) */
@@ -100,6 +105,7 @@ typedef struct {
     double sm_vq;                  /* its model speed (m/s), the box at the start (midpoint, radius) */
     double sm_c0[NX], sm_r0[NX];   /* and the bounds of omega per substep (midpoint, radius) */
     double sm_mo[IV_SAMPLED_MAX_SUBSTEPS][NX], sm_ro[IV_SAMPLED_MAX_SUBSTEPS][NX];
+    double sm_so[IV_SAMPLED_MAX_SUBSTEPS], sm_s0;  /* sum |mid| + rad of each omega and of the start box */
 } Pending;
 
 /* one gain of the sampled-measurement correction (the runtime's ``_sampled_maps``: gains) */
@@ -108,6 +114,8 @@ typedef struct {
     double kphi[NX][NX], akphi[NX][NX], kgb[NX];    /* K phi[n], |K phi[n]|, K gamb[n]; K = I - L C */
     double kpg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX];    /* K pg[i] */
     double akpg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX];   /* |K phi[i]| Gam_M(hs) */
+    double ekphi, ekgb;                             /* their error bounds (entrywise) */
+    double ekpg[IV_SAMPLED_MAX_SUBSTEPS], eakpg[IV_SAMPLED_MAX_SUBSTEPS];
 } SampledGain;
 
 #define SM_GAINS (1 + NY * NY)      /* the deadbeat gain, one column by one measurement */
@@ -120,6 +128,8 @@ typedef struct {
     double phi[IV_SAMPLED_MAX_SUBSTEPS + 1][NX][NX], aphi[IV_SAMPLED_MAX_SUBSTEPS + 1][NX][NX];
     double gamb[IV_SAMPLED_MAX_SUBSTEPS + 1][NX];
     double pg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX], apg[IV_SAMPLED_MAX_SUBSTEPS][NX][NX];
+    double ephi[IV_SAMPLED_MAX_SUBSTEPS + 1], egamb[IV_SAMPLED_MAX_SUBSTEPS + 1];   /* error bounds */
+    double epg[IV_SAMPLED_MAX_SUBSTEPS], eapg[IV_SAMPLED_MAX_SUBSTEPS];
     SampledGain c[SM_GAINS];
 } Sampled;
 
@@ -188,13 +198,60 @@ static int all_finite(const double *x, int n)
     return 1;
 }
 
-/* midpoint and radius of a box */
+/* ------------------------------------------------------------------ rigorous rounding */
+/* (the runtime's DEPARTURE, see there): every bound contains the exact real value of what it bounds.
+ * A single operation's result is rounded outward by one ulp (dn, up); a sum of n products in
+ * midpoint-radius form (mid s, radius t, shadow a = sum |c| |m|) within s -+ radius(t, a, e, n),
+ * e the coefficients' errors. */
+#define U_RND 0x1p-53              /* unit roundoff */
+#define ETA_RND 0x1p-1074          /* the smallest subnormal */
+#define SLACK (1.0 + 0x1p-20)      /* the margin of an error bound's own roundings */
+
+/* nextafter(x, +-INFINITY) without the libm call (the same results, NaN and the infinities included:
+ * a finite nonzero double's neighbour is one step of its bit pattern) */
+static double up(double x)
+{
+    uint64_t b;
+    if (x != x || x == INFINITY) return x;
+    if (x == 0.0) return 0x1p-1074;
+    memcpy(&b, &x, sizeof b);
+    b = x > 0.0 ? b + 1 : b - 1;
+    memcpy(&x, &b, sizeof b);
+    return x;
+}
+
+static double dn(double x)
+{
+    return -up(-x);
+}
+
+static double radius(double t, double a, double e, int n)
+{
+    double k = 2 * n + 4;
+    return up(t + e + k * U_RND * (a + t + e) + k * ETA_RND);
+}
+
+/* midpoint and radius of a box [lower0..n-1, upper0..n-1], the radius rounded up (the runtime's
+ * ``_mid_rad``) */
+static void mid_rad_n(const double *X, int n, double *c, double *r)
+{
+    for (int j = 0; j < n; j++) {
+        c[j] = (X[j] + X[n + j]) * 0.5;
+        r[j] = up(py_max(X[n + j] - c[j], c[j] - X[j]));
+    }
+}
+
 static void mid_rad(const double *X, double c[NX], double r[NX])
 {
-    for (int j = 0; j < NX; j++) {
-        c[j] = (X[j] + X[NX + j]) * 0.5;
-        r[j] = (X[NX + j] - X[j]) * 0.5;
-    }
+    mid_rad_n(X, NX, c, r);
+}
+
+/* sum |x|, from the left (the runtime's ``total(map(abs, x))``) */
+static double sum_abs(const double *x, int n)
+{
+    double s = 0.0;
+    for (int j = 0; j < n; j++) s += fabs(x[j]);
+    return s;
 }
 
 static void measurements(const double *u, double y[NY])
@@ -221,10 +278,12 @@ static double a1u(int i, int j)
     return (i == j && IV_DAMPED[i]) ? 0.0 : IV_A1[i][j];
 }
 
-/* -d_i(vx) = -(A0_ii + vx A1_ii): the known decay rate of a damped row (1/s) */
-static double decay(int i, double vx)
+/* [alo, ahi] containing -d_i(vx) = -(A0_ii + vx A1_ii): the known decay rate of a damped row (1/s) */
+static void decay(int i, double vx, double *alo, double *ahi)
 {
-    return -(IV_A0[i][i] + vx * IV_A1[i][i]);
+    double a0 = IV_A0[i][i], a1 = IV_A1[i][i];
+    *alo = dn(-a0 - up(vx * a1));
+    *ahi = up(-a0 - dn(vx * a1));
 }
 
 /* ------------------------------------------------------------------ Lemma 3 and the stiffness part */
@@ -233,22 +292,35 @@ static double decay(int i, double vx)
 static void product_hull(double al, double au, double l, double u, double *lo, double *hi)
 {
     if (al == au) {
-        *lo = al >= 0.0 ? al * l : al * u;
-        *hi = al >= 0.0 ? al * u : al * l;
+        *lo = dn(al >= 0.0 ? al * l : al * u);
+        *hi = up(al >= 0.0 ? al * u : al * l);
     } else if (al >= 0.0) {
-        *lo = l >= 0.0 ? l * al : l * au;
-        *hi = u >= 0.0 ? u * au : u * al;
+        *lo = dn(l >= 0.0 ? l * al : l * au);
+        *hi = up(u >= 0.0 ? u * au : u * al);
     } else if (au <= 0.0) {
-        *lo = u >= 0.0 ? u * al : u * au;
-        *hi = l >= 0.0 ? l * au : l * al;
+        *lo = dn(u >= 0.0 ? u * al : u * au);
+        *hi = up(l >= 0.0 ? l * au : l * al);
     } else if (fabs(al + au) <= 1e-9 * py_max(-al, au)) {
         double a = py_max(-al, au), mag = u > -l ? u : -l;
-        *lo = -a * mag;
-        *hi = a * mag;
+        *lo = dn(-a * mag);
+        *hi = up(a * mag);
     } else {
-        *lo = py_min(l * au, u * al);
-        *hi = py_max(l * al, u * au);
+        *lo = dn(py_min(l * au, u * al));
+        *hi = up(py_max(l * al, u * au));
     }
+}
+
+/* [th_lo, th_hi] containing theta(a, h) = (1 - exp(-a h))/a for a in [alo, ahi], alo > 0 (the
+ * runtime's ``_theta``: libm's expm1 within 2 ulps, rounded by 3) */
+static void theta(double alo, double ahi, double h, double *tl, double *th)
+{
+    double hi = -expm1(dn(-alo * h)), lo = -expm1(up(-ahi * h));
+    for (int k = 0; k < 3; k++) {
+        hi = up(hi);
+        lo = dn(lo);
+    }
+    *tl = py_max(0.0, dn(lo / ahi));
+    *th = up(hi / alo);
 }
 
 /* An asymmetric stiffness box: the structured rows [rl, ru] intersected with the elementwise bound
@@ -262,13 +334,14 @@ static void intersect_elementwise(const double *l, const double *u, int with_inp
         for (int j = 0; j < NX; j++) {
             if (IV_DA_LO[i][j] == 0.0 && IV_DA_UP[i][j] == 0.0) continue;
             product_hull(IV_DA_LO[i][j], IV_DA_UP[i][j], l[j], u[j], &pl, &pu);
-            el += pl;
-            eu += pu;
+            el = dn(el + pl);
+            eu = up(eu + pu);
         }
         double bl = IV_DB1_LO[i], bu = IV_DB1_UP[i];
         if (with_input && (bl != 0.0 || bu != 0.0)) {
-            el += vd * (vd >= 0.0 ? bl : bu);
-            eu += vd * (vd >= 0.0 ? bu : bl);
+            product_hull(bl, bu, dn(vd), up(vd), &pl, &pu);
+            el = dn(el + pl);
+            eu = up(eu + pu);
         }
         double sl = rl[k], su = ru[k];
         if (el > sl) sl = el;
@@ -290,19 +363,25 @@ static void intersect_elementwise(const double *l, const double *u, int with_inp
  * by interval arithmetic (exact: p and q are independent). with_input = 0: dA x alone. */
 static void stiffness(const double *l, const double *u, int with_input, double vd, double *lo, double *hi)
 {
-    double ufl = (with_input ? vd - u[0] : -u[0]) - IV_LF * u[1];
-    double ufu = (with_input ? vd - l[0] : -l[0]) - IV_LF * l[1];
-    double url = IV_LR * l[1] - u[0];
-    double uru = IV_LR * u[1] - l[0];
+    double ufl, ufu;               /* every operation rounded outward */
+    if (with_input) {
+        ufl = dn(dn(dn(vd) - u[0]) - up(IV_LF * u[1]));
+        ufu = up(up(up(vd) - l[0]) - dn(IV_LF * l[1]));
+    } else {
+        ufl = dn(-u[0] - up(IV_LF * u[1]));
+        ufu = up(-l[0] - dn(IV_LF * l[1]));
+    }
+    double url = dn(dn(IV_LR * l[1]) - u[0]);
+    double uru = up(up(IV_LR * u[1]) - l[0]);
     double pl, pu, ql, qu;
     product_hull(IV_DCF[0], IV_DCF[1], ufl, ufu, &pl, &pu);
     product_hull(IV_DCR[0], IV_DCR[1], url, uru, &ql, &qu);
-    double rl[2] = {IV_K3 * (pl + ql), IV_K4F * pl - IV_K4R * qu};
-    double ru[2] = {IV_K3 * (pu + qu), IV_K4F * pu - IV_K4R * ql};
+    double rl[2] = {dn(IV_K3 * dn(pl + ql)), dn(dn(IV_K4F * pl) - up(IV_K4R * qu))};
+    double ru[2] = {up(IV_K3 * up(pu + qu)), up(up(IV_K4F * pu) - dn(IV_K4R * ql))};
     if (!IV_STIFF_SYMMETRIC) intersect_elementwise(l, u, with_input, vd, rl, ru);
     for (int k = 0; k < 2; k++) {
-        lo[ROW_AY + k] += rl[k];
-        hi[ROW_AY + k] += ru[k];
+        lo[ROW_AY + k] = dn(lo[ROW_AY + k] + rl[k]);
+        hi[ROW_AY + k] = up(hi[ROW_AY + k] + ru[k]);
     }
 }
 
@@ -312,16 +391,21 @@ static void stiffness(const double *l, const double *u, int with_input, double v
  * A0 + vx A1 by eq. (20) in midpoint-radius form, plus the disturbance bound w. */
 static void G(double vx, double d, const double X[NB], double Fg[NB])
 {
-    double avx = vx >= 0.0 ? vx : -vx, vd = vx * d, c[NX], r[NX];
+    double avx = vx >= 0.0 ? vx : -vx, vd = vx * d, c[NX], r[NX], ac[NX];
     mid_rad(X, c, r);
+    for (int j = 0; j < NX; j++) ac[j] = fabs(c[j]);
     for (int i = 0; i < NX; i++) {
-        double m = 0.0, m1 = 0.0, w = 0.0, w1 = 0.0;
+        double m = 0.0, m1 = 0.0, w = 0.0, w1 = 0.0, a = 0.0, sa1 = 0.0;   /* mid, radius, shadow */
         int has1 = 0, hasr1 = 0;
         for (int j = 0; j < NX; j++) {
             double a0 = a0u(i, j), a1 = a1u(i, j);
-            if (a0 != 0.0) m += a0 * c[j];
+            if (a0 != 0.0) {
+                m += a0 * c[j];
+                a += fabs(a0) * ac[j];
+            }
             if (a1 != 0.0) {
                 m1 += a1 * c[j];
+                sa1 += fabs(a1) * ac[j];
                 has1 = 1;
             }
             if (a0 != 0.0 && a1 == 0.0) w += fabs(a0) * r[j];
@@ -330,14 +414,24 @@ static void G(double vx, double d, const double X[NB], double Fg[NB])
                 hasr1 = 1;
             }
         }
-        if (has1) m += vx * m1;
+        if (has1) {
+            m += vx * m1;
+            a += avx * sa1;
+        }
         if (hasr1) w += avx * w1;
         for (int j = 0; j < NX; j++)
-            if (a0u(i, j) != 0.0 && a1u(i, j) != 0.0) w += fabs(a0u(i, j) + vx * a1u(i, j)) * r[j];
-        if (IV_B1[i] != 0.0) m += vd * IV_B1[i];
+            if (a0u(i, j) != 0.0 && a1u(i, j) != 0.0) {
+                w += fabs(a0u(i, j) + vx * a1u(i, j)) * r[j];
+                a += (fabs(a0u(i, j)) + avx * fabs(a1u(i, j))) * r[j];
+            }
+        if (IV_B1[i] != 0.0) {
+            m += vd * IV_B1[i];
+            a += fabs(vd * IV_B1[i]);
+        }
         if (IV_W[i] != 0.0) w += IV_W[i];
-        Fg[i] = m - w;
-        Fg[NX + i] = m + w;
+        double R = radius(w, a, 0.0, 16);
+        Fg[i] = dn(m - R);
+        Fg[NX + i] = up(m + R);
     }
     stiffness(X, X + NX, 1, vd, Fg, Fg + NX);
 }
@@ -347,18 +441,33 @@ static void F_hull(double vx, double d, const double X[NB], double F[NB])
 {
     G(vx, d, X, F);
     for (int i = 0; i < NX; i++) {
+        double alo, ahi, pl, pu;
         if (!IV_DAMPED[i]) continue;
-        double t = IV_A0[i][i] + vx * IV_A1[i][i];
-        F[i] += t >= 0.0 ? t * X[i] : t * X[NX + i];
-        F[NX + i] += t >= 0.0 ? t * X[NX + i] : t * X[i];
+        decay(i, vx, &alo, &ahi);
+        product_hull(-ahi, -alo, X[i], X[NX + i], &pl, &pu);
+        F[i] = dn(F[i] + pl);
+        F[NX + i] = up(F[NX + i] + pu);
     }
 }
 
 /* ------------------------------------------------------------------ step maps */
-/* exp(M) of the leading mm x mm block (the runtime's ``_expm_taylor``): scaling X = M / 2^s with
- * ||X||_inf <= 1/2, Horner's Taylor series of degree 16, s squarings. 0, or -1 if ||M||_inf is not
- * finite or above 1e300 (the runtime raises). M is scaled in place. */
-static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM])
+/* max_i sum_j |M[i][j]| of the leading rows x cols block, rows from the first (Python's max) */
+static double rows_abs_max(const double M[MAXM][MAXM], int rows, int cols)
+{
+    double best = 0.0;
+    for (int i = 0; i < rows; i++) {
+        double t = 0.0;
+        for (int j = 0; j < cols; j++) t += fabs(M[i][j]);
+        best = i == 0 ? t : py_max(best, t);
+    }
+    return best;
+}
+
+/* exp(M) of the leading mm x mm block (the runtime's ``expm_taylor``, with_error): scaling X = M / 2^s
+ * with ||X||_inf <= 1/2, Horner's Taylor series of degree 16, s squarings; *err >= ||E - exp(M)||_inf
+ * (the running bound of the runtime's docstring). 0, or -1 if ||M||_inf is not finite or above 1e300
+ * (the runtime raises). M is scaled in place. */
+static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM], double *err)
 {
     double P[MAXM][MAXM], norm = 0.0;
     for (int i = 0; i < mm; i++) {
@@ -375,6 +484,8 @@ static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM])
             M[i][j] *= scale;
             E[i][j] = i == j ? 1.0 : 0.0;
         }
+    double nx = rows_abs_max(M, mm, mm) * (1.0 + 0x1p-40) + mm * ETA_RND, gam = (mm + 2) * U_RND * 1.01;
+    double nE = 1.0, e = 0.0;
     for (int k = 16; k > 0; k--) {          /* Horner: I + X/1 (I + X/2 (... (I + X/16))) */
         for (int i = 0; i < mm; i++)
             for (int j = 0; j < mm; j++) {
@@ -384,8 +495,14 @@ static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM])
             }
         for (int i = 0; i < mm; i++)
             for (int j = 0; j < mm; j++) E[i][j] = (i == j ? 1.0 : 0.0) + P[i][j] / k;
+        double nE1 = rows_abs_max(E, mm, mm) * (1.0 + 0x1p-40);
+        e = (nx * e + gam * nx * nE + mm * ETA_RND) / k + U_RND * nE1;
+        nE = nE1;
     }
+    e += pow(nx, 17) / 355687428096000.0 / (1.0 - nx / 18.0);     /* the series remainder (17!) */
+    double gm = mm * U_RND * 1.01;
     for (int q = 0; q < s; q++) {
+        e = e * (2.0 * nE + e) + gm * nE * nE + mm * ETA_RND;
         for (int i = 0; i < mm; i++)
             for (int j = 0; j < mm; j++) {
                 double t = 0.0;
@@ -394,19 +511,21 @@ static int expm_taylor(double M[MAXM][MAXM], int mm, double E[MAXM][MAXM])
             }
         for (int i = 0; i < mm; i++)
             for (int j = 0; j < mm; j++) E[i][j] = P[i][j];
+        nE = rows_abs_max(E, mm, mm) * (1.0 + 0x1p-40);
     }
+    *err = up(e * SLACK);
     return 0;
 }
 
 /* (Phi, Gam[, Gam1, Gam2]) = (exp(N h), int_0^h exp(N s) ds, ...) for a Metzler N with N + eta I >= 0
- * (the runtime's ``phi_gamma``, nb = order + 1 blocks): exp of the nonnegative block matrix
+ * (the runtime's ``phi_gamma`` with_error, nb = order + 1 blocks): exp of the nonnegative block matrix
  * [[N + eta I, I, ..], [0, eta I, I, ..], ..] h by scaling (||X||_inf <= 1/2), Horner's Taylor
- * series of degree 16 and squaring, times exp(-eta h). 0, or -1 if the norm is not finite or an
- * entry is negative (the runtime raises). */
-static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX])
+ * series of degree 16 and squaring, times exp(-eta h); *err >= every entry's error (infinite: no
+ * useful bound). 0, or -1 if the norm is not finite or an entry is negative (the runtime raises). */
+static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, double out[][NX][NX], double *err)
 {
     int mm = nb * NX;
-    double M[MAXM][MAXM], E[MAXM][MAXM];
+    double M[MAXM][MAXM], E[MAXM][MAXM], e;
     memset(M, 0, sizeof M);
     for (int i = 0; i < NX; i++)
         for (int j = 0; j < NX; j++) M[i][j] = (N[i][j] + (i == j ? eta : 0.0)) * h;
@@ -418,8 +537,18 @@ static int phi_gamma(const double N[NX][NX], double h, double eta, int nb, doubl
     for (int i = 0; i < mm; i++)
         for (int j = 0; j < mm; j++)
             if (!(M[i][j] >= 0.0)) return -1;
-    if (expm_taylor(M, mm, E) != 0) return -1;
-    double damp = exp(-eta * h);
+    double damp = exp(-eta * h), nM = 0.0;
+    for (int i = 0; i < mm; i++) {
+        double t = 0.0;
+        for (int j = 0; j < mm; j++) t += M[i][j];
+        nM = i == 0 ? t : py_max(nM, t);
+    }
+    nM *= 1.0 + 0x1p-40;
+    if (expm_taylor(M, mm, E, &e) != 0) return -1;
+    double nE = rows_abs_max(E, mm, mm) * (1.0 + 0x1p-40), eps = 2.01 * U_RND, eh = eta * h;
+    e += eps * nM * exp(eps * nM) * (nE + e);
+    e = up((e * (1.0 + 8.0 * U_RND) + nE * (6.0 * U_RND + 2.0 * U_RND * eh)) * damp * SLACK);
+    *err = isfinite(e) ? e : INFINITY;
     for (int b = 0; b < nb; b++)
         for (int i = 0; i < NX; i++)
             for (int j = 0; j < NX; j++) out[b][i][j] = E[i][b * NX + j] * damp;
@@ -448,7 +577,7 @@ static void mul_nxx(const double A[NX][NX], const double B[NX][NX], double C[NX]
 }
 
 /* the correction coefficients of (mode, h) from its maps (the runtime's ``_core``) */
-static void core_fill(Core *k, int mode, double h, const double maps[N_MAPS][NX][NX])
+static void core_fill(Core *k, int mode, double h, const double maps[N_MAPS][NX][NX], double e)
 {
     const double (*Gam)[NX] = maps[1], (*Gam1)[NX] = maps[2], (*Gam2)[NX] = maps[3];
     const double (*J)[NY] = IV_J[mode], (*P)[NX] = IV_P[mode];
@@ -485,6 +614,41 @@ static void core_fill(Core *k, int mode, double h, const double maps[N_MAPS][NX]
         k->gh[i] = t;
     }
     memcpy(k->phi, maps[0], sizeof k->phi);
+    /* the coefficients' error bounds and Gam's row sums (the runtime's ``_core``) */
+    double g = 0.0, cJ = 0.0, cP = 0.0, sH = 0.0, t;
+    int first = 1;
+    for (int b = 0; b < N_MAPS; b++)
+        for (int i = 0; i < NX; i++)
+            for (int j = 0; j < NX; j++) {
+                g = first ? fabs(maps[b][i][j]) : py_max(g, fabs(maps[b][i][j]));
+                first = 0;
+            }
+    for (int c = 0; c < NY; c++) {
+        t = 0.0;
+        for (int i = 0; i < NX; i++) t += fabs(J[i][c]);
+        cJ = c == 0 ? t : py_max(cJ, t);
+    }
+    for (int c = 0; c < NX; c++) {
+        t = 0.0;
+        for (int i = 0; i < NX; i++) t += fabs(P[i][c]);
+        cP = c == 0 ? t : py_max(cP, t);
+    }
+    for (int j = 0; j < NX; j++) sH += fabs(IV_H[mode][j]);
+    double eW1 = (e + U_RND * g) / h, eW0 = e + eW1 + U_RND * (g + g / h);
+    double eW2 = e * (1.0 + h) + 2.0 * U_RND * g * (1.0 + h), eW3 = 2.0 * eW2 / h + U_RND * g * (1.0 + 2.0 / h);
+    double gW = g * (2.0 + 2.0 / h);
+    k->err_phi = e;
+    k->err_w0j = up((eW0 + 5.0 * U_RND * gW) * cJ * SLACK);
+    k->err_w1j = up((eW1 + 5.0 * U_RND * gW) * cJ * SLACK);
+    k->err_w2j = up((eW2 + 5.0 * U_RND * gW) * cJ * SLACK);
+    k->err_w3j = up(2.0 * (eW3 + 5.0 * U_RND * gW) * cJ * SLACK);
+    k->err_gp = up((e + 5.0 * U_RND * g) * cP * SLACK);
+    k->err_gh = up((e + 5.0 * U_RND * g) * sH * SLACK);
+    for (int i = 0; i < NX; i++) {
+        t = 0.0;
+        for (int j = 0; j < NX; j++) t += Gam[i][j];
+        k->gsum[i] = up(t * (1.0 + 8.0 * U_RND) + 4.0 * e);
+    }
     mul_nxx(Gam, P, k->gp);
     mul_nxx(Gam, aP, k->gap);
     mul_nxx(Gam1, P, k->g1p);
@@ -497,7 +661,7 @@ static void core_fill(Core *k, int mode, double h, const double maps[N_MAPS][NX]
 static const Core *core_for(Model *m, int mode, double h, const Log *log)
 {
     Core *k = &m->core[mode];
-    double maps[N_MAPS][NX][NX], nsub = ceil(h * IV_RHO[mode] / IV_SUBSTEP_RHO_H - 1e-9);
+    double maps[N_MAPS][NX][NX], nsub = ceil(h * IV_RHO[mode] / IV_SUBSTEP_RHO_H - 1e-9), e;
     if (k->h == h) return k;
     if (!(nsub <= MAX_SUBSTEPS)) {
         log_event(log, LOG_ERROR, "step refused: h = %g s would need %g enclosure substeps (at most %d)", h, nsub,
@@ -506,11 +670,12 @@ static const Core *core_for(Model *m, int mode, double h, const Log *log)
     }
     if (h == IV_H0) {
         memcpy(maps, IV_MAPS_H0[mode], sizeof maps);
-    } else if (phi_gamma(IV_N[mode], h, IV_ETA[mode], N_MAPS, maps) != 0) {
+        e = IV_MAPS_H0_ERROR[mode];
+    } else if (phi_gamma(IV_N[mode], h, IV_ETA[mode], N_MAPS, maps, &e) != 0 || !isfinite(e)) {
         log_event(log, LOG_ERROR, "step refused: no finite step map of mode %d for h = %g s", mode + 1, h);
         return NULL;
     }
-    core_fill(k, mode, h, maps);
+    core_fill(k, mode, h, maps, e);
     k->nsub = nsub > 1.0 ? (int)nsub : 1;
     k->hs = h / k->nsub;
     k->h = h;
@@ -518,28 +683,31 @@ static const Core *core_for(Model *m, int mode, double h, const Log *log)
 }
 
 /* ------------------------------------------------------------------ a priori enclosure (step 4) */
-/* T(S) (the runtime's ``_extents``): the enclosure of x over a substep hs from the box X and G's values Fg
- * over S: a damped row with a = -d_i > 0 by the convex combination x_i(s) = x_i(0) +
- * theta(s) (gbar/a - x_i(0)), th = -expm1(-a hs)/a; otherwise x_i(s) in x_i(0) + [0, hs] F_i(S). */
-static void extents(double hs, const double a[NX], const double th[NX], const double X[NB],
-                    const double Fg[NB], const double S[NB], double T[NB])
+/* T(S) (the runtime's ``_extents``), rounded outward: the enclosure of x over a substep hs from the box
+ * X and G's values Fg over S: a damped row with a in [alo, ahi], alo > 0, by the convex combination
+ * x_i(s) = x_i(0) + theta(s) (g - a x_i(0)), theta in [0, th]; another damped row x_i(0) + [0, hs]
+ * (g - a S_i); otherwise x_i(s) in x_i(0) + [0, hs] G_i(S). */
+static void extents(double hs, const double alo[NX], const double ahi[NX], const double th[NX],
+                    const double X[NB], const double Fg[NB], const double S[NB], double T[NB])
 {
     for (int i = 0; i < NX; i++) {
-        double l = X[i], u = X[NX + i], gl = Fg[i], gu = Fg[NX + i], t;
-        if (IV_DAMPED[i] && a[i] > 0.0) {
-            t = gl - a[i] * l;
-            T[i] = t < 0.0 ? l + th[i] * t : l;
-            t = gu - a[i] * u;
-            T[NX + i] = t > 0.0 ? u + th[i] * t : u;
-        } else if (IV_DAMPED[i]) {
-            t = gl - a[i] * S[i];
-            T[i] = t < 0.0 ? l + hs * t : l;
-            t = gu - a[i] * S[NX + i];
-            T[NX + i] = t > 0.0 ? u + hs * t : u;
-        } else {
-            T[i] = gl < 0.0 ? l + hs * gl : l;
-            T[NX + i] = gu > 0.0 ? u + hs * gu : u;
+        double l = X[i], u = X[NX + i], gl = Fg[i], gu = Fg[NX + i], t, pl, pu;
+        if (IV_DAMPED[i]) {
+            if (alo[i] > 0.0) {
+                product_hull(alo[i], ahi[i], l, l, &pl, &pu);
+                t = dn(gl - pu);
+                T[i] = t < 0.0 ? dn(l + dn(th[i] * t)) : l;
+                product_hull(alo[i], ahi[i], u, u, &pl, &pu);
+                t = up(gu - pl);
+                T[NX + i] = t > 0.0 ? up(u + up(th[i] * t)) : u;
+                continue;
+            }
+            product_hull(alo[i], ahi[i], S[i], S[NX + i], &pl, &pu);
+            gl = dn(gl - pu);
+            gu = up(gu - pl);
         }
+        T[i] = gl < 0.0 ? dn(l + dn(hs * gl)) : l;
+        T[NX + i] = gu > 0.0 ? up(u + up(hs * gu)) : u;
     }
 }
 
@@ -549,26 +717,26 @@ static void extents(double hs, const double a[NX], const double th[NX], const do
  * extents of the last T(S); one refining pass T(T). 0, or -1 after IV_ENCLOSURE_TRIES tries. */
 static int enclose(double hs, double vx, double d, const double X[NB], double T[NB])
 {
-    double a[NX] = {0.0}, th[NX] = {0.0}, Fg[NB], S[NB], e[NB];
+    double alo[NX] = {0.0}, ahi[NX] = {0.0}, th[NX] = {0.0}, Fg[NB], S[NB], e[NB], tl;
     for (int i = 0; i < NX; i++) {
         if (!IV_DAMPED[i]) continue;
-        a[i] = decay(i, vx);
-        th[i] = a[i] > 0.0 ? -expm1(-a[i] * hs) / a[i] : hs;
+        decay(i, vx, &alo[i], &ahi[i]);
+        if (alo[i] > 0.0) theta(alo[i], ahi[i], hs, &tl, &th[i]);
     }
     G(vx, d, X, Fg);
-    extents(hs, a, th, X, Fg, X, T);
+    extents(hs, alo, ahi, th, X, Fg, X, T);
     for (int i = 0; i < NB; i++) e[i] = T[i] - X[i];
     double grow = IV_ENCLOSURE_GROW;
     for (int k = 0; k < IV_ENCLOSURE_TRIES; k++) {
         int inside = 1;
         for (int i = 0; i < NB; i++) S[i] = X[i] + grow * e[i];
         G(vx, d, S, Fg);
-        extents(hs, a, th, X, Fg, S, T);
+        extents(hs, alo, ahi, th, X, Fg, S, T);
         for (int i = 0; i < NX; i++) inside = inside && T[i] >= S[i] && T[NX + i] <= S[NX + i];
         if (inside) {                 /* x(s) in T for all s, hence in T(T), a subset */
             G(vx, d, T, Fg);
             memcpy(S, T, sizeof S);
-            extents(hs, a, th, X, Fg, S, T);
+            extents(hs, alo, ahi, th, X, Fg, S, T);
             return 0;
         }
         for (int i = 0; i < NX; i++) {    /* the extents never shrink */
@@ -583,57 +751,67 @@ static int enclose(double hs, double vx, double d, const double X[NB], double T[
 }
 
 /* Metzler majorant of A(vx, c) over the stiffness box (the runtime's ``_majorant``): the largest
- * diagonal entries and the largest |off-diagonal| entries */
+ * diagonal entries and the largest |off-diagonal| entries, rounded up */
 static void majorant(double vx, double M[NX][NX])
 {
     for (int i = 0; i < NX; i++)
         for (int j = 0; j < NX; j++) {
-            double a = IV_A0[i][j] + vx * IV_A1[i][j];
-            double lo = a + IV_DA_LO[i][j], hi = a + IV_DA_UP[i][j];
+            double a0 = IV_A0[i][j], a1 = IV_A1[i][j];
+            double lo = dn(dn(a0 + dn(vx * a1)) + IV_DA_LO[i][j]), hi = up(up(a0 + up(vx * a1)) + IV_DA_UP[i][j]);
             M[i][j] = i == j ? hi : py_max(fabs(lo), fabs(hi));
         }
 }
 
 /* Fallback enclosure for any hs (``_comparison_enclosure``): |x(s) - x_k| <= Gamma(M, hs) g with M
- * the Metzler majorant and g = max |F(X)| (comparison principle), intersected with
- * X + [0, hs] F(S). 0, or -1 if Gamma(M, hs) is not finite. */
+ * the Metzler majorant and g = max |F(X)| (comparison principle; Gamma within its bracket, the sum
+ * rounded up), intersected with X + [0, hs] F(S). 0, or -1 if Gamma(M, hs) has no finite bound. */
 static int comparison_enclosure(double hs, double vx, double d, const double X[NB], double T[NB])
 {
-    double f[NB], g[NX], M[NX][NX], maps[2][NX][NX], S[NB], shift = 0.0;
+    double f[NB], g[NX], M[NX][NX], maps[2][NX][NX], S[NB], shift = 0.0, e, sg = 0.0;
     F_hull(vx, d, X, f);
     for (int i = 0; i < NX; i++) g[i] = py_max(fabs(f[i]), fabs(f[NX + i]));
     majorant(vx, M);
     double top = -M[0][0];
     for (int i = 1; i < NX; i++) top = py_max(top, -M[i][i]);
     shift = py_max(0.0, top);
-    if (phi_gamma(M, hs, shift, 2, maps) != 0) return -1;
+    if (phi_gamma(M, hs, shift, 2, maps, &e) != 0 || !isfinite(e)) return -1;
+    for (int i = 0; i < NX; i++) sg += g[i];
     for (int i = 0; i < NX; i++) {
         double R = 0.0;
         for (int j = 0; j < NX; j++) R += maps[1][i][j] * g[j];
-        S[i] = X[i] - R;
-        S[NX + i] = X[NX + i] + R;
+        R = up(R * (1.0 + 8.0 * U_RND) + e * sg * (1.0 + 8.0 * U_RND));
+        S[i] = dn(X[i] - R);
+        S[NX + i] = up(X[NX + i] + R);
     }
     F_hull(vx, d, S, f);
     for (int i = 0; i < NX; i++) {
-        T[i] = py_max(S[i], X[i] + py_min(0.0, hs * f[i]));
-        T[NX + i] = py_min(S[NX + i], X[NX + i] + py_max(0.0, hs * f[NX + i]));
+        double lo = f[i] < 0.0 ? dn(X[i] + dn(hs * f[i])) : X[i];
+        double hi = f[NX + i] > 0.0 ? up(X[NX + i] + up(hs * f[NX + i])) : X[NX + i];
+        T[i] = py_max(S[i], lo);
+        T[NX + i] = py_min(S[NX + i], hi);
     }
     return 0;
 }
 
 /* ------------------------------------------------------------------ the sampled-measurement correction */
 /* (Phi, Gam) = (exp(A h), int_0^h exp(A s) ds) for ANY A (the runtime's ``expm_gamma``): exp of
- * [[A, I], [0, 0]] h by scaling (||X||_inf <= 1/2), Horner's Taylor series of degree 16, squaring.
- * 0, or -1 if the norm is not finite (the runtime raises). */
-static int expm_gamma(const double A[NX][NX], double h, double Phi[NX][NX], double Gam[NX][NX])
+ * [[A, I], [0, 0]] h by scaling (||X||_inf <= 1/2), Horner's Taylor series of degree 16, squaring;
+ * *err >= every entry's error for any exact A' within dA (inf-norm) of A. 0, or -1 if the norm is
+ * not finite (the runtime raises). */
+static int expm_gamma(const double A[NX][NX], double h, double dA, double Phi[NX][NX], double Gam[NX][NX],
+                      double *err)
 {
-    double M[MAXM][MAXM], E[MAXM][MAXM];
+    double M[MAXM][MAXM], E[MAXM][MAXM], e;
     memset(M, 0, sizeof M);
     for (int i = 0; i < NX; i++) {
         for (int j = 0; j < NX; j++) M[i][j] = A[i][j] * h;
         M[i][NX + i] = h;
     }
-    if (expm_taylor(M, 2 * NX, E) != 0) return -1;
+    double nM = rows_abs_max(M, 2 * NX, 2 * NX);
+    if (expm_taylor(M, 2 * NX, E, &e) != 0) return -1;
+    double nD = (dA * h + 2.0 * U_RND * nM) * SLACK + 2 * NX * ETA_RND;
+    e = up((e + nD * exp(nM + nD)) * SLACK);
+    *err = isfinite(e) ? e : INFINITY;
     for (int i = 0; i < NX; i++)
         for (int j = 0; j < NX; j++) {
             Phi[i][j] = E[i][j];
@@ -658,6 +836,16 @@ static void matvec(const double A[NX][NX], const double *x, double *y)
     }
 }
 
+/* y = |A| x */
+static void matvec_abs(const double A[NX][NX], const double *x, double *y)
+{
+    for (int i = 0; i < NX; i++) {
+        double t = 0.0;
+        for (int j = 0; j < NX; j++) t += fabs(A[i][j]) * x[j];
+        y[i] = t;
+    }
+}
+
 static void matvec_y(const double A[NX][NY], const double *x, double *y)
 {
     for (int i = 0; i < NX; i++) {
@@ -667,47 +855,103 @@ static void matvec_y(const double A[NX][NY], const double *x, double *y)
     }
 }
 
-/* The maps of (vq, h) (the runtime's ``_sampled_maps``, same order of operations): 0, or -1 (none). */
+/* max row sum of |A| (the runtime's ``_norm_rows``: rounded up); of A' when by_columns */
+static double norm_abs(const double A[NX][NX], int by_columns)
+{
+    double best = 0.0;
+    for (int i = 0; i < NX; i++) {
+        double t = 0.0;
+        for (int j = 0; j < NX; j++) t += fabs(by_columns ? A[j][i] : A[i][j]);
+        best = i == 0 ? t : py_max(best, t);
+    }
+    return up(best * (1.0 + 4.0 * U_RND));
+}
+
+static double max_abs(const double *x, int n)
+{
+    double best = fabs(x[0]);
+    for (int j = 1; j < n; j++) best = py_max(best, fabs(x[j]));
+    return best;
+}
+
+/* C = A B and the bound of its entries' errors (the runtime's ``_mm_err``) */
+static double mm_err(const double A[NX][NX], double eA, const double B[NX][NX], double eB, double C[NX][NX])
+{
+    double ra = norm_abs(A, 0), cb = norm_abs(B, 1), bmax = max_abs(&B[0][0], NX * NX);
+    mul_nxx(A, B, C);
+    return up((ra * eB + eA * cb + NX * eA * eB + (NX + 2) * U_RND * ra * bmax) * SLACK + NX * ETA_RND);
+}
+
+/* y = A v and the bound of its entries' errors (the runtime's ``_mv_err``) */
+static double mv_err(const double A[NX][NX], double eA, const double v[NX], double ev, double y[NX])
+{
+    double ra = norm_abs(A, 0), va = sum_abs(v, NX), vmax = max_abs(v, NX);
+    matvec(A, v, y);
+    return up((ra * ev + eA * va + NX * eA * ev + (NX + 2) * U_RND * ra * vmax) * SLACK + NX * ETA_RND);
+}
+
+/* The maps of (vq, h) (the runtime's ``_sampled_maps``, same order of operations), each with the
+ * bound of its entries' errors: 0, or -1 (none). */
 static int sampled_fill(Sampled *sm, double vq, double h)
 {
-    double A[NX][NX], Bv[NX], phid[NX][NX], gamd[NX][NX], Mj[NX][NX], gm[2][NX][NX], gdb[NX], t[NX];
-    double eye[NX][NX], shift = 0.0, top;
+    double A[NX][NX], Al[NX][NX], Au[NX][NX], W[NX][NX], Bv[NX], phid[NX][NX], gamd[NX][NX], Mj[NX][NX];
+    double gm[2][NX][NX], gdb[NX], t[NX], eye[NX][NX], shift = 0.0, top, ed, eM, eBv, egdb;
     sm->valid = 0;
     for (int i = 0; i < NX; i++) {
         for (int j = 0; j < NX; j++) {
             A[i][j] = IV_A0[i][j] + vq * IV_A1[i][j];
+            Al[i][j] = dn(IV_A0[i][j] + dn(vq * IV_A1[i][j]));
+            Au[i][j] = up(IV_A0[i][j] + up(vq * IV_A1[i][j]));
             eye[i][j] = i == j ? 1.0 : 0.0;
         }
         Bv[i] = vq * IV_B1[i];
     }
+    for (int i = 0; i < NX; i++)
+        for (int j = 0; j < NX; j++) W[i][j] = Au[i][j] - Al[i][j];
+    double dA = norm_abs(W, 0);
+    eBv = up(max_abs(Bv, NX) * 2.0 * U_RND);
     double nd = ceil(h / IV_SAMPLED_SUBSTEP - 1e-9);
-    int n = !(nd >= 1.0) ? 1 : nd > IV_SAMPLED_MAX_SUBSTEPS ? IV_SAMPLED_MAX_SUBSTEPS : (int)nd;
+    int n = !(nd >= 1.0) ? 1 : nd > IV_SAMPLED_MAX_SUBSTEPS ? IV_SAMPLED_MAX_SUBSTEPS : (int)nd, p2 = 1;
+    while (p2 < n) p2 <<= 1;             /* a power of two: h / n exact */
+    if (p2 > IV_SAMPLED_MAX_SUBSTEPS) return -1;
+    n = p2;
     double hs = h / n, norm = 0.0;
     for (int i = 0; i < NX; i++) {
         double row = 0.0;
         for (int j = 0; j < NX; j++) row += fabs(A[i][j]);
-        norm = py_max(norm, row);
+        norm = i == 0 ? row : py_max(norm, row);
     }
     if (!(norm * hs <= IV_SAMPLED_MAX_NORM)) return -1;     /* |vx| far beyond any vehicle */
-    if (expm_gamma(A, hs, phid, gamd) != 0) return -1;
+    if (expm_gamma(A, hs, dA, phid, gamd, &ed) != 0) return -1;
     for (int i = 0; i < NX; i++)
-        for (int j = 0; j < NX; j++) Mj[i][j] = i == j ? A[i][j] : fabs(A[i][j]);
+        for (int j = 0; j < NX; j++) Mj[i][j] = i == j ? Au[i][j] : py_max(fabs(Al[i][j]), fabs(Au[i][j]));
     top = -Mj[0][0];
     for (int i = 1; i < NX; i++) top = py_max(top, -Mj[i][i]);
     shift = py_max(0.0, top);
-    if (phi_gamma(Mj, hs, shift, 2, gm) != 0) return -1;
-    matvec(gamd, Bv, gdb);
+    if (phi_gamma(Mj, hs, shift, 2, gm, &eM) != 0) return -1;
+    egdb = mv_err(gamd, ed, Bv, eBv, gdb);
+    /* phi[m] = phi[m-1] phid: errors summed against the computed powers (linear in m, see the runtime) */
+    double nphi[IV_SAMPLED_MAX_SUBSTEPS + 1], cs[IV_SAMPLED_MAX_SUBSTEPS], ndd = norm_abs(phid, 0);
     memcpy(sm->phi[0], eye, sizeof eye);
     for (int i = 0; i < NX; i++) sm->gamb[0][i] = 0.0;
+    sm->ephi[0] = 0.0;
+    sm->egamb[0] = 0.0;
+    nphi[0] = 1.0;
     for (int m = 1; m <= n; m++) {
-        matvec(sm->phi[m - 1], gdb, t);
+        double eg = mv_err(sm->phi[m - 1], sm->ephi[m - 1], gdb, egdb, t);
         for (int i = 0; i < NX; i++) sm->gamb[m][i] = sm->gamb[m - 1][i] + t[i];
+        sm->egamb[m] = up((sm->egamb[m - 1] + eg + 2.0 * U_RND * max_abs(sm->gamb[m], NX)) * SLACK);
+        cs[m - 1] = (nphi[m - 1] * ed + 6.0 * U_RND * nphi[m - 1] * ndd) * SLACK + NX * ETA_RND;
         mul_nxx(sm->phi[m - 1], phid, sm->phi[m]);
+        nphi[m] = norm_abs(sm->phi[m], 0);
+        double e = 0.0;
+        for (int k = 1; k <= m; k++) e += cs[k - 1] * (nphi[m - k] + sm->ephi[m - k]);
+        sm->ephi[m] = up(e * SLACK);
     }
     for (int m = 0; m <= n; m++) mat_abs(sm->phi[m], sm->aphi[m]);
     for (int m = 0; m < n; m++) {
-        mul_nxx(sm->phi[m], gamd, sm->pg[m]);
-        mul_nxx(sm->aphi[m], gm[1], sm->apg[m]);
+        sm->epg[m] = mm_err(sm->phi[m], sm->ephi[m], gamd, ed, sm->pg[m]);
+        sm->eapg[m] = mm_err(sm->aphi[m], sm->ephi[m], gm[1], eM, sm->apg[m]);
     }
     /* the gains: the deadbeat one, one column by one measurement (``_sampled_maps``) */
     const double (*ph)[NX] = sm->phi[n];
@@ -740,7 +984,7 @@ static int sampled_fill(Sampled *sm, double vq, double h)
     sm->nc = 0;
     for (int o = 0; o < nopt; o++) {
         SampledGain *g = &sm->c[sm->nc];
-        double K[NX][NX], KP[NX][NX];
+        double K[NX][NX], KP[NX][NX], eK;
         int finite = 1;
         memset(g->L, 0, sizeof g->L);
         for (int q = 0; q < NY; q++) g->L[MEAS[q]][q] = 1.0;
@@ -758,14 +1002,15 @@ static int sampled_fill(Sampled *sm, double vq, double h)
                 K[i][j] = eye[i][j] - s;
             }
         }
-        mul_nxx(K, ph, g->kphi);
+        eK = up(max_abs(&K[0][0], NX * NX) * U_RND);
+        g->ekphi = mm_err(K, eK, ph, sm->ephi[n], g->kphi);
         mat_abs(g->kphi, g->akphi);
-        matvec(K, sm->gamb[n], g->kgb);
+        g->ekgb = mv_err(K, eK, sm->gamb[n], sm->egamb[n], g->kgb);
         for (int m = 0; m < n; m++) {
-            mul_nxx(K, sm->pg[m], g->kpg[m]);
-            mul_nxx(K, sm->phi[m], KP);
+            g->ekpg[m] = mm_err(K, eK, sm->pg[m], sm->epg[m], g->kpg[m]);
+            double ek = mm_err(K, eK, sm->phi[m], sm->ephi[m], KP);
             mat_abs(KP, KP);
-            mul_nxx(KP, gm[1], g->akpg[m]);
+            g->eakpg[m] = mm_err(KP, ek, gm[1], eM, g->akpg[m]);
         }
         sm->nc++;
     }
@@ -787,58 +1032,94 @@ static const Sampled *sampled_get(Model *m, double vq, double h)
     return sampled_fill(sm, vq, h) == 0 ? sm : NULL;
 }
 
-/* The box of x(t + h) by the model alone from the box X of x(t) (the runtime's ``_sampled_predict``),
- * and what ``sampled_correct`` needs (p->sm_*). 0, or -1 (skipped: no map or no finite enclosure). */
+/* The box of x(t + h) by the model alone from the box X of x(t) (the runtime's ``_sampled_predict``,
+ * rounded rigorously), and what ``sampled_correct`` needs (p->sm_*). 0, or -1 (skipped: no map or no
+ * finite enclosure). */
 static int sampled_predict(Model *m, double h, double vx, double d, const double X[NB], double Bm[NB], Pending *p)
 {
-    double vq = IV_SAMPLED_DV * rint(vx / IV_SAMPLED_DV), dv = vx - vq, adv = fabs(dv);
+    double vq = IV_SAMPLED_DV * rint(vx / IV_SAMPLED_DV), dv = vx - vq, adv = fabs(dv), ad = fabs(d);
     const Sampled *sm = sampled_get(m, vq, h);
-    double c[NX], r[NX], t[NX], T[NB], S[NB];
+    double c[NX], r[NX], a[NX], t[NX], ac0[NX], amo[NX], T[NB], S[NB], tc[NX], tr[NX], atc[NX], ms[NX], rs[NX];
     if (sm == NULL) return -1;
     p->sm_vq = vq;
-    for (int i = 0; i < NX; i++) {
-        p->sm_c0[i] = (X[i] + X[NX + i]) * 0.5;
-        p->sm_r0[i] = (X[NX + i] - X[i]) * 0.5;
+    mid_rad(X, p->sm_c0, p->sm_r0);
+    for (int i = 0; i < NX; i++) ac0[i] = fabs(p->sm_c0[i]);
+    p->sm_s0 = sum_abs(p->sm_c0, NX);
+    {
+        double s = 0.0;
+        for (int i = 0; i < NX; i++) s += p->sm_r0[i];
+        p->sm_s0 = p->sm_s0 + s;
     }
     for (int k = 0; k <= sm->n; k++) {
         matvec(sm->phi[k], p->sm_c0, c);
         for (int i = 0; i < NX; i++) c[i] = c[i] + sm->gamb[k][i] * d;
         matvec(sm->aphi[k], p->sm_r0, r);
+        matvec(sm->aphi[k], ac0, a);
+        for (int i = 0; i < NX; i++) a[i] = a[i] + fabs(sm->gamb[k][i] * d);
+        double e = sm->ephi[k] * p->sm_s0 + sm->egamb[k] * ad;
         for (int i = 0; i < k; i++) {
             matvec(sm->pg[k - 1 - i], p->sm_mo[i], t);
             for (int j = 0; j < NX; j++) c[j] = c[j] + t[j];
             matvec(sm->apg[k - 1 - i], p->sm_ro[i], t);
             for (int j = 0; j < NX; j++) r[j] = r[j] + t[j];
+            for (int j = 0; j < NX; j++) amo[j] = fabs(p->sm_mo[i][j]);
+            matvec_abs(sm->pg[k - 1 - i], amo, t);
+            for (int j = 0; j < NX; j++) a[j] = a[j] + t[j];
+            double sro = 0.0;
+            for (int j = 0; j < NX; j++) sro += p->sm_ro[i][j];
+            e += sm->epg[k - 1 - i] * p->sm_so[i] + sm->eapg[k - 1 - i] * sro;
         }
         for (int i = 0; i < NX; i++) {
-            Bm[i] = c[i] - r[i];
-            Bm[NX + i] = c[i] + r[i];
+            double R = radius(r[i], a[i], e, 8 * k + 8);
+            Bm[i] = dn(c[i] - R);
+            Bm[NX + i] = up(c[i] + R);
         }
         if (k == sm->n) break;
         if (enclose(sm->hs, vx, d, Bm, T) != 0 && comparison_enclosure(sm->hs, vx, d, Bm, T) != 0) return -1;
         for (int i = 0; i < NB; i++) S[i] = 0.0;
         stiffness(T, T + NX, 1, vx * d, S, S + NX);
+        mid_rad(T, tc, tr);
+        mid_rad(S, ms, rs);
+        for (int j = 0; j < NX; j++) atc[j] = fabs(tc[j]);
         for (int i = 0; i < NX; i++) {
-            double tc = 0.0, tr = 0.0;
-            for (int j = 0; j < NX; j++) tc += IV_A1[i][j] * ((T[j] + T[NX + j]) * 0.5);
-            for (int j = 0; j < NX; j++) tr += fabs(IV_A1[i][j]) * ((T[NX + j] - T[j]) * 0.5);
-            p->sm_mo[k][i] = (S[i] + S[NX + i]) * 0.5 + dv * (tc + IV_B1[i] * d);
-            p->sm_ro[k][i] = (S[NX + i] - S[i]) * 0.5 + IV_W[i] + adv * tr;
+            double x = 0.0, ar = 0.0, aa = 0.0, b1 = IV_B1[i];
+            for (int j = 0; j < NX; j++) x += IV_A1[i][j] * tc[j];
+            x = x + b1 * d;
+            p->sm_mo[k][i] = ms[i] + dv * x;
+            for (int j = 0; j < NX; j++) ar += fabs(IV_A1[i][j]) * tr[j];
+            double tt = rs[i] + IV_W[i] + adv * ar;
+            for (int j = 0; j < NX; j++) aa += fabs(IV_A1[i][j]) * atc[j];
+            double sa = fabs(ms[i]) + adv * (aa + fabs(b1 * d));
+            p->sm_ro[k][i] = radius(tt, sa, 0.0, 12);
+        }
+        {
+            double s = sum_abs(p->sm_mo[k], NX), s2 = 0.0;
+            for (int i = 0; i < NX; i++) s2 += p->sm_ro[k][i];
+            p->sm_so[k] = s + s2;
         }
     }
     return all_finite(Bm, NB) ? 0 : -1;
 }
 
 /* The box of x(t + h) once the measured states lie in [ylo, yhi] (the runtime's ``_sampled_correct``):
- * every gain's enclosure, intersected row by row. 0, or -1 (no map). */
+ * every gain's enclosure, rounded rigorously, intersected row by row. 0, or -1 (no map). */
 static int sampled_correct(Model *m, const Pending *p, const double ylo[NY], const double yhi[NY], double out[NB])
 {
     const Sampled *sm = sampled_get(m, p->sm_vq, p->h);
-    double yc[NY], yr[NY], c[NX], r[NX], t[NX];
+    double Y[2 * NY], yc[NY], yr[NY], ayc[NY], ac0[NX], c[NX], r[NX], a[NX], t[NX], amo[NX], ad = fabs(p->d);
+    double sro[IV_SAMPLED_MAX_SUBSTEPS];
     if (sm == NULL) return -1;
     for (int q = 0; q < NY; q++) {
-        yc[q] = (ylo[q] + yhi[q]) * 0.5;
-        yr[q] = (yhi[q] - ylo[q]) * 0.5;
+        Y[q] = ylo[q];
+        Y[NY + q] = yhi[q];
+    }
+    mid_rad_n(Y, NY, yc, yr);
+    for (int q = 0; q < NY; q++) ayc[q] = fabs(yc[q]);
+    for (int i = 0; i < NX; i++) ac0[i] = fabs(p->sm_c0[i]);
+    for (int i = 0; i < sm->n; i++) {
+        double s = 0.0;
+        for (int j = 0; j < NX; j++) s += p->sm_ro[i][j];
+        sro[i] = s;
     }
     for (int i = 0; i < NX; i++) {
         out[i] = -INFINITY;
@@ -853,15 +1134,25 @@ static int sampled_correct(Model *m, const Pending *p, const double ylo[NY], con
         matvec(k->akphi, p->sm_r0, r);
         matvec_y(k->aL, yr, t);
         for (int i = 0; i < NX; i++) r[i] = r[i] + t[i];
+        matvec(k->akphi, ac0, a);
+        for (int i = 0; i < NX; i++) a[i] = a[i] + fabs(k->kgb[i] * p->d);
+        matvec_y(k->aL, ayc, t);
+        for (int i = 0; i < NX; i++) a[i] = a[i] + t[i];
+        double e = k->ekphi * p->sm_s0 + k->ekgb * ad;
         for (int i = 0; i < sm->n; i++) {
             matvec(k->kpg[sm->n - 1 - i], p->sm_mo[i], t);
             for (int j = 0; j < NX; j++) c[j] = c[j] + t[j];
             matvec(k->akpg[sm->n - 1 - i], p->sm_ro[i], t);
             for (int j = 0; j < NX; j++) r[j] = r[j] + t[j];
+            for (int j = 0; j < NX; j++) amo[j] = fabs(p->sm_mo[i][j]);
+            matvec_abs(k->kpg[sm->n - 1 - i], amo, t);
+            for (int j = 0; j < NX; j++) a[j] = a[j] + t[j];
+            e += k->ekpg[sm->n - 1 - i] * p->sm_so[i] + k->eakpg[sm->n - 1 - i] * sro[i];
         }
         for (int i = 0; i < NX; i++) {
-            if (c[i] - r[i] > out[i]) out[i] = c[i] - r[i];
-            if (c[i] + r[i] < out[NX + i]) out[NX + i] = c[i] + r[i];
+            double R = radius(r[i], a[i], e, 8 * sm->n + 8), lo = dn(c[i] - R), hi = up(c[i] + R);
+            if (lo > out[i]) out[i] = lo;
+            if (hi < out[NX + i]) out[NX + i] = hi;
         }
     }
     return 0;
@@ -880,28 +1171,35 @@ static void intersect_box(double *B, const double *S)
 }
 
 /* The prediction (the runtime's ``_predict``): out = [Fbar (8), B (8)], Fbar the hull of F over T and B the
- * box of x(t + h) from the box X of x(t): a damped row with a > 0 exactly (convex combination),
- * the others x(h) in x(0) + h Fbar; intersected with T. */
+ * box of x(t + h) from the box X of x(t): a damped row with a > 0 exactly (convex combination, theta(h)
+ * in [th_lo, th_hi]), the others x(h) in x(0) + h Fbar; intersected with T; rounded outward. */
 static void predict(double h, double vx, double d, const double X[NB], const double T[NB], double out[2 * NB])
 {
     double *fl = out, *fu = out + NX, *bl = out + NB, *bu = out + NB + NX;
     G(vx, d, T, out);
     for (int i = 0; i < NX; i++) {
-        double l = X[i], u = X[NX + i];
-        if (IV_DAMPED[i] && decay(i, vx) > 0.0) {
-            double a = decay(i, vx), th = -expm1(-a * h) / a;
-            bl[i] = l + th * (fl[i] - a * l);
-            bu[i] = u + th * (fu[i] - a * u);
-            fl[i] -= a * T[NX + i];
-            fu[i] -= a * T[i];
-        } else {
-            if (IV_DAMPED[i]) {
-                double a = decay(i, vx);
-                fl[i] -= a * T[i];
-                fu[i] -= a * T[NX + i];
+        double l = X[i], u = X[NX + i], alo, ahi, pl, pu, tl, th, t;
+        if (IV_DAMPED[i]) {
+            decay(i, vx, &alo, &ahi);
+            if (alo > 0.0) {
+                theta(alo, ahi, h, &tl, &th);
+                product_hull(alo, ahi, l, l, &pl, &pu);
+                t = dn(fl[i] - pu);
+                bl[i] = dn(l + py_min(dn(tl * t), dn(th * t)));
+                product_hull(alo, ahi, u, u, &pl, &pu);
+                t = up(fu[i] - pl);
+                bu[i] = up(u + py_max(up(tl * t), up(th * t)));
             }
-            bl[i] = l + h * fl[i];
-            bu[i] = u + h * fu[i];
+            product_hull(-ahi, -alo, T[i], T[NX + i], &pl, &pu);
+            fl[i] = dn(fl[i] + pl);
+            fu[i] = up(fu[i] + pu);
+            if (alo <= 0.0) {
+                bl[i] = dn(l + dn(h * fl[i]));
+                bu[i] = up(u + up(h * fu[i]));
+            }
+        } else {
+            bl[i] = dn(l + dn(h * fl[i]));
+            bu[i] = up(u + up(h * fu[i]));
         }
         if (bl[i] < T[i]) bl[i] = T[i];
         if (bu[i] > T[NX + i]) bu[i] = T[NX + i];
@@ -911,45 +1209,61 @@ static void predict(double h, double vx, double d, const double X[NB], const dou
 /* ------------------------------------------------------------------ eq. (23) over a step (step 2) */
 /* midpoint oc and radius orad of omega = (vx - vx_j) A1 x + the stiffness part over the box
  * [lo, hi] (midpoint c, radius r), plus, with_input, the input part (vx - vx_j) B1 delta (exact)
- * and the disturbance bound (the runtime's ``_omega``; eq. 25 via Lemma 3) */
+ * and the disturbance bound (the runtime's ``_omega``; eq. 25 via Lemma 3); the radius rigorous */
 static void omega(int mode, double vx, double d, const double *lo, const double *hi, const double c[NX],
                   const double r[NX], int with_input, double oc[NX], double orad[NX])
 {
-    double dv = vx - IV_MODE_VX[mode], adv = dv >= 0.0 ? dv : -dv, dvd = dv * d, vd = vx * d;
+    double dv = vx - IV_MODE_VX[mode], adv = dv >= 0.0 ? dv : -dv, dvd = dv * d, vd = vx * d, ac[NX];
     double sl[NX] = {0.0}, su[NX] = {0.0};
+    for (int j = 0; j < NX; j++) ac[j] = fabs(c[j]);
     stiffness(lo, hi, with_input, vd, sl, su);
     for (int i = 0; i < NX; i++) {
-        double mid = 0.0, rad = 0.0;
+        double mid = 0.0, rad = 0.0, sh = 0.0;
         if (row_nonzero(IV_A1[i])) {
             mid += dv * acc(0.0, IV_A1[i], c, NX);
             rad += adv * acc_abs(0.0, IV_A1[i], r, NX);
+            sh += adv * acc_abs(0.0, IV_A1[i], ac, NX);
         }
-        if (with_input && IV_B1[i] != 0.0) mid += dvd * IV_B1[i];
+        if (with_input && IV_B1[i] != 0.0) {
+            mid += dvd * IV_B1[i];
+            sh += fabs(dvd * IV_B1[i]);
+        }
         if (with_input && IV_W[i] != 0.0) rad += IV_W[i];
         if (i == ROW_AY || i == ROW_YAW_ACC) {
-            mid += (sl[i] + su[i]) * 0.5;
-            rad += (su[i] - sl[i]) * 0.5;
+            double ms = (sl[i] + su[i]) * 0.5;
+            mid += ms;
+            rad += up(py_max(su[i] - ms, ms - sl[i]));
+            sh += fabs(ms);
         }
         oc[i] = mid;
-        orad[i] = rad;
+        orad[i] = radius(rad, sh, 0.0, 12);
     }
 }
 
-/* [a, b] := [a, b] intersected with the hull of P x over the box of midpoint c, radius r (eq. 20);
- * the hull alone where they do not meet ([-inf, inf]: no xi) */
+/* [a, b] := [a, b] intersected with the hull of P x over the box of midpoint c, radius r (eq. 20,
+ * rounded outward); the hull alone where they do not meet ([-inf, inf]: no xi) */
 static void rebase(const double P[NX][NX], const double c[NX], const double r[NX], double xi[NB])
 {
+    double ac[NX];
+    for (int j = 0; j < NX; j++) ac[j] = fabs(c[j]);
     for (int i = 0; i < NX; i++) {
-        double p = acc(0.0, P[i], c, NX), q = acc_abs(0.0, P[i], r, NX), t;
-        t = p - q;
-        if (t > xi[i]) xi[i] = t;
-        t = p + q;
-        if (t < xi[NX + i]) xi[NX + i] = t;
+        double p = acc(0.0, P[i], c, NX), q = acc_abs(0.0, P[i], r, NX);
+        double R = radius(q, acc_abs(0.0, P[i], ac, NX), 0.0, 4), pl = dn(p - R), pu = up(p + R);
+        if (pl > xi[i]) xi[i] = pl;
+        if (pu < xi[NX + i]) xi[NX + i] = pu;
         if (xi[i] > xi[NX + i]) {
-            xi[i] = p - q;
-            xi[NX + i] = p + q;
+            xi[i] = pl;
+            xi[NX + i] = pu;
         }
     }
+}
+
+/* sum |mid| + sum rad (the runtime's ``S`` in ``_correct``) */
+static double size_mr(const double *mid, const double *rad, int n)
+{
+    double s = sum_abs(mid, n), t = 0.0;
+    for (int j = 0; j < n; j++) t += rad[j];
+    return s + t;
 }
 
 /* The correction of the pending step [t - h', t] once y(t) is known (the runtime's ``_correct``): xi(t) =
@@ -957,39 +1271,78 @@ static void rebase(const double P[NX][NX], const double c[NX], const double r[NX
  * nonnegative kernels (order preserving); y(s) the interpolation of its samples (weights W0, W1)
  * plus a remainder (W2 with [y''] on the smooth rows, W3 otherwise); omega over the box at the
  * start (Gam) and its growth over Fbar (Gam1); Omega by eq. (24). Then the box at t, x = xi + E y,
- * intersected with the current box B and, on the measured rows, with [ylo, yhi]. out = [box; xi]. */
+ * intersected with the current box B and, on the measured rows, with [ylo, yhi]. Rounded rigorously
+ * (the coefficients' error k->err, the design residuals IV_RESIDUAL, the sums'). out = [box; xi]. */
 static void correct(const Core *k, const Pending *p, const double ylo[NY], const double yhi[NY],
                     const double B[NB], double out[2 * NB])
 {
     const int mode = p->mode;
-    const double *l = p->X, vx = p->vx, d = p->d;
-    double xi[NB], c[NX], r[NX], xc[NX], xr[NX], fc[NX], fr[NX], yc[NY], yr[NY], c0[NY], r0[NY];
-    double dc[NY] = {0.0}, dr[NY] = {0.0}, frm[NY], oc0[NX], or0[NX], oc1[NX], or1[NX];
+    const double *l = p->X, vx = p->vx, d = p->d, h = p->h;
+    double xi[NB], c[NX], r[NX], xc[NX], xr[NX], fc[NX], fr[NX], afc[NX], Y[2 * NY], yc[NY], yr[NY];
+    double c0[NY], r0[NY], dc[NY] = {0.0}, dr[NY] = {0.0}, frm[NY], oc0[NX], or0[NX], oc1[NX], or1[NX];
+    double ax[NX], a0[NY], ay[NY], adc[NY], ao0[NX], ao1[NX], avx = fabs(vx), ad = fabs(d);
     mid_rad(l, c, r);
     memcpy(xi, p->xi, sizeof xi);
     rebase(IV_P[mode], c, r, xi);
     mid_rad(xi, xc, xr);
     mid_rad(p->Fb, fc, fr);
     for (int q = 0; q < NY; q++) {
+        Y[q] = ylo[q];
+        Y[NY + q] = yhi[q];
+    }
+    mid_rad_n(Y, NY, yc, yr);
+    for (int j = 0; j < NX; j++) afc[j] = fabs(fc[j]);
+    for (int q = 0; q < NY; q++) {
         int j = MEAS[q];
-        yc[q] = (ylo[q] + yhi[q]) * 0.5;
-        yr[q] = (yhi[q] - ylo[q]) * 0.5;
         c0[q] = c[j];
         r0[q] = r[j];
         frm[q] = fr[j];
         if (!IV_SMOOTH[j]) continue;
         /* [y''] of a smooth row: its linear form (A0 + vx A1)[j, :] over Fbar */
+        double sh;
         dc[q] = acc(0.0, IV_A0[j], fc, NX);
-        if (row_nonzero(IV_A1[j])) dc[q] += vx * acc(0.0, IV_A1[j], fc, NX);
+        sh = acc_abs(0.0, IV_A0[j], afc, NX);
+        if (row_nonzero(IV_A1[j])) {
+            dc[q] += vx * acc(0.0, IV_A1[j], fc, NX);
+            sh += avx * acc_abs(0.0, IV_A1[j], afc, NX);
+        }
         for (int i = 0; i < NX; i++)
             if (IV_A1[j][i] == 0.0 && IV_A0[j][i] != 0.0) dr[q] += fabs(IV_A0[j][i]) * fr[i];
         for (int i = 0; i < NX; i++)
-            if (IV_A1[j][i] != 0.0) dr[q] += fabs(IV_A0[j][i] + vx * IV_A1[j][i]) * fr[i];
+            if (IV_A1[j][i] != 0.0) {
+                dr[q] += fabs(IV_A0[j][i] + vx * IV_A1[j][i]) * fr[i];
+                sh += (fabs(IV_A0[j][i]) + avx * fabs(IV_A1[j][i])) * fr[i];
+            }
+        dr[q] = radius(dr[q], sh, 0.0, 16);
     }
     omega(mode, vx, d, l, l + NX, c, r, 1, oc0, or0);
     omega(mode, vx, d, p->Fb, p->Fb + NX, fc, fr, 0, oc1, or1);
+    /* the coefficients' errors and the design residuals' (|x| <= xmax over the step) */
+    double sfrm = 0.0;
+    for (int q = 0; q < NY; q++) sfrm += frm[q];
+    double e = k->err_phi * size_mr(xc, xr, NX) + k->err_w0j * size_mr(c0, r0, NY) + k->err_w1j * size_mr(yc, yr, NY)
+               + k->err_w2j * size_mr(dc, dr, NY) + k->err_w3j * sfrm + k->err_gp * size_mr(oc0, or0, NX)
+               + k->err_gp * size_mr(oc1, or1, NX) + k->err_gh * ad;
+    double xmax = 0.0;
+    for (int j = 0; j < NX; j++) {
+        double t = fabs(c[j]) + r[j] + h * py_max(fabs(p->Fb[j]), fabs(p->Fb[NX + j]));
+        xmax = j == 0 ? t : py_max(xmax, t);
+    }
+    xmax *= 1.0 + 8.0 * U_RND;
+    double rho1 = IV_RESIDUAL[mode][0], rho2 = IV_RESIDUAL[mode][1], rho3 = IV_RESIDUAL[mode][2];
+    double eres = rho1 * xmax + rho2 * ad;
+    for (int j = 0; j < NX; j++) {
+        ax[j] = fabs(xc[j]);
+        ao0[j] = fabs(oc0[j]);
+        ao1[j] = fabs(oc1[j]);
+    }
+    for (int q = 0; q < NY; q++) {
+        a0[q] = fabs(c0[q]);
+        ay[q] = fabs(yc[q]);
+        adc[q] = fabs(dc[q]);
+    }
     for (int i = 0; i < NX; i++) {
-        double nc = acc(0.0, k->phi[i], xc, NX), nr = acc(0.0, k->phi[i], xr, NX);
+        double nc = acc(0.0, k->phi[i], xc, NX), nr = acc(0.0, k->phi[i], xr, NX), na;
         nc = acc(nc, k->w0j[i], c0, NY);
         nc = acc(nc, k->w1j[i], yc, NY);
         nc = acc(nc, k->w2j_neg[i], dc, NY);
@@ -1002,16 +1355,25 @@ static void correct(const Core *k, const Pending *p, const double ylo[NY], const
         nr = acc(nr, k->w3aj2[i], frm, NY);
         nr = acc(nr, k->gap[i], or0, NX);
         nr = acc(nr, k->g1ap[i], or1, NX);
+        na = acc(0.0, k->phi[i], ax, NX);        /* the shadow of nc */
+        na = acc(na, k->aw0j[i], a0, NY);
+        na = acc(na, k->aw1j[i], ay, NY);
+        na = acc(na, k->w2aj[i], adc, NY);
+        na = acc(na, k->gap[i], ao0, NX);
+        na = acc(na, k->g1ap[i], ao1, NX);
+        na += fabs(k->gh[i] * d);
+        double ei = e + k->gsum[i] * eres, R = radius(nr, na, ei, 24);
         /* the box at t: x = xi + E y(t), intersected with B */
         double bc = acc(nc, IV_E[mode][i], yc, NY), br = acc_abs(nr, IV_E[mode][i], yr, NY);
-        double xl = bc - br, xu = bc + br;
+        double Rb = radius(br, acc_abs(na, IV_E[mode][i], ay, NY), ei + rho3 * xmax, 26);
+        double xl = dn(bc - Rb), xu = up(bc + Rb);
         if (xl < B[i]) xl = B[i];
         if (xu > B[NX + i]) xu = B[NX + i];
         if (xl > xu) xl = B[i], xu = B[NX + i];
         out[i] = xl;
         out[NX + i] = xu;
-        out[NB + i] = nc - nr;
-        out[NB + NX + i] = nc + nr;
+        out[NB + i] = dn(nc - R);
+        out[NB + NX + i] = up(nc + R);
     }
     for (int q = 0; q < NY; q++) {       /* the measured states: with their measurement */
         int j = MEAS[q];

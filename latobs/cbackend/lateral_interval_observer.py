@@ -68,6 +68,8 @@ def emit(data: dict) -> CModel:
         c_array("IV_N", mode("N")), c_array("IV_P", mode("P")), c_array("IV_E", mode("E")),
         c_array("IV_J", mode("J")), c_array("IV_H", mode("H")),
         c_array("IV_MAPS_H0", mode("maps_h0")),
+        c_array("IV_MAPS_H0_ERROR", mode("maps_h0_error")),   # each entry's error bound (their bracket)
+        c_array("IV_RESIDUAL", mode("residual")),             # bounds of the design residuals R1, R2, R3
     ])
     return CModel(header=header, states=STATES, n_event_indicators=N_EVENT_INDICATORS,
                   dependencies=_dependencies(tb))

@@ -89,6 +89,25 @@ def checks(data: dict) -> list:
                        max(_rel(a, b, 1e-300) for a, b in zip(maps, ref)), REL))
         out.append(Check(f"{name} step maps >= 0 (order preserving)", float(maps.min()), 0.0,
                          bool(maps.min() >= 0.0), ">="))
+        # the maps' bracket (rigorous rounding): at least the reference's distance, and tight
+        gap = max(float(np.max(np.abs(a - b))) for a, b in zip(maps, ref))
+        e = float(tm["maps_h0_error"])
+        out.append(Check(f"{name} step maps' error bound >= |maps - reference| - 4 ulps", e,
+                         gap - 4 * np.spacing(float(np.max(maps))), bool(e >= gap - 4 * np.spacing(float(np.max(maps)))),
+                         ">="))
+        out.append(_le(f"{name} step maps' error bound relative to the largest entry", e / float(np.max(maps)), 1e-12))
+        # the design residuals' bounds (R1 = P A_j - N P - J C, R2 = P B_j - H, R3 = I - E C - P)
+        P_, E_, J_ = (np.asarray(tm[k], float) for k in ("P", "E", "J"))
+        Aj = A0 + float(tm["vx"]) * A1
+        C_ = np.zeros((2, 4))
+        C_[0, 1] = C_[1, 2] = 1.0
+        scale = max(1.0, float(np.max(np.abs(N))))
+        R1 = np.abs(P_ @ Aj - N @ P_ - J_ @ C_).sum(axis=1).max()
+        rho = [float(x) for x in tm["residual"]]
+        out.append(Check(f"{name} design residual bound rho1 >= ||P A_j - N P - J C|| (float64) - 1e-13 scale",
+                         rho[0], float(R1) - 1e-13 * scale, bool(rho[0] >= R1 - 1e-13 * scale), ">="))
+        out.append(_le(f"{name} design residual bounds (rho1, rho2, rho3) relative to max |N|",
+                       max(rho) / scale if all(np.isfinite(rho)) else float("inf"), 1e-9))
         # the enclosure's substeps: rho bounds the spectral radius of the band's Metzler majorant
         vx = max(abs(float(m["vx"])), float(data["switching"]["edges"][k + 1]))
         a = A0 + vx * A1

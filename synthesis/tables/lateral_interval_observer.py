@@ -12,6 +12,7 @@ the very doubles the runtimes would compute (``phi_gamma``: the same operations 
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 from ...fmu_src.linalg import dot, matrix as _matrix, phi_gamma   # the runtime's own arithmetic
 from ...fmu_src.spec import DEFAULT_STEP   # s: the FMU's default communication step (the maps stored for it)
@@ -21,7 +22,7 @@ TOL = 1e-9                    # relative tolerance of the design file's structur
 
 #: the runtime's tuning (both backends); see the runtime page for what each one does
 TUNING = {
-    "consistency_tol": 1e-9,      # measurement outside the bounds by less (x (1 + |y|)): rounding
+    "consistency_tol": 4 * 2.0 ** -52,   # a gap of at most 4 ulps (x (1 + |y|)) is not an inconsistency
     "enclosure_tries": 10,        # a priori enclosure attempts before the comparison bound
     "enclosure_grow": 2.0,        # inflation of the extents of T(X_k), then of the last T(S) ..
     "enclosure_mult": 1.0,        # .. times this per failed attempt
@@ -247,6 +248,39 @@ def _read_stiffness(data: dict, model) -> dict:
             "symmetric": symmetric(*dcf) and symmetric(*dcr)}
 
 
+def _norm_up(R) -> float:
+    """||R||_inf of an exact rational matrix, as the next double above (a bound)."""
+    x = max(sum((abs(v) for v in row), Fraction(0)) for row in R)
+    f = float(x)
+    return f if Fraction(f) >= x else math.nextafter(f, math.inf)
+
+
+def residuals(model, mode) -> list[float]:
+    """[rho1, rho2, rho3]: upper bounds of ||R1||, ||R2||, ||R3|| (inf-norm), evaluated exactly in
+    rationals from the doubles the runtime uses: R1 = P A_j - N P - J C, R2 = P B_j - H, R3 = I - E C
+    - P (A_j = A0 + vx_j A1, B_j = vx_j B1, C = [e2, e3]). Eq. (30)/(33) make them 0; the solved
+    and rounded design leaves them ~1e-16 relative: the runtime bounds their effect (``_correct``)."""
+    F = Fraction
+    vx = F(mode["vx"])
+    A = [[F(a) + vx * F(b) for a, b in zip(r0, r1)] for r0, r1 in zip(model["A0"], model["A1"])]
+    Bj = [vx * F(b) for b in model["B1"]]
+    P = [[F(x) for x in row] for row in mode["P"]]
+    N = [[F(x) for x in row] for row in mode["N"]]
+    J = [[F(x) for x in row] for row in mode["J"]]
+    E = [[F(x) for x in row] for row in mode["E"]]
+    H = [F(x) for x in mode["H"]]
+    meas = (1, 2)
+    r = range(NX)
+    PA = [[sum((P[i][k] * A[k][j] for k in r), F(0)) for j in r] for i in r]
+    NP = [[sum((N[i][k] * P[k][j] for k in r), F(0)) for j in r] for i in r]
+    JC = [[J[i][meas.index(j)] if j in meas else F(0) for j in r] for i in r]
+    EC = [[E[i][meas.index(j)] if j in meas else F(0) for j in r] for i in r]
+    R1 = [[PA[i][j] - NP[i][j] - JC[i][j] for j in r] for i in r]
+    R2 = [[sum((P[i][k] * Bj[k] for k in r), F(0)) - H[i]] for i in r]
+    R3 = [[(1 if i == j else 0) - EC[i][j] - P[i][j] for j in r] for i in r]
+    return [_norm_up(R1), _norm_up(R2), _norm_up(R3)]
+
+
 def compute(data: dict) -> dict:
     """The interval observer's tables from its design dict (ValueError naming a bad field)."""
     try:
@@ -274,7 +308,9 @@ def compute(data: dict) -> dict:
         # enclosure substeps: hs rho(|A|) <= substep_rho_h at the band's top speed (the damped
         # diagonal, integrated exactly, left out)
         m["rho"] = _perron(majorant(model, max(abs(m["vx"]), edges[i + 1]), damped))
-        m["maps_h0"] = list(phi_gamma(m["N"], DEFAULT_STEP, m["eta"], order=3))
+        *maps, m["maps_h0_error"] = phi_gamma(m["N"], DEFAULT_STEP, m["eta"], order=3, with_error=True)
+        m["maps_h0"] = maps
+        m["residual"] = residuals(model, m)
     return {"h0": DEFAULT_STEP, "model": model, "meas": meas, "damped": damped, "smooth": smooth,
             "probe_smooth": probe_smooth,
             "stiffness": stiff, "edges": edges, "modes": modes, "nu": nu, "x0_halfwidth": w0,
