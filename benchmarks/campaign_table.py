@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 
 from latobs.campaign_runner import run_campaign
+from latobs.validation.metrics import quantity_of
 
 P000 = ["SideslipBankObserver", "SideslipBankObserverTire", "SideslipBankObserverPaper",
         "SideslipBankObserverTirePaper"]
@@ -43,7 +44,7 @@ def table(summary: dict) -> list[str]:
     for key, e in summary["versus_baselines"].items():
         q = e["quantity"]
         rms = (summary["metrics"].get(f"{key}.rms") or summary["metrics"].get(f"{key}.midpoint_rms") or {}).get("p50")
-        unit = "°" if q in RMS_DEG else ""
+        unit = "°" if quantity_of(q) in RMS_DEG else ""
         rms_s = "—" if rms is None else (f"{math.degrees(rms):.3g}°" if unit else f"{rms:.3g}")
         best = max(e["best_baseline_runs"], key=e["best_baseline_runs"].get) if e["best_baseline_runs"] else "—"
         valid = (e.get("valid") or {}).get("win_fraction")

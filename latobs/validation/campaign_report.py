@@ -55,11 +55,12 @@ _IN_UNIT = ("rms", "max_abs", "mean_width", "max_violation")
 def display(column: str) -> tuple[float, str]:
     """(factor, unit) of a metric column in the report: angles in deg, angular rates in deg/s,
     other quantities in SI (:func:`latobs.validation.units.display_scale`); counts: (1, "samples")."""
+    from .metrics import quantity_of
     from .units import display_scale
 
     parts = column.split(".")
     if len(parts) >= 3 and (parts[-1] in _IN_UNIT or parts[-1].startswith("rms_") or parts[-1].endswith("_rms")):
-        return display_scale(parts[-2])
+        return display_scale(quantity_of(parts[-2]))     # X_filtered in the unit of X
     return 1.0, "samples" if parts[-1] in ("violations", "nonfinite") else ""
 
 

@@ -107,8 +107,10 @@ def check_supports(c: Campaign, fmus: list[FmuRef]) -> None:
 def observer_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mapping[str, np.ndarray],
                      after: np.ndarray, model_name: str | None) -> dict[str, float]:
     """Flat metrics of one observer in one run, on the samples ``after`` (t >= settle time):
-    ``LABEL.X.rms`` and ``LABEL.X.max_abs`` of every estimate ``X_hat`` that has a truth, and for
-    every interval ``X_lower``/``X_upper``: ``LABEL.X.violations`` (samples outside, or a bound
+    ``LABEL.X.rms`` and ``LABEL.X.max_abs`` of every estimate ``X_hat`` that has a truth (and
+    ``LABEL.X_filtered.rms``, ``.max_abs`` of a filtered estimate ``X_filtered``, scored one step
+    behind: its row k + 1 against the truth at row k, :func:`latobs.validation.metrics.one_step_behind`),
+    and for every interval ``X_lower``/``X_upper``: ``LABEL.X.violations`` (samples outside, or a bound
     not finite), ``LABEL.X.max_violation`` and ``LABEL.X.mean_width``; ``LABEL.nonfinite``: samples
     of any scored output that are not finite. SI units of the signals. The truth is chosen as in
     :mod:`latobs.validation.metrics` (its REFERENCE_SIGNALS map)."""
@@ -126,6 +128,15 @@ def observer_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
             nonfinite += int(np.sum(~np.isfinite(e)))
             row[f"{label}.{q}.rms"] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
             row[f"{label}.{q}.max_abs"] = float(np.max(np.abs(e))) if e.size else math.nan
+        elif name.endswith(metrics.FILTERED):
+            src = metrics.truth_signal(metrics.quantity_of(name), truth, model_name)
+            if src is None:
+                continue
+            yy, xx, sel = metrics.one_step_behind(y, truth[src], after)
+            e = (yy - xx)[sel]
+            nonfinite += int(np.sum(~np.isfinite(e)))
+            row[f"{label}.{name}.rms"] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
+            row[f"{label}.{name}.max_abs"] = float(np.max(np.abs(e))) if e.size else math.nan
         elif name.endswith("_lower") and name[:-6] + "_upper" in outputs:
             q = name[:-6]
             src = metrics.truth_signal(q, truth, model_name)
@@ -152,7 +163,8 @@ def baseline_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
                      initial: str = "rest") -> dict[str, float]:
     """The observer ``label`` against the baselines of ``validate`` on the same run and samples.
 
-    For every quantity X the observer estimates (``X_hat``, or an interval by its midpoint) that it
+    For every quantity X the observer estimates (``X_hat``, ``X_filtered`` under its own name, scored
+    one step behind with the baselines on the same samples, or an interval by its midpoint) that it
     does not read as an input and that has a truth: the baselines of
     :func:`latobs.validation.metrics.baselines_for` (zero, the bicycle or the steady turn, from the
     design's vehicle, driven by ``drive``: the signals the observers received) are scored on the
@@ -167,22 +179,28 @@ def baseline_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
     from . import metrics
 
     ins = set(inputs)
-    targets: dict[str, tuple[np.ndarray, str, str]] = {}     # X -> (estimate, truth signal, what)
+    # key (X, or X_filtered) -> (estimate, truth signal, what, X, scored one step behind)
+    targets: dict[str, tuple[np.ndarray, str, str, str, bool]] = {}
     for name, y in outputs.items():
-        q = None
+        q = key = None
         if name.endswith("_hat"):
-            q, est = name[:-4], np.asarray(y, dtype=float)
+            q = key = name[:-4]
+            est = np.asarray(y, dtype=float)
+        elif name.endswith(metrics.FILTERED):
+            q, key, est = metrics.quantity_of(name), name, np.asarray(y, dtype=float)
         elif name.endswith("_lower") and name[:-6] + "_upper" in outputs and name[:-6] + "_hat" not in outputs:
-            q = name[:-6]
+            q = key = name[:-6]
             est = 0.5 * (np.asarray(y, dtype=float) + np.asarray(outputs[q + "_upper"], dtype=float))
         if q is None or q in ins:
             continue
         src = metrics.truth_signal(q, truth, model_name)
         if src is not None:
-            targets[q] = (est, src, "estimate" if name.endswith("_hat") else "midpoint")
+            what = "midpoint" if name.endswith("_lower") else "estimate"
+            targets[key] = (est, src, what, q, name.endswith(metrics.FILTERED))
     if not targets:
         return {}
-    b = metrics.baselines_for(time, drive, list(targets), dict(design) if design else None, model_name,
+    quantities = list(dict.fromkeys(t[3] for t in targets.values()))
+    b = metrics.baselines_for(time, drive, quantities, dict(design) if design else None, model_name,
                               initial=initial)
     flag = next((f for f in VALIDITY_FLAGS if f in outputs), None)
     sels = {"": after}
@@ -194,26 +212,31 @@ def baseline_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
     def rms(e):
         return float(np.sqrt(np.mean(e * e))) if e.size else None
 
-    for q, (est, src, what) in targets.items():
+    for key, (est, src, what, q, lag) in targets.items():
         x = np.asarray(truth[src], dtype=float)
         missing = {base: u[q] for base, u in b["unavailable"].items() if q in u}
         for pre, sel in sels.items():
-            obs = rms((est - x)[sel])
-            base_rms = {base: rms((np.asarray(ser[q], dtype=float) - x)[sel])
-                        for base, ser in b["series"].items() if q in ser}
+            series = {base: np.asarray(ser[q], dtype=float) for base, ser in b["series"].items() if q in ser}
+            if lag:            # row k + 1 estimates row k: the baselines on rows 0 .. n - 2, as the estimate
+                e, xs, sel = metrics.one_step_behind(est, x, sel)
+                series = {base: v[:-1] for base, v in series.items()}
+            else:
+                e, xs = est, x
+            obs = rms((e - xs)[sel])
+            base_rms = {base: rms((v - xs)[sel]) for base, v in series.items()}
             if not base_rms and not missing:
                 continue
             v = metrics.baseline_summary(obs if obs is None or math.isfinite(obs) else None, base_rms, "rms",
                                          what, missing)
             if pre:
-                row[f"{label}.{q}.valid_rms"] = math.nan if obs is None else obs
+                row[f"{label}.{key}.valid_rms"] = math.nan if obs is None else obs
             else:
                 if what == "midpoint":
-                    row[f"{label}.{q}.midpoint_rms"] = math.nan if obs is None else obs
+                    row[f"{label}.{key}.midpoint_rms"] = math.nan if obs is None else obs
                 for base, r in base_rms.items():
-                    row[f"{label}.{q}.rms_{base}"] = math.nan if r is None else r
-            row[f"{label}.{q}.{pre}ratio"] = math.nan if v["ratio"] is None else v["ratio"]
-            row[f"{label}.{q}.{pre}wins"] = math.nan if v["observer_best"] is None else float(v["observer_best"])
+                    row[f"{label}.{key}.rms_{base}"] = math.nan if r is None else r
+            row[f"{label}.{key}.{pre}ratio"] = math.nan if v["ratio"] is None else v["ratio"]
+            row[f"{label}.{key}.{pre}wins"] = math.nan if v["observer_best"] is None else float(v["observer_best"])
     return row
 
 

@@ -97,15 +97,17 @@ def metric_columns(rows: list[Mapping[str, Any]]) -> list[str]:
 
 def headline_columns(metrics: Mapping[str, Any], inputs: Mapping[str, list[str]]) -> list[str]:
     """The metric columns ranked for the worst runs and plotted: the RMS error of each estimate of
-    a quantity the observer does not measure (``beta``, ``bank_angle``, ``Fyf``, not the filtered
-    ``yaw_rate`` it reads), and each interval's violation count and mean width (the widest runs:
+    a quantity the observer does not measure (``beta``, ``bank_angle``, ``Fyf``, ``beta_filtered``; not
+    the estimate of the ``yaw_rate`` it reads), and each interval's violation count and mean width (the widest runs:
     an interval that never misses the truth is judged by how wide it is). ``inputs``: {label:
     its inputs}."""
+    from .metrics import quantity_of
+
     out = []
     for col in metrics:
         label, _, rest = col.partition(".")
         q, _, what = rest.rpartition(".")
-        if what in ("violations", "mean_width") or (what == "rms" and q not in inputs.get(label, ())):
+        if what in ("violations", "mean_width") or (what == "rms" and quantity_of(q) not in inputs.get(label, ())):
             out.append(col)
     return out
 

@@ -387,6 +387,39 @@ def test_a_run_scores_the_observer_beside_the_baselines_on_the_same_samples():
     assert math.isnan(none["O.beta.wins"]) and "O.beta.rms_bicycle" not in none
 
 
+def test_a_filtered_estimate_is_scored_one_step_behind_in_a_campaign_run():
+    """X_filtered (a filter's x(k|k), published one step behind): row k + 1 against the truth at row k,
+    the baselines on the same samples (rows 0 .. n - 2), under its own name beside X_hat; a
+    filtered estimate of a quantity the observer reads is not scored against baselines."""
+    from latobs.validation import baselines as bl
+
+    n = 1201
+    t = np.arange(n) * 0.005
+    delta = 0.02 * np.sin(1.3 * t)
+    vx = np.full(n, 20.0)
+    bike = bl.bicycle(t, delta, vx, SEDAN_LIKE["parameters"])
+    beta = bike["beta"] + 0.002 * np.sin(5 * t)
+    truth = {"beta": beta, "yaw_rate": bike["yaw_rate"], "delta": delta, "vx": vx}
+    after = t >= 1.0
+    delayed = np.concatenate([[0.0], beta[:-1]])           # the truth one row late: a perfect x(k|k)
+    outputs = {"beta_hat": beta + 0.01, "beta_filtered": delayed, "yaw_rate_filtered": truth["yaw_rate"] + 1.0}
+    row = cr.observer_metrics("O", outputs, truth, after, "SideslipKalmanFilter")
+    assert row["O.beta_filtered.rms"] == 0.0 and row["O.beta_filtered.max_abs"] == 0.0
+    assert row["O.beta.rms"] == pytest.approx(0.01)
+    same = cr.observer_metrics("O", {"beta_filtered": beta}, truth, after, "SideslipKalmanFilter")
+    assert same["O.beta_filtered.rms"] > 0                 # not delayed: scored against the wrong time
+    b = cr.baseline_metrics("O", outputs, truth, truth, t, after, "SideslipKalmanFilter", {"vehicle": SEDAN_LIKE},
+                            inputs=["yaw_rate", "delta", "vx"])
+    sel = after[:-1]
+    assert b["O.beta_filtered.rms_zero"] == pytest.approx(float(np.sqrt(np.mean(beta[:-1][sel] ** 2))), rel=1e-12)
+    assert b["O.beta_filtered.rms_bicycle"] == pytest.approx(
+        float(np.sqrt(np.mean((bike["beta"][:-1] - beta[:-1])[sel] ** 2))), rel=1e-12)
+    assert b["O.beta_filtered.ratio"] == 0.0 and b["O.beta_filtered.wins"] == 1.0
+    assert b["O.beta.rms_zero"] == pytest.approx(float(np.sqrt(np.mean(beta[after] ** 2))), rel=1e-12)
+    assert not any(k.startswith("O.yaw_rate") for k in b)
+    assert cs.headline_columns(row, {"O": ["yaw_rate", "delta", "vx"]}) == ["O.beta.rms", "O.beta_filtered.rms"]
+
+
 def test_the_summary_gives_each_observers_ratio_distribution_win_fraction_and_worst_runs(tmp_path):
     from latobs.validation import campaign_report
 
