@@ -163,7 +163,7 @@ def omega_bounds(P, wl, wu):
 
 # -- outward rounding of the published bounds ----------------------------------------------------
 _U = 2.0 ** -53                 # the unit roundoff of doubles
-_TINY = 4.0 * 2.0 ** -1074      # the rounding errors' absolute floor (subnormal results)
+_TINY = 4.0 * _ETA              # the rounding errors' absolute floor (subnormal results)
 
 
 def _outward_atan(q: float, side: int) -> float:
@@ -822,14 +822,14 @@ class IntervalObserver:
         yc, yr = _mid_rad(Y)
         c0, r0, frm = [c[j] for j in MEAS], [r[j] for j in MEAS], [fr[j] for j in MEAS]
         dc, dr = [0.0, 0.0], [0.0, 0.0]
+        afc = [abs(x) for x in fc]
         for q, j in enumerate(MEAS):
             if self._smooth[j]:         # [y''] of a smooth row: (A0 + vx A1)[j, :] over Fbar
-                sh = 0.0
                 dc[q] = _acc(0.0, md["A0"][j], fc)
-                sh = _acc_abs(0.0, md["A0"][j], [abs(x) for x in fc])
+                sh = _acc_abs(0.0, md["A0"][j], afc)     # the shadow of dc (rigorous rounding)
                 if any(a != 0.0 for a in md["A1"][j]):
                     dc[q] += vx * _acc(0.0, md["A1"][j], fc)
-                    sh += abs(vx) * _acc_abs(0.0, md["A1"][j], [abs(x) for x in fc])
+                    sh += abs(vx) * _acc_abs(0.0, md["A1"][j], afc)
                 for i in _R:
                     if md["A1"][j][i] == 0.0 and md["A0"][j][i] != 0.0:
                         dr[q] += abs(md["A0"][j][i]) * fr[i]
