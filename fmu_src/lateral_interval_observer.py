@@ -16,7 +16,7 @@ import math
 from bisect import bisect_right
 from operator import add
 
-from .linalg import dot, expm_taylor as _expm_taylor, matvec as _matvec, phi_gamma, total
+from .linalg import _ETA, _U, dot, expm_taylor as _expm_taylor, matvec as _matvec, phi_gamma, total
 
 OUTPUT_NAMES = ("vy_lower", "vy_upper", "beta_lower", "beta_upper", "yaw_rate_lower", "yaw_rate_upper",
                 "Fyf_lower", "Fyf_upper", "Fyr_lower", "Fyr_upper")
@@ -83,10 +83,7 @@ def _mid_rad(X):
 # margin k u covers gamma_n twice over and the roundings of R itself), e the coefficients' own
 # errors (coefficient error bound x sum of |m_k| + r_k) and the design residuals' effect. A single
 # operation's result is rounded outward by one ulp (``_na``: the exact result lies within half an
-# ulp of the rounded one); libm's exp and expm1 by 3 ulps (within 2).
-_ETA = 2.0 ** -1074
-
-
+# ulp of the rounded one); libm's exp and expm1 by 3 ulps (within 2). u, eta: ``linalg``'s.
 _na = math.nextafter    # _na(x, _NINF): the next double below x (above the exact result x rounds); _INF: above
 _NINF = -_INF
 
@@ -162,7 +159,6 @@ def omega_bounds(P, wl, wu):
 
 
 # -- outward rounding of the published bounds ----------------------------------------------------
-_U = 2.0 ** -53                 # the unit roundoff of doubles
 _TINY = 4.0 * _ETA              # the rounding errors' absolute floor (subnormal results)
 
 

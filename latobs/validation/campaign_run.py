@@ -119,24 +119,17 @@ def observer_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
     row: dict[str, float] = {}
     nonfinite = 0
     for name, y in outputs.items():
-        if name.endswith("_hat"):
-            q = name[:-4]
-            src = metrics.truth_signal(q, truth, model_name)
-            if src is None:
-                continue
-            e = (np.asarray(y, dtype=float) - np.asarray(truth[src], dtype=float))[after]
-            nonfinite += int(np.sum(~np.isfinite(e)))
-            row[f"{label}.{q}.rms"] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
-            row[f"{label}.{q}.max_abs"] = float(np.max(np.abs(e))) if e.size else math.nan
-        elif name.endswith(metrics.FILTERED):
+        if name.endswith("_hat") or name.endswith(metrics.FILTERED):
+            key = name[:-4] if name.endswith("_hat") else name      # X, or X_filtered under its own name
             src = metrics.truth_signal(metrics.quantity_of(name), truth, model_name)
             if src is None:
                 continue
-            yy, xx, sel = metrics.one_step_behind(y, truth[src], after)
+            yy, xx, sel = ((np.asarray(y, dtype=float), np.asarray(truth[src], dtype=float), after)
+                           if key != name else metrics.one_step_behind(y, truth[src], after))
             e = (yy - xx)[sel]
             nonfinite += int(np.sum(~np.isfinite(e)))
-            row[f"{label}.{name}.rms"] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
-            row[f"{label}.{name}.max_abs"] = float(np.max(np.abs(e))) if e.size else math.nan
+            row[f"{label}.{key}.rms"] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
+            row[f"{label}.{key}.max_abs"] = float(np.max(np.abs(e))) if e.size else math.nan
         elif name.endswith("_lower") and name[:-6] + "_upper" in outputs:
             q = name[:-6]
             src = metrics.truth_signal(q, truth, model_name)
