@@ -71,9 +71,15 @@ STACK = ("numpy", "scipy", "cvxpy", "clarabel", "sympy")
 
 
 def solver_stack() -> dict[str, str]:
+    """The versions of STACK and the SIMD extensions numpy dispatches to on this CPU (its kernels,
+    and OpenBLAS's chosen by the same CPU, round differently: the LMI solutions move in the last
+    bits between an AVX2 and an AVX-512 machine with the same packages)."""
     from importlib.metadata import version
 
-    return {p: version(p) for p in STACK}
+    from numpy._core import _multiarray_umath as umath
+
+    found = sorted(k for k, v in umath.__cpu_features__.items() if v and k in umath.__cpu_dispatch__)
+    return {**{p: version(p) for p in STACK}, "cpu": " ".join(found)}
 
 
 def golden_design(name: str) -> dict:
