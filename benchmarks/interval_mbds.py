@@ -7,6 +7,9 @@ vary: the quantile of the tuning part's sensor residuals they are taken at
 
     python benchmarks/interval_mbds.py [--box F] [--out DIR] [--more]
 
+A last table gives, per speed mode, the steady-state vy width that each sensor's identified bound
+alone keeps through the design's gains (the floor of the width at this design).
+
 ``--box F``: the design's relative stiffness half-widths around the identified Cf, Cr (default
 0.2, the design's default). Builds the native FMU for this machine in DIR (default a temporary
 folder) and drives it with fmpy through ``latobs.validation.replay.drive``. ``--more``: two more
@@ -79,9 +82,25 @@ def main(argv=None) -> int:
               f"{100 * tu[0]:.2f} % / {100 * ho[0]:.2f} % | {tu[1]:.2f} / {ho[1]:.2f} | {tu[2]:.2f} / {ho[2]:.2f} |",
               flush=True)
     ident.NOISE_QUANTILE = q_identify
+    _noise_floor(data, ident.measurement_error_bounds(cols, fit))
     if args.more:
         _more(fmu, cols, fit, ident.measurement_error_bounds(cols, fit)["yaw_rate"][0])
     return 0
+
+
+def _noise_floor(data: dict, bounds: dict) -> None:
+    """Per mode, the steady-state width of vy (m/s) that each sensor's error bound alone keeps, at
+    zero stiffness and speed mismatch: (-N)^-1 2|J| nu + 2|E| nu (the width dynamics of xi = P x
+    with N Metzler, then x = xi + E y), row vy, per measured channel; and E's ay entry in the ay
+    row, which LMI (36) forces to >= 1 (N[ay, vy] = A[ay, vy] (1 - E[ay, ay]) >= 0, A[ay, vy] < 0)."""
+    nu = np.array([bounds["yaw_rate"][0], bounds["ay"][0]])
+    print("\nThe sensors' share of the width (steady state, no stiffness or speed mismatch), per mode:")
+    print("| mode | speed (m/s) | vy width from the yaw rate's bound (m/s) | from ay's bound (m/s) "
+          "| E[ay, ay] (>= 1 by LMI 36) |\n|---|---|---|---|---|")
+    for m in data["modes"]:
+        N, E, J = (np.asarray(m[k], float) for k in ("N", "E", "J"))
+        w = [float(np.linalg.solve(-N, 2 * np.abs(J[:, q]) * nu[q])[0] + 2 * abs(E[0, q]) * nu[q]) for q in range(2)]
+        print(f"| {m['index']} | {m['vx']:.4g} | {w[0]:.2f} | {w[1]:.2f} | {E[2, 1]:.4g} |")
 
 
 def _more(fmu, cols, fit, yaw_bound: float) -> None:
