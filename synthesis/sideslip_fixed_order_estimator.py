@@ -258,7 +258,8 @@ def lemma5(poly: Polytope, central, order: int = 1, region=LHP, stability_region
         raise ValueError(f"central polynomial must have degree {nd} for an estimator of order {order}, "
                          f"got degree {len(c) - 1}")
     N = nd + 1
-    xv, yv, g = cp.Variable(order + 1), cp.Variable(order + 1), cp.Variable(nonneg=True)
+    k1 = order + 1
+    xv, yv, g = cp.Variable(k1), cp.Variable(k1), cp.Variable(nonneg=True)
     s = 1.0 / np.abs(c) if scale else np.ones(N)
     if np.any(~np.isfinite(s)):
         raise ValueError("central polynomial has a zero coefficient; it cannot be Hurwitz")
@@ -267,21 +268,51 @@ def lemma5(poly: Polytope, central, order: int = 1, region=LHP, stability_region
     cc = c.reshape(N, 1)
     fixed = P.polymul(DF1, DF2)
     w = P.polymul(NF1, NF2)
+    # Each vertex's LMI matrix is affine in (x, y, g, Q): built as one coefficient matrix times the
+    # stacked variables (numpy below), the same matrices as the block expressions
+    #     S [[cc d + d' cc' - cc cc' - Pi'(Delta (x) Q)Pi, nr'], [nr, g]] S,  d = Td x,  nr = Tn1 x - Tn2 y,
+    # and, with a stability region, Sc (cc d + d' cc' - 1e-6 cc cc' - Pi'(Delta (x) Q2)Pi) Sc: cvxpy
+    # then compiles one product per LMI instead of a tree of blocks (the solve's compilation took
+    # 10x the solver's time)
     cons = []
+    qbasis = [np.outer(np.eye(nd)[i], np.eye(nd)[j]) for j in range(nd) for i in range(nd)]   # vec(Q), column-major
+    regQ = [projected_region(E, region, nd) for E in qbasis]
+    regQ2 = [projected_region(E, stability_region, nd) for E in qbasis] if stability_region is not None else None
+    c1 = cc[:, 0]
     for b1, b2, a in poly.vertices:
         Td = _conv_matrix(P.polymul(fixed, a), order, N)
         Tn1 = _conv_matrix(P.polymul(w, b1), order, N)
         Tn2 = _conv_matrix(P.polymul(w, b2), order, N)
-        d = cp.reshape(Td @ xv, (1, N), order="C")
-        nr = cp.reshape(Tn1 @ xv - Tn2 @ yv, (1, N), order="C")
         Q = cp.Variable((nd, nd), symmetric=True)
-        top = cc @ d + d.T @ cc.T - cc @ cc.T - projected_region(Q, region, nd)
-        M = cp.bmat([[top, nr.T], [nr, cp.reshape(g, (1, 1), order="C")]])
-        M = S @ M @ S
+        cols, cols2 = [], []
+        for k in range(k1):          # x_k: cc d' + d cc' and nr
+            blk = np.zeros((N + 1, N + 1))
+            blk[:N, :N] = np.outer(c1, Td[:, k]) + np.outer(Td[:, k], c1)
+            blk[:N, N] = blk[N, :N] = Tn1[:, k]
+            cols.append(S @ blk @ S)
+            cols2.append(Sc @ blk[:N, :N] @ Sc)
+        for k in range(k1):          # y_k: -Tn2 in nr
+            blk = np.zeros((N + 1, N + 1))
+            blk[:N, N] = blk[N, :N] = -Tn2[:, k]
+            cols.append(S @ blk @ S)
+        blk = np.zeros((N + 1, N + 1))
+        blk[N, N] = 1.0
+        cols.append(S @ blk @ S)     # g
+        for R in regQ:               # Q (column-major vec)
+            blk = np.zeros((N + 1, N + 1))
+            blk[:N, :N] = -R
+            cols.append(S @ blk @ S)
+        blk = np.zeros((N + 1, N + 1))
+        blk[:N, :N] = -(cc @ cc.T)
+        F = np.column_stack([c.ravel(order="F") for c in cols])
+        M = cp.reshape(F @ cp.hstack([xv, yv, g, cp.vec(Q, order="F")]) + (S @ blk @ S).ravel(order="F"),
+                       (N + 1, N + 1), order="F")
         cons.append((M + M.T) / 2 >> 0)
         if stability_region is not None:
             Q2 = cp.Variable((nd, nd), symmetric=True)
-            M2 = Sc @ (cc @ d + d.T @ cc.T - 1e-6 * (cc @ cc.T) - projected_region(Q2, stability_region, nd)) @ Sc
+            F2 = np.column_stack([c.ravel(order="F") for c in cols2 + [-Sc @ R @ Sc for R in regQ2]])
+            M2 = cp.reshape(F2 @ cp.hstack([xv, cp.vec(Q2, order="F")]) + (Sc @ (-1e-6 * (cc @ cc.T)) @ Sc).ravel(order="F"),
+                            (N, N), order="F")
             cons.append((M2 + M2.T) / 2 >> 0)
     prob = cp.Problem(cp.Minimize(g), cons)
     status, seconds = lmi.solve(prob)
