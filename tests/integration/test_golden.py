@@ -78,7 +78,10 @@ def solver_stack() -> dict[str, str]:
     bits between an AVX2 and an AVX-512 machine with the same packages)."""
     from importlib.metadata import version
 
-    from numpy._core import _multiarray_umath as umath
+    try:
+        from numpy._core import _multiarray_umath as umath
+    except ImportError:                       # numpy 1.x
+        from numpy.core import _multiarray_umath as umath
 
     found = sorted(k for k, v in umath.__cpu_features__.items() if v and k in umath.__cpu_dispatch__)
     return {**{p: version(p) for p in STACK}, "cpu": " ".join(found)}
