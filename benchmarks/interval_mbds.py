@@ -82,9 +82,10 @@ def main(argv=None) -> int:
               f"{100 * tu[0]:.2f} % / {100 * ho[0]:.2f} % | {tu[1]:.2f} / {ho[1]:.2f} | {tu[2]:.2f} / {ho[2]:.2f} |",
               flush=True)
     ident.NOISE_QUANTILE = q_identify
-    _noise_floor(data, ident.measurement_error_bounds(cols, fit))
+    bounds = ident.measurement_error_bounds(cols, fit)          # identify's
+    _noise_floor(data, bounds)
     if args.more:
-        _more(fmu, cols, fit, ident.measurement_error_bounds(cols, fit)["yaw_rate"][0])
+        _more(fmu, cols, fit, bounds["yaw_rate"][0])
     return 0
 
 

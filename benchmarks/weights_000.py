@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from dataclasses import replace
 from pathlib import Path
 
 NAME = "SideslipBankObserver"

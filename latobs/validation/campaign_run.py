@@ -120,12 +120,13 @@ def observer_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
     nonfinite = 0
     for name, y in outputs.items():
         if name.endswith("_hat") or name.endswith(metrics.FILTERED):
-            key = name[:-4] if name.endswith("_hat") else name      # X, or X_filtered under its own name
+            filtered = name.endswith(metrics.FILTERED)
+            key = name if filtered else name[:-4]          # X, or X_filtered under its own name
             src = metrics.truth_signal(metrics.quantity_of(name), truth, model_name)
             if src is None:
                 continue
-            yy, xx, sel = ((np.asarray(y, dtype=float), np.asarray(truth[src], dtype=float), after)
-                           if key != name else metrics.one_step_behind(y, truth[src], after))
+            yy, xx, sel = (metrics.one_step_behind(y, truth[src], after) if filtered else
+                           (np.asarray(y, dtype=float), np.asarray(truth[src], dtype=float), after))
             e = (yy - xx)[sel]
             nonfinite += int(np.sum(~np.isfinite(e)))
             row[f"{label}.{key}.rms"] = float(np.sqrt(np.mean(e * e))) if e.size else math.nan
