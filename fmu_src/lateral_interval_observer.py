@@ -989,21 +989,35 @@ class IntervalObserver:
     def _find_max_communication_step(self) -> float:
         """The largest k MAX_COMM_STEP_RESOLUTION at which every probe speed decays fast enough. The
         decay rate falls with h at each speed, so that k is the least over the speeds of each one's
-        largest: the first speed's by bisection, then each other speed tried at the current k only
-        and bisected below it when it fails there (each speed but the limiting ones probed once)."""
+        largest: the first speed's by bisection, then each other speed tried at the current k only;
+        one that fails there is searched below k by steps doubling from 1 (k - 1, k - 2, k - 4, ...:
+        the next speed's limit is usually just below the last one's) until one passes, then
+        bisected between them (each speed but the limiting ones probed once)."""
         res = self.MAX_COMM_STEP_RESOLUTION
         probe = type(self)(self._probe_data(), PROBE_PARAMETERS)
         k = int(round(self.MAX_COMM_STEP_CEILING / res)) + 1        # (no step tried yet: exclusive)
         first = True
+
+        def passes(j: int, v: float) -> bool:
+            return self.decay_rate(j * res, v, probe) >= self.MAX_COMM_STEP_DECAY
+
         for v in self._probe_speeds():
             if k == 0:                        # no step passes
                 break
-            if not first and self.decay_rate(k * res, v, probe) >= self.MAX_COMM_STEP_DECAY:
+            if first:
+                lo, hi = 0, k                 # the exclusive ceiling
+            elif passes(k, v):
                 continue
-            lo, hi = 0, k                     # k fails at v (or is the exclusive ceiling)
-            while hi - lo > 1:
+            else:                             # k fails at v: gallop down to a step that passes (or 0)
+                hi, gap = k, 1
+                while True:
+                    lo = max(0, k - gap)
+                    if lo == 0 or passes(lo, v):
+                        break
+                    hi, gap = lo, 2 * gap
+            while hi - lo > 1:                # lo passes (or is 0), hi fails
                 mid = (lo + hi) // 2
-                if self.decay_rate(mid * res, v, probe) >= self.MAX_COMM_STEP_DECAY:
+                if passes(mid, v):
                     lo = mid
                 else:
                     hi = mid

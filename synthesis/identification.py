@@ -213,6 +213,31 @@ def _roll_model(vals: Mapping[str, float], vx: np.ndarray, relax: bool) -> tuple
     return Ax, Bx
 
 
+def expm_stack(M: np.ndarray) -> np.ndarray:
+    """exp(M[i]) of every matrix of a stack (n, k, k), as ``scipy.linalg.expm`` of the stack but in
+    whole-stack numpy operations (scipy's treats a stack one matrix at a time in Python: ~10 us a
+    matrix, 15 s of an identification). Scaling and squaring, per matrix: M / 2^s with its 1-norm
+    <= 1/2, then Taylor's series to degree 18 (its remainder < 0.5^19 / 19! ~ 2e-23 relative),
+    squared s times: as accurate as scipy's or more (``test_identification``: against exact
+    exponentials)."""
+    M = np.asarray(M, dtype=float)
+    if M.ndim != 3 or M.shape[1] != M.shape[2]:
+        raise ValueError(f"expm_stack: a stack of square matrices (n, k, k), got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        raise ValueError("expm_stack: the matrices must be finite")
+    norm = np.abs(M).sum(axis=1).max(axis=1) if M.shape[0] else np.zeros(0)
+    s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / 0.5))).astype(int)
+    X = M / np.ldexp(1.0, s)[:, None, None]
+    eye = np.eye(M.shape[1])
+    E = eye + X / 18.0
+    for j in range(17, 0, -1):          # Horner: I + X/j (I + X/(j+1) (...))
+        E = eye + (X @ E) / j
+    for j in range(int(s.max(initial=0))):
+        sq = s > j
+        E[sq] = E[sq] @ E[sq]
+    return E
+
+
 def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tuple[float, float] = (0.0, 0.0)
              ) -> dict[str, np.ndarray]:
     """The model of ``vals`` (:func:`model_kind`) driven by the record's delta at its speed (below
@@ -236,7 +261,7 @@ def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tupl
     M = np.zeros((n, k + 1, k + 1))          # Van Loan: exp([[A, B], [0, 0]] h) = [[Phi, Gam], [0, 1]]
     M[:, :k, :k] = A * h[:, None, None]
     M[:, :k, k] = B * h[:, None]
-    E = scipy.linalg.expm(M)
+    E = expm_stack(M)
     Phi, Gam = E[:, :k, :k], E[:, :k, k]
     x = np.empty((n, k))
     xk = np.zeros(k)

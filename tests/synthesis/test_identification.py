@@ -35,6 +35,36 @@ def _noisy(cols: dict, seed: int) -> dict:
     return {k: (v + noise[k][1] + noise[k][0] * g.standard_normal(len(v)) if k in noise else v) for k, v in cols.items()}
 
 
+def test_the_stacked_exponential_is_exact_on_closed_forms_and_scipys_elsewhere():
+    """``expm_stack`` (the identification's discretisation) against exponentials known in closed
+    form, over norms from 1e-6 to 1e3 (rotations, shears, decays: every scaling-and-squaring
+    depth), and against scipy's ``expm`` on random stacks (with their zero Van Loan row)."""
+    import scipy.linalg
+
+    w = np.concatenate([[0.0], np.logspace(-6, 3, 40)])
+    rot = np.zeros((w.size, 2, 2))
+    rot[:, 0, 1], rot[:, 1, 0] = -w, w                   # exp = [[cos w, -sin w], [sin w, cos w]]
+    e = ident.expm_stack(rot)
+    assert np.allclose(e[:, 0, 0], np.cos(w), rtol=0, atol=1e-12 * np.maximum(1, w))
+    assert np.allclose(e[:, 1, 0], np.sin(w), rtol=0, atol=1e-12 * np.maximum(1, w))
+    shear = np.zeros((w.size, 3, 3))                      # [[-a, b, 0], [0, -a, 0], [0, 0, 0]]
+    shear[:, 0, 0] = shear[:, 1, 1] = -w
+    shear[:, 0, 1] = 1.0
+    e = ident.expm_stack(shear)
+    assert np.allclose(e[:, 0, 0], np.exp(-w), rtol=1e-13, atol=1e-300)
+    assert np.allclose(e[:, 0, 1], np.exp(-w), rtol=1e-13, atol=1e-300)      # t e^{-a t} at t = 1
+    assert np.all(e[:, 2, 2] == 1.0) and np.all(e[:, 1, 0] == 0.0)
+    rng = np.random.default_rng(0)
+    for scale, tol in ((1e-3, 1e-15), (0.1, 1e-14), (1.0, 1e-12)):   # (scipy's own error grows with the norm)
+        m = rng.normal(size=(500, 4, 4)) * scale
+        m[:, 3, :] = 0.0
+        ref = scipy.linalg.expm(m)
+        assert np.all(np.abs(ident.expm_stack(m) - ref).max(axis=(1, 2)) <= tol * np.abs(ref).max(axis=(1, 2)))
+    assert ident.expm_stack(np.zeros((0, 3, 3))).shape == (0, 3, 3)
+    with pytest.raises(ValueError, match="finite"):
+        ident.expm_stack(np.full((1, 2, 2), np.nan))
+
+
 def test_the_identification_model_is_carplants_linear_dynamics(built_fmus):
     """Paper 000's roll model with relaxed axle forces, as identification simulates it, against
     CarPlant (two-track, roll, relaxation; its linear tires) on the same steering: the yaw rate,
