@@ -33,6 +33,21 @@ def _has_c_model(name: str) -> bool:
 
 #: the FMUs of the native C backend (those whose runtime has a C model)
 C_NAMES = [n for n in FMU_NAMES if _has_c_model(n)]
+
+
+def _host_only() -> list[str] | None:
+    from latobs.cbackend import toolchain
+
+    host = toolchain.host_platform()
+    return [host] if host else None
+
+
+#: ``platforms`` of a test's own native build that only runs on this machine (a design variant, a
+#: plant for another vehicle): this machine's binary alone, a fifth of the compilations. The
+#: binaries of every platform are those of the session build (``built_fmus``), which
+#: test_cross_run, test_fmi3 and test_check run under Wine and qemu. None where this machine is
+#: not a platform of ``toolchain.PLATFORMS``: all of them.
+HOST_ONLY = _host_only()
 #: seconds to design and build each FMU in both backends on one core (measured roughly; only the
 #: balance of the workers' shares in ``SessionBuild.build_share`` depends on them)
 #: whether the workers build their shares of every FMU at the start (a whole run: set at collection)

@@ -33,6 +33,8 @@ from latobs.synthesis.tables import lateral_interval_observer as tables
 from latobs.validation import get_scenario, harness
 from latobs.validation.harness import FmuInstance, NoiseSpec
 
+from conftest import HOST_ONLY
+
 NAME = "LateralIntervalObserver"
 INPUTS = ("delta", "vx", "yaw_rate", "ay")
 SIGNALS = ("vy", "beta", "yaw_rate", "Fyf", "Fyr")
@@ -105,7 +107,8 @@ def test_equals_python_fmu_on_the_mbds_record(built_fmus, tmp_path):
     from latobs.validation import replay
 
     path = design_file.write(built_fmus.design(NAME, "mbds_250lm"), tmp_path)      # solved once per test run
-    py, c = packaging.package_design(path, tmp_path), packaging.package_design(path, tmp_path / "c", backend="c")
+    py, c = (packaging.package_design(path, tmp_path),
+             packaging.package_design(path, tmp_path / "c", backend="c", platforms=HOST_ONLY))
     data = {k: v[:6000] for k, v in replay.load_csv(replay.resolve_csv("mbds")).items()}
     outs = replay.drive(c, data).outputs
     assert_same(replay.drive(py, data).outputs, outs, "mbds record")
@@ -221,7 +224,8 @@ def test_asymmetric_stiffness_box_equals_runtime(fmus, tmp_path):
     data["tables"] = tables.compute(data)
     rt = IntervalObserver(data)
     assert not data["tables"]["stiffness"]["symmetric"]
-    path = cbackend.build_c_fmu(packaging.OBSERVERS[NAME], "LateralIntervalObserverAsym", data, tmp_path)
+    path = cbackend.build_c_fmu(packaging.OBSERVERS[NAME], "LateralIntervalObserverAsym", data, tmp_path,
+                                platforms=HOST_ONLY)
     u, h = synthetic_drive(data, n=1200, seed=5)
     b, _ = drive(path, u, h)
     rt.initialize(dict(zip(INPUTS, map(float, u[0]))))

@@ -39,6 +39,8 @@ from latobs.validation import harness
 from latobs.validation import replay as rp
 from latobs.validation.scenarios import get_scenario
 
+from conftest import HOST_ONLY
+
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (set CC, or install cc/gcc)")
 
 OTHER_DT = 0.002              # s, a step with no precomputed map
@@ -67,7 +69,7 @@ class Pairs:
         if artefact not in self._made:
             path = design_file.write(designs.run(name, vehicle), self.out)
             self._made[artefact] = (packaging.package_design(path, self.out / "py"),
-                                    packaging.package_design(path, self.out / "c", backend="c"))
+                                    packaging.package_design(path, self.out / "c", backend="c", platforms=HOST_ONLY))
         return self._made[artefact]
 
 
@@ -304,7 +306,7 @@ def synthetic(tmp_path_factory):
         if name not in made:
             kind = packaging.OBSERVERS[model]
             data = {**data, "tables": tft.compute(data)}       # what designs.run attaches
-            made[name] = (packaging.build_fmu(kind, name, data, out / "py"), build_c_fmu(kind, name, data, out / "c"))
+            made[name] = (packaging.build_fmu(kind, name, data, out / "py"), build_c_fmu(kind, name, data, out / "c", platforms=HOST_ONLY))
         return made[name]
     return build
 

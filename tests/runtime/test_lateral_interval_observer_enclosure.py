@@ -23,6 +23,8 @@ from latobs.packaging import complete_runtime_data
 from latobs import packaging
 from latobs.synthesis import design_file, designs
 
+from conftest import HOST_ONLY
+
 pytestmark = pytest.mark.slow
 RUNS = 200
 SIGNALS = ("vy", "beta", "yaw_rate", "Fyf", "Fyr")
@@ -42,11 +44,13 @@ def fmus(tmp_path_factory, built_fmus):
     plant_backend = packaging.resolve_backend("auto", packaging.PLANTS["CarPlant"])[0]
     data = built_fmus.design("LateralIntervalObserver")
     observer = built_fmus.get("LateralIntervalObserver", backend)
-    plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out, plant_backend)  # paper 001's model class
+    plant_rigid = packaging.package_plant("CarPlant", "sedan_no_roll", out, plant_backend,  # paper 001's model class
+                                          platforms=HOST_ONLY if plant_backend == "c" else None)
     plant = built_fmus.get("CarPlant", plant_backend)
     robust = complete_runtime_data(designs.run("LateralIntervalObserver", model_error_bound=ROLL_ERROR_BOUND))
     robust_dir = out / "robust"
-    observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir, backend)
+    observer_robust = packaging.package_design(design_file.write(robust, robust_dir), robust_dir, backend,
+                                               platforms=HOST_ONLY if backend == "c" else None)
     return {"plant_rigid": plant_rigid, "plant": plant, "observer": observer, "observer_robust": observer_robust,
             "box": tuple(data["options"]["box"])}
 

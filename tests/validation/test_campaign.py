@@ -22,6 +22,8 @@ from latobs.validation import campaign_stats as cs
 from latobs.validation.campaign import CampaignError
 from latobs.validation.scenarios import get_scenario
 
+from conftest import HOST_ONLY
+
 SHIPPED = sorted(p.stem for p in Path(cp.__file__).parents[1].joinpath("campaigns").glob("*.toml"))
 
 
@@ -472,7 +474,7 @@ def test_a_local_campaign_holds_paper_001s_enclosure_resumes_and_reruns_a_run_al
     from latobs.campaign_runner import run_campaign, rerun
 
     fmus = _fmu_folder(built_fmus, tmp_path, ["LateralIntervalObserver"])
-    packaging.package_plant("CarPlant", "sedan_no_roll", fmus, backend="c")
+    packaging.package_plant("CarPlant", "sedan_no_roll", fmus, backend="c", platforms=HOST_ONLY)
     out = tmp_path / "out"
     kw = dict(out=out, fmu_dir=fmus, workers=2, progress=False, plots=False)
     s = run_campaign("robustness-001", runs=10, **kw)
