@@ -48,8 +48,8 @@ def _host_only() -> list[str] | None:
 #: test_cross_run, test_fmi3 and test_check run under Wine and qemu. None where this machine is
 #: not a platform of ``toolchain.PLATFORMS``: all of them.
 HOST_ONLY = _host_only()
-#: seconds to design and build each FMU in both backends on one core (measured roughly; only the
-#: balance of the workers' shares in ``SessionBuild.build_share`` depends on them)
+
+
 #: whether the workers build their shares of every FMU at the start (a whole run: set at collection)
 _BUILD_SHARES = {"on": False}
 

@@ -165,9 +165,10 @@ def test_a_design_file_of_the_same_inputs_is_packaged_without_solving_again(tmp_
 @pytest.mark.parametrize("backend", ["c", "python"])
 def test_latobs_build_twice_gives_byte_identical_fmus(backend, tmp_path):
     """Two `latobs build` processes (each solving its designs): the same bytes. The issue's case
-    is the interval observer, whose design carried the solver's wall time into the FMU; paper
-    000's tire-mode design is a second LMI design (pythonfmu: the designs are the backends' same
-    data, and the native variant adds the compilers' own reproducibility, for every platform)."""
+    is the interval observer, whose design carried the solver's wall time into the FMU. Paper
+    000's tire-mode design, a second LMI design, is built in the pythonfmu variant only (a design
+    is the same for both backends); the native variant adds the compilers' reproducibility, for
+    every platform."""
     if backend == "c" and find_compiler() is None:
         pytest.skip("no C compiler")
     names = ["LateralIntervalObserver", *(["SideslipBankObserverTirePaper"] if backend == "python" else []), "CarPlant"]
