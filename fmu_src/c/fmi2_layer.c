@@ -4,8 +4,9 @@
  * Hand-written, shared by every model file (model.h); no maths here. It maps the FMI 2.0 calls,
  * types and statuses onto the instance, state machine, logging and checks that both FMI layers
  * share (layer.h); fmi3_layer.c is its FMI 3.0 counterpart. A model file (<runtime>.c) gives the
- * maths through model.h; the build generates fmu_config.h (identifiers, guid, variable table) for
- * each FMU.
+ * maths through model.h; the FMU's identifiers, guid and variable table are read at run time from
+ * LAYER_CONFIG (layer_config.h, defined by layer_config.c from the FMU's generated fmu_config.h),
+ * so one compiled layer serves every FMU.
  *
  * Value references (the same as the pythonfmu backend's, latobs.fmu_src.framework.variable_table,
  * extended): parameters, inputs, Real outputs, Integer outputs, then the ModelExchange states and
@@ -41,8 +42,9 @@
 
 #include "fmi2Functions.h"
 
-#define FMU_CONFIG_TABLES /* the variable tables of fmu_config.h: the layer's only */
+#define LATOBS_LAYER /* one object for every FMU: the FMU's configuration is read at run time */
 #include "model.h"
+#include "layer_config.h"
 #include "model_util.h"
 
 #define LAYER_PREFIX "fmi2"

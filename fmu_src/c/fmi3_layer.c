@@ -8,7 +8,7 @@
  * Value references: those of the FMI 2.0 layer (parameters, inputs, Float64 outputs, Int32
  * outputs, the ModelExchange states and their derivatives), then the event indicators (local
  * Float64 variables, as FMI 3.0 declares them), the independent variable `time` and the gain
- * arrays (constants, fmu_config.h: ARR_*; an array's values count in nValues).
+ * arrays (constants, LAYER_CONFIG: ARR_*; an array's values count in nValues).
  *
  * Misuse is refused as in fmi2_layer.c (a message naming the culprit is logged whatever the
  * logging setting; the host is never crashed; the state is kept):
@@ -38,8 +38,9 @@
 
 #include "fmi3Functions.h"
 
-#define FMU_CONFIG_TABLES /* the variable tables of fmu_config.h: the layer's only */
+#define LATOBS_LAYER /* one object for every FMU: the FMU's configuration is read at run time */
 #include "model.h"
+#include "layer_config.h"
 #include "model_util.h"
 
 #define LAYER_PREFIX "fmi3"
@@ -49,7 +50,7 @@
     fmi3LogMessageCallback logger;
 #define VR_EVI0 VR_ME_END
 #define VR_TIME (VR_EVI0 + N_EVENT_INDICATORS)
-#define VR_ARR0 (VR_TIME + 1) /* the gain arrays (constants, fmu_config.h: ARR_*) */
+#define VR_ARR0 (VR_TIME + 1) /* the gain arrays (constants, LAYER_CONFIG: ARR_*) */
 #define N_VR (VR_ARR0 + N_ARRAYS)
 #include "layer.h"
 
@@ -221,10 +222,8 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
     Instance *inst = begin(c);
     GetCache cache = {{0}, {0}, 0, 0};
     char n[64];
-#if N_STATES > 0 && N_EVENT_INDICATORS > 0
-    double z[N_EVENT_INDICATORS];
+    double z[LAYER_MAX_EVENT_INDICATORS];
     int have_z = 0;
-#endif
     if (inst == NULL) return fmi3Error;
     if (!check_values(inst, "fmi3GetFloat64", vr, nvr, values, nValues)) return fmi3Error;
     refresh_outputs(inst);
@@ -237,8 +236,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
             *out = inst->v.time;
         else if (r >= VR_EVI0 && r < VR_TIME) {
             *out = 0.0; /* (before initialisation: not computed yet) */
-#if N_STATES > 0 && N_EVENT_INDICATORS > 0
-            if (!inst->v.ready) continue;
+            if (!inst->v.ready || N_STATES == 0) continue;
             if (!have_z) {
                 if (!inputs_valid(inst->v.u)) {
                     say(inst, LOG_ERROR, "fmi3GetFloat64: %s needs inputs inside their declared range", var_name(r, n));
@@ -247,7 +245,6 @@ fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
                 model_me_event_indicators(inst->model, inst->v.u, z), have_z = 1;
             }
             *out = z[r - VR_EVI0];
-#endif
         } else if (!get_real(inst, "fmi3GetFloat64", r, out, &cache))
             unknown_ref(inst, "fmi3GetFloat64", r, "Float64");
     }

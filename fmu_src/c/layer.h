@@ -7,7 +7,8 @@
  * no FMI type here. A layer maps its calls, types and statuses onto these functions; they return a
  * log level (LOG_INFO: done, LOG_WARNING, LOG_ERROR: refused, the culprit logged) or 1/0.
  *
- * The layer includes it once, after model.h, having defined:
+ * The layer includes it once, after model.h and layer_config.h (the FMU's sizes and tables, read
+ * at run time: no size here is a compile-time constant), having defined:
  *   LAYER_PREFIX  "fmi2" or "fmi3", the prefix of the function names in messages;
  *   LAYER_MAGIC   marks a live instance of this layer;
  *   LAYER_HOST    the instance's fields holding the host's callbacks;
@@ -54,10 +55,10 @@ typedef struct {
     Phase phase;
     int ready; /* model_setup succeeded: the model's state exists */
     double time;
-    double p[N_PARAMETERS + 1];
-    double u[N_INPUTS + 1];
-    double y[N_OUTPUTS + 1];
-    int yi[N_INT_OUTPUTS + 1];
+    double p[LAYER_MAX_VARS]; /* the first N_PARAMETERS used; likewise below */
+    double u[LAYER_MAX_VARS];
+    double y[LAYER_MAX_VARS];
+    int yi[LAYER_MAX_VARS];
 } Values;
 
 typedef struct Instance {
@@ -330,17 +331,13 @@ static int exit_initialization(Instance *inst)
 /* the model exchange outputs are functions of the states and inputs: refresh before a get */
 static void refresh_outputs(Instance *inst)
 {
-#if N_STATES > 0
     if (inst->type == IF_ME && (inst->v.phase == PHASE_EVENT || inst->v.phase == PHASE_CONTINUOUS) &&
-        inputs_valid(inst->v.u))
+        inputs_valid(inst->v.u)) /* (a ModelExchange instance has states) */
         model_me_outputs(inst->model, inst->v.u, inst->v.y, inst->v.yi);
-#else
-    (void)inst;
-#endif
 }
 
 typedef struct { /* the model exchange values of one get call, computed once */
-    double x[N_STATES + 1], dx[N_STATES + 1];
+    double x[LAYER_MAX_STATES], dx[LAYER_MAX_STATES];
     int have_x, have_dx;
 } GetCache;
 
@@ -353,7 +350,6 @@ static int get_real(Instance *inst, const char *what, long r, double *out, GetCa
     if (r < VR_IN0) *out = inst->v.p[r - VR_PAR0];
     else if (r < VR_OUT0) *out = inst->v.u[r - VR_IN0];
     else if (r < VR_INT0) *out = inst->v.y[r - VR_OUT0];
-#if N_STATES > 0
     else if (r >= VR_STATE0 && r < VR_ME_END && !inst->v.ready) {
         *out = 0.0; /* not set up yet: the states are computed when initialisation mode is left */
     } else if (r >= VR_STATE0 && r < VR_DER0) {
@@ -369,10 +365,7 @@ static int get_real(Instance *inst, const char *what, long r, double *out, GetCa
             model_me_derivatives(inst->model, inst->v.u, cache->dx), cache->have_dx = 1;
         }
         *out = cache->dx[r - VR_DER0];
-    }
-#endif
-    else return 0;
-    (void)cache, (void)n, (void)what;
+    } else return 0;
     return 1;
 }
 
@@ -461,12 +454,9 @@ static int count_ok(Instance *inst, const char *what, const void *array, size_t 
 static int event_update(Instance *inst, const char *what, int *changed)
 {
     *changed = 0;
-#if N_STATES > 0
+    if (N_STATES == 0) return inst->log.worst;
     if (!inputs_ok(inst, what)) return LOG_ERROR;
     *changed = model_me_event_update(inst->model, inst->v.time, inst->v.u, &inst->log) != 0;
-#else
-    (void)what;
-#endif
     return inst->log.worst;
 }
 
@@ -483,47 +473,39 @@ static int set_time(Instance *inst, const char *what, double t)
 static int set_states(Instance *inst, const char *what, const double *x, size_t nx)
 {
     if (!count_ok(inst, what, x, nx, N_STATES)) return LOG_ERROR;
-#if N_STATES > 0
+    if (N_STATES == 0) return LOG_INFO;
     if (!all_finite(x, N_STATES)) {
         say(inst, LOG_ERROR, "%s: non-finite state refused", what);
         return LOG_ERROR;
     }
     model_me_set_states(inst->model, x);
-#else
-    (void)all_finite;
-#endif
     return LOG_INFO;
 }
 
 static int get_derivatives(Instance *inst, const char *what, double *dx, size_t nx)
 {
     if (!count_ok(inst, what, dx, nx, N_STATES)) return LOG_ERROR;
-#if N_STATES > 0
+    if (N_STATES == 0) return inst->log.worst;
     if (!inputs_ok(inst, what)) return LOG_ERROR;
     model_me_derivatives(inst->model, inst->v.u, dx);
-#endif
     return inst->log.worst;
 }
 
 static int get_event_indicators(Instance *inst, const char *what, double *z, size_t ni)
 {
     if (!count_ok(inst, what, z, ni, N_EVENT_INDICATORS)) return LOG_ERROR;
-#if N_STATES > 0 && N_EVENT_INDICATORS > 0
+    if (N_STATES == 0 || N_EVENT_INDICATORS == 0) return inst->log.worst;
     if (!inputs_ok(inst, what)) return LOG_ERROR;
     model_me_event_indicators(inst->model, inst->v.u, z);
-#endif
     return inst->log.worst;
 }
 
 static int get_states(Instance *inst, const char *what, double *x, size_t nx, int nominals)
 {
     if (!count_ok(inst, what, x, nx, N_STATES)) return LOG_ERROR;
-#if N_STATES > 0
+    if (N_STATES == 0) return LOG_INFO;
     if (nominals) model_me_nominals(inst->model, x);
     else model_me_get_states(inst->model, x);
-#else
-    (void)nominals;
-#endif
     return LOG_INFO;
 }
 
@@ -578,10 +560,11 @@ static void free_state(void **state)
     }
 }
 
-/* serialised: the instantiation token (the guid), then the state blob */
+/* serialised: the instantiation token (the guid) with its terminating 0, then the state blob */
+#define TOKEN_SIZE (strlen(INSTANTIATION_TOKEN) + 1)
 static size_t serialized_size(void)
 {
-    return sizeof INSTANTIATION_TOKEN + sizeof(StateHeader) + model_size();
+    return TOKEN_SIZE + sizeof(StateHeader) + model_size();
 }
 
 static int state_size(Instance *inst, const char *what, const void *state, size_t *size)
@@ -602,8 +585,8 @@ static int serialize(Instance *inst, const char *what, const void *state, unsign
         say(inst, LOG_ERROR, "%s: buffer of %zu bytes, %zu needed", what, size, serialized_size());
         return LOG_ERROR;
     }
-    memcpy(bytes, INSTANTIATION_TOKEN, sizeof INSTANTIATION_TOKEN);
-    memcpy(bytes + sizeof INSTANTIATION_TOKEN, state, sizeof(StateHeader) + model_size());
+    memcpy(bytes, INSTANTIATION_TOKEN, TOKEN_SIZE);
+    memcpy(bytes + TOKEN_SIZE, state, sizeof(StateHeader) + model_size());
     return LOG_INFO;
 }
 
@@ -611,9 +594,9 @@ static int deserialize(Instance *inst, const char *what, const char *token_kind,
                        size_t size, void **state)
 {
     StateHeader head;
-    if (bytes != NULL && size == serialized_size()) memcpy(&head, bytes + sizeof INSTANTIATION_TOKEN, sizeof head);
+    if (bytes != NULL && size == serialized_size()) memcpy(&head, bytes + TOKEN_SIZE, sizeof head);
     if (bytes == NULL || state == NULL || size != serialized_size() ||
-        memcmp(bytes, INSTANTIATION_TOKEN, sizeof INSTANTIATION_TOKEN) != 0 || head.magic != LAYER_MAGIC) {
+        memcmp(bytes, INSTANTIATION_TOKEN, TOKEN_SIZE) != 0 || head.magic != LAYER_MAGIC) {
         say(inst, LOG_ERROR, "%s: not a serialised state of this FMU (%s %s, %zu bytes)", what, token_kind,
             INSTANTIATION_TOKEN, serialized_size());
         return LOG_ERROR;
@@ -623,7 +606,7 @@ static int deserialize(Instance *inst, const char *what, const char *token_kind,
         say(inst, LOG_ERROR, "%s: out of memory", what);
         return LOG_ERROR;
     }
-    memcpy(blob, bytes + sizeof INSTANTIATION_TOKEN, sizeof(StateHeader) + model_size());
+    memcpy(blob, bytes + TOKEN_SIZE, sizeof(StateHeader) + model_size());
     *state = blob;
     return LOG_INFO;
 }

@@ -1,5 +1,5 @@
 /*
- * model.h - the interface between the one shared FMI 2.0 layer (fmi2_layer.c) and a model file
+ * model.h - the interface between the shared FMI layers (fmi2_layer.c, fmi3_layer.c) and a model file
  * (<runtime>.c), in the manner of the Reference FMUs: the layer holds the FMI state machine,
  * the variable table, logging and the statuses and knows no maths; a model file holds the maths
  * and knows nothing of FMI. C99, libc and libm only.
@@ -10,8 +10,10 @@
  *                 continuous states, 0 = co-simulation only), N_EVENT_INDICATORS, and one index
  *                 macro per variable in the order of the model file's ModelSpec:
  *                 PAR_<name>, IN_<name>, OUT_<name>, INT_<name> (0-based within its group);
- *                 MAX_STEP (s, the ModelSpec's max_step) and, for the layer, the start values
- *                 and declared [min, max] of the parameters and inputs.
+ *                 MAX_STEP (s, the ModelSpec's max_step) and, for layer_config.c, the start
+ *                 values and declared [min, max] of the parameters and inputs. The layers do not
+ *                 include it: they read it through LAYER_CONFIG (layer_config.h), so that one
+ *                 compiled layer serves every FMU.
  *   model_data.h  the design (certified gains, discretisation, tables) as static const data,
  *                 written by the model's emitter (latobs/cbackend/<runtime>.py); included by the
  *                 model file only.
@@ -31,7 +33,9 @@
 
 #include <stddef.h>
 
+#ifndef LATOBS_LAYER /* the layers read the FMU's configuration at run time: layer_config.h */
 #include "fmu_config.h"
+#endif
 
 #define LOG_INFO 0
 #define LOG_WARNING 1
@@ -74,9 +78,8 @@ int model_do_step(Model *m, double h, const double *u, const Log *log);
 /* The outputs after model_setup / model_initialize / model_do_step (co-simulation). */
 void model_outputs(const Model *m, double *y, int *yi);
 
-#if N_STATES > 0
-/* Model exchange. The continuous state x[N_STATES]; the discrete state (mode, flags) changes only
- * in model_me_event_update. */
+/* Model exchange (a model with N_STATES > 0; layer_config.c stands in for a model without). The
+ * continuous state x[N_STATES]; the discrete state (mode, flags) changes only in model_me_event_update. */
 void model_me_get_states(const Model *m, double *x);
 void model_me_set_states(Model *m, const double *x);
 /* nominal magnitudes of the states (1.0 where nothing better is known) */
@@ -91,6 +94,5 @@ void model_me_event_indicators(const Model *m, const double *u, double *z);
 int model_me_event_update(Model *m, double t, const double *u, const Log *log);
 /* the outputs at the current continuous and discrete state and inputs u (model exchange) */
 void model_me_outputs(const Model *m, const double *u, double *y, int *yi);
-#endif
 
 #endif

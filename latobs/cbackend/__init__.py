@@ -12,7 +12,9 @@ system C compiler for this machine's platform when there is one):
   pythonfmu backend, then the ModelExchange states and derivatives);
 * compiled with the hand-written sources of ``fmu_src/c``: ``fmi2_layer.c`` (the FMI 2.0 layer;
   ``fmi3_layer.c`` with ``--fmi 3``) over ``layer.h`` (what both layers share: instance, state
-  machine, variables, logging, checks; CoSimulation and ModelExchange), ``model.h`` (the layers'
+  machine, variables, logging, checks; CoSimulation and ModelExchange), ``layer_config.c`` (the
+  layer's view of ``fmu_config.h``, read at run time: the layer itself is compiled once per
+  platform for every FMU), ``model.h`` (the layers'
   interface to the model files), ``<runtime>.c`` (the maths), shared helpers (``linalg.h``),
   ``fp_contract.h`` (no FMA contraction, stated in the sources for every compiler that rebuilds
   them; included by ``model.h``) and ``glibc_compat.h`` (the old-glibc baseline, below).
@@ -42,7 +44,8 @@ from ..fmu_src.spec import input_starts, max_step, refused_above, var_bounds
 from .emit import CModel, c_array, c_define, c_string
 
 C_SRC = Path(_framework.__file__).resolve().parent / "c"
-LAYER = ("fmi2_layer.c", "layer.h", "model.h", "fp_contract.h", "glibc_compat.h")
+#: the FMI 2.0 layer's files: the layer itself first, layer_config.c (its view of the FMU) second
+LAYER = ("fmi2_layer.c", "layer_config.c", "layer.h", "layer_config.h", "model.h", "fp_contract.h", "glibc_compat.h")
 SHARED_HEADERS = ("linalg.h", "model_util.h")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 #: the FMI versions the native backend builds (``latobs build --fmi``)
@@ -138,6 +141,28 @@ def _config_header(spec, data: dict, model_identifier: str, guid: str, cm: CMode
     return "".join(out)
 
 
+def layer_limits() -> dict[str, int]:
+    """The sizes the FMI layers' buffers hold (``LAYER_MAX_*`` of ``fmu_src/c/layer_config.h``,
+    read from it): {"VARS": per group of variables, "STATES": ..., "EVENT_INDICATORS": ...}."""
+    import re
+
+    text = (C_SRC / "layer_config.h").read_text()
+    return {k: int(v) for k, v in re.findall(r"#define LAYER_MAX_(\w+) (\d+)", text)}
+
+
+def check_layer_limits(class_name: str, spec, cm: CModel) -> None:
+    """NativeBuildError naming what of this FMU exceeds the layers' buffers (``layer_limits``)."""
+    limits = layer_limits()
+    counts = {"parameters": (len(spec.parameters), "VARS"), "inputs": (len(spec.inputs), "VARS"),
+              "Real outputs": (len(spec.outputs), "VARS"), "Integer outputs": (len(spec.integer_outputs), "VARS"),
+              "continuous states": (len(cm.states), "STATES"),
+              "event indicators": (cm.n_event_indicators, "EVENT_INDICATORS")}
+    for what, (n, key) in counts.items():
+        if n > limits[key]:
+            raise NativeBuildError(f"{class_name}: {n} {what}, more than the FMI layers hold ({limits[key]}: "
+                                   f"LAYER_MAX_{key} of fmu_src/c/layer_config.h)")
+
+
 def _build_description(model_identifier: str, sources: list[str]) -> bytes:
     """sources/buildDescription.xml (the FMI 3.0 build description, which FMI 2.0 tools read too)."""
     root = Element("fmiBuildDescription", fmiVersion="3.0")
@@ -211,9 +236,12 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
     data = design_file.reproducible(data)       # no wall-clock figure enters an FMU
     platforms = platforms_of(platforms)
     spec, em, cm = native_model(kind, class_name, data, platforms)
+    check_layer_limits(class_name, spec, cm)
     layer, headers = (LAYER, FMI_HEADERS) if fmi == 2 else (fmi3.LAYER, fmi3.FMI_HEADERS)
     sources, model_c = native_sources(kind, class_name, em, cm, layer, headers)
-    c_files = [layer[0], model_c]
+    c_files = [layer[0], layer[1], model_c]
+    # the layer reads no file of this FMU (layer_config.h): one object per target for every FMU
+    common = {layer[0]: tuple(n for n in (*layer[2:], *headers, *SHARED_HEADERS))}
     sources["buildDescription.xml"] = _build_description(class_name, c_files)
     data_name = f"{class_name}.{kind.data_kind}.json"
     files = {f"sources/{name}": raw for name, raw in sources.items()}
@@ -247,7 +275,8 @@ def build_c_fmu(kind, class_name: str, data: dict, out_dir: Path, *, base=None, 
         config = config.encode()
         try:
             libraries = toolchain.compile_platforms({p: class_name + toolchain.SUFFIX[p] for p in platforms},
-                                                    {**sources, "fmu_config.h": config}, c_files)
+                                                    {**sources, "fmu_config.h": config}, c_files,
+                                                    common=common)
         except toolchain.ToolchainError as exc:
             raise NativeBuildError(f"{class_name}: {exc}") from exc
         held = ({p: (toolchain.SUFFIX[p], raw) for p, raw in libraries.items()} if fmi == 2

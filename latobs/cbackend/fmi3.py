@@ -25,7 +25,7 @@ from ..fmu_src import framework as fw
 from ..fmu_src.spec import input_starts, max_step
 from .emit import c_array, c_define, c_string
 
-LAYER = ("fmi3_layer.c", "layer.h", "model.h", "fp_contract.h", "glibc_compat.h")
+LAYER = ("fmi3_layer.c", "layer_config.c", "layer.h", "layer_config.h", "model.h", "fp_contract.h", "glibc_compat.h")
 FMI_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 #: ``toolchain.PLATFORMS`` folder -> the FMI 3.0 platform folders made of its library (darwin64's
 #: universal Mach-O holds both macOS architectures: each gets its own thin file)

@@ -132,18 +132,23 @@ def missing(platforms: list[str], zig: bool = False) -> str | None:
     return "building for " + ", ".join(need) + " needs zig (pip install ziglang)"
 
 
-def _target_flags(target: str, out_name: str, shared: bool, sources=()) -> list[str]:
+def _compile_flags(target: str, sources=()) -> list[str]:
+    """The flags of a compilation for ``target`` (no linking)."""
     flags = list(COMMON_FLAGS)
     if "linux" in target:
         # glibc_compat.h (the native backend's sources): the old-glibc baseline, included first
-        flags += ["-fPIC", "-s", "-Wl,--build-id=none"]
-        if GLIBC_COMPAT in sources:
-            flags += ["-include", GLIBC_COMPAT]
-    elif "macos" in target:
+        flags += ["-fPIC"] + (["-include", GLIBC_COMPAT] if GLIBC_COMPAT in sources else [])
+    return flags
+
+
+def _target_flags(target: str, out_name: str, shared: bool, sources=()) -> list[str]:
+    """The flags of a compilation and link into ``out_name`` for ``target``."""
+    flags = _compile_flags(target, sources) + ["-s"]
+    if "linux" in target:
+        flags += ["-Wl,--build-id=none"]
+    elif "macos" in target and shared:
         # the install name is the file's own name, not the scratch folder it was linked in
-        flags += ["-s"] + (["-Wl,-install_name,@rpath/" + out_name] if shared else [])
-    elif "windows" in target:
-        flags += ["-s"]
+        flags += ["-Wl,-install_name,@rpath/" + out_name]
     return flags + (["-shared"] if shared else [])
 
 
@@ -164,19 +169,20 @@ def _uses_zig(platform: str, zig: bool) -> bool:
     return zig or platform != host_platform() or platform != "linux64" or system_compiler() is None
 
 
-def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_files: list[str], out_name: str,
-                    shared: bool, libs: tuple[str, ...], zig: bool, cached: bool = True) -> bytes:
-    """One target's file, compiled in a scratch folder of its own: every source under its relative
-    name, the output under its final name (a Windows DLL records its own name). ``cached``: taken
-    from latobs's cache when the same compilation was made before (and kept there)."""
+def _command(platform: str, target: str, zig: bool) -> list[str]:
+    """The compiler command of one target."""
     if _uses_zig(platform, zig):
-        cmd = [*zig_cc(), "-target", target]
-    else:
-        cmd = shlex.split(system_compiler())
-    args = [*_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *c_files,
-            *(libs if "windows" not in target else ())]
-    # a compilation is a pure function of its command, the compiler and the sources' bytes: kept in
-    # latobs's cache (``latobs.cache``, kind "compile") by their content, like ccache
+        return [*zig_cc(), "-target", target]
+    return shlex.split(system_compiler())
+
+
+def _cached_run(cmd: list[str], args: list[str], sources: dict[str, bytes], out_name: str, cached: bool,
+                objects: dict[str, bytes] | None = None) -> bytes:
+    """``cmd + args`` run in a scratch folder holding ``sources`` (and ``objects``: compiled files
+    the command links) under their relative names; the bytes of ``out_name`` it writes. A
+    compilation is a pure function of its command, the compilers and the sources' bytes (the
+    objects are made from the sources): kept in latobs's cache (``latobs.cache``, kind "compile")
+    by their content, like ccache, unless ``cached`` is False."""
     from .. import cache
 
     sha256_bytes = lambda raw: hashlib.sha256(raw).hexdigest()  # noqa: E731
@@ -190,7 +196,7 @@ def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_fil
         return hit["output"]
     with tempfile.TemporaryDirectory(prefix="latobs-c-") as tmp:
         work = Path(tmp)
-        for name, raw in sources.items():
+        for name, raw in {**sources, **(objects or {})}.items():
             (work / name).write_bytes(raw)
         _run([*cmd, *args], work)
         raw = (work / out_name).read_bytes()
@@ -199,14 +205,40 @@ def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_fil
     return raw
 
 
+def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_files: list[str], out_name: str,
+                    shared: bool, libs: tuple[str, ...], zig: bool, cached: bool = True,
+                    common: dict[str, tuple[str, ...]] | None = None) -> bytes:
+    """One target's file, compiled in a scratch folder of its own: every source under its relative
+    name, the output under its final name (a Windows DLL records its own name). ``common``: the
+    files of ``c_files`` that are the same for many outputs (an FMI layer), each with the names of
+    the sources it reads: each is compiled alone into an object, in a folder holding only those
+    sources (so that its cache entry names everything it was made from), and linked in. ``cached``:
+    taken from latobs's cache when the same compilation was made before (and kept there)."""
+    cmd = _command(platform, target, zig)
+    objects = {}
+    for c_file in (common or {}):
+        reads = {name: sources[name] for name in (c_file, *common[c_file])}
+        obj = Path(c_file).stem + ".o"
+        objects[obj] = _cached_run(cmd, [*_compile_flags(target, reads), "-I.", "-c", "-o", obj, c_file], reads,
+                                   obj, cached)
+    rest = [c for c in c_files if c not in objects and c not in (common or {})]
+    args = [*_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *rest, *objects,
+            *(libs if "windows" not in target else ())]
+    return _cached_run(cmd, args, sources, out_name, cached, objects)
+
+
 def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_files: list[str], *,
                       shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False,
-                      jobs: int | None = None, cached: bool = True) -> dict[str, bytes]:
+                      jobs: int | None = None, cached: bool = True,
+                      common: dict[str, tuple[str, ...]] | None = None) -> dict[str, bytes]:
     """:func:`compile_for` of several platforms at once: ``out_names`` {platform: output file
     name} -> {platform: file bytes}. Every target is compiled in a thread of its own running the
     compiler (``jobs`` at a time, default one per core); ToolchainError naming the first failure.
     A compilation made before with the same command, compilers and sources is taken from latobs's
-    cache (``latobs.cache``, kind "compile"), unless ``cached`` is False or the cache is off."""
+    cache (``latobs.cache``, kind "compile"), unless ``cached`` is False or the cache is off.
+    ``common`` {file of ``c_files``: the names of the sources it reads}: files compiled into
+    objects of their own, cached by those sources alone (``_compile_target``): an FMI layer,
+    compiled once per target for every FMU."""
     from concurrent.futures import ThreadPoolExecutor
 
     unknown = [p for p in out_names if p not in PLATFORMS]
@@ -218,7 +250,7 @@ def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_fi
     tasks = [(p, t) for p in out_names for t in PLATFORMS[p]]
     with ThreadPoolExecutor(max_workers=max(1, min(len(tasks), jobs or os.cpu_count() or 1))) as pool:
         futures = {(p, t): pool.submit(_compile_target, p, t, sources, c_files, out_names[p], shared, libs, zig,
-                                          cached)
+                                          cached, common)
                    for p, t in tasks}
         thin = {task: f.result() for task, f in futures.items()}
     out = {}
@@ -230,14 +262,14 @@ def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_fi
 
 def compile_for(platform: str, sources: dict[str, bytes], c_files: list[str], out_name: str, *,
                 shared: bool = True, libs: tuple[str, ...] = ("-lm",), zig: bool = False,
-                cached: bool = True) -> bytes:
+                cached: bool = True, common: dict[str, tuple[str, ...]] | None = None) -> bytes:
     """Compile ``c_files`` (names in ``sources``, written to a scratch folder under their relative
     names) for ``platform`` (a folder of :data:`PLATFORMS`) into a shared library (``shared``) or a
     program named ``out_name``; returns its bytes (darwin64: one universal file of both
     architectures). On x86-64 Linux, linux64 uses the system compiler when there is one, unless ``zig``.
-    ToolchainError with the compiler's output."""
+    ToolchainError with the compiler's output. ``common``: as in :func:`compile_platforms`."""
     return compile_platforms({platform: out_name}, sources, c_files, shared=shared, libs=libs, zig=zig,
-                             cached=cached)[platform]
+                             cached=cached, common=common)[platform]
 
 
 # Mach-O universal ("fat") file: a big-endian header, one record per architecture, then each

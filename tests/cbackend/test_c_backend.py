@@ -105,6 +105,26 @@ def test_sources_compile_without_a_warning(built_fmus, name, tmp_path):
     assert proc.returncode == 0, proc.stderr
 
 
+def test_an_fmu_larger_than_the_layers_buffers_is_refused_naming_the_limit():
+    """The FMI layers hold each FMU's values in buffers of fixed size (LAYER_MAX_* of
+    layer_config.h, which layer_config.c also checks at compile time): a model beyond them is
+    refused before compiling, naming what is too large and the limit."""
+    from types import SimpleNamespace
+
+    from latobs.cbackend.emit import CModel
+
+    limits = cbackend.layer_limits()
+    assert limits == {"VARS": 64, "STATES": 32, "EVENT_INDICATORS": 64}
+    small = SimpleNamespace(parameters=[1], inputs=[1] * 64, outputs=[1], integer_outputs=[])
+    cbackend.check_layer_limits("Fits", small, CModel(header="", states=[None] * 32, n_event_indicators=64))
+    with pytest.raises(cbackend.NativeBuildError, match="Big: 65 inputs, more than the FMI layers hold \\(64: "
+                                                        "LAYER_MAX_VARS"):
+        cbackend.check_layer_limits("Big", SimpleNamespace(**{**vars(small), "inputs": [1] * 65}),
+                                    CModel(header="", states=[], n_event_indicators=0))
+    with pytest.raises(cbackend.NativeBuildError, match="33 continuous states.*LAYER_MAX_STATES"):
+        cbackend.check_layer_limits("Big", small, CModel(header="", states=[None] * 33, n_event_indicators=0))
+
+
 def _compile_from_sources(fmu: Path, tmp: Path) -> Path:
     """What a foreign tool does with the FMU alone: compile sources/ as buildDescription.xml says,
     into a copy of the FMU whose binary is replaced."""

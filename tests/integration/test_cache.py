@@ -175,13 +175,9 @@ def test_a_bad_size_bound_is_refused_naming_it(value, tmp_path, monkeypatch):
     assert not (tmp_path / "out" / "CarPlant.fmu").exists()
 
 
-def test_a_compilation_is_made_once_per_command_compilers_and_source_bytes(tmp_path, monkeypatch):
-    """A target's binary is compiled once per (compiler command, compilers, sources' bytes) and
-    then taken from the cache, bit for bit; a changed source byte, another output name,
-    ``cached=False`` and a turned-off cache compile again. The binary still runs (it is the
-    compiler's output, not a stand-in)."""
-    import ctypes
-
+def _counted_compilations(tmp_path, monkeypatch) -> tuple[str, list]:
+    """(this machine's platform, the list every compiler command run from now on is appended to),
+    latobs's cache in ``tmp_path``; skips without a C compiler for this machine."""
     from latobs.cbackend import toolchain
 
     host = toolchain.host_platform()
@@ -191,6 +187,19 @@ def test_a_compilation_is_made_once_per_command_compilers_and_source_bytes(tmp_p
     runs = []
     real = toolchain._run
     monkeypatch.setattr(toolchain, "_run", lambda cmd, cwd: (runs.append(cmd), real(cmd, cwd))[1])
+    return host, runs
+
+
+def test_a_compilation_is_made_once_per_command_compilers_and_source_bytes(tmp_path, monkeypatch):
+    """A target's binary is compiled once per (compiler command, compilers, sources' bytes) and
+    then taken from the cache, bit for bit; a changed source byte, another output name,
+    ``cached=False`` and a turned-off cache compile again. The binary still runs (it is the
+    compiler's output, not a stand-in)."""
+    import ctypes
+
+    from latobs.cbackend import toolchain
+
+    host, runs = _counted_compilations(tmp_path, monkeypatch)
     src = {"twice.c": b"__attribute__((visibility(\"default\"))) double twice(double x) { return 2.0 * x; }\n"}
     name = "twice" + toolchain.SUFFIX[host]
     first = toolchain.compile_for(host, src, ["twice.c"], name)
@@ -211,3 +220,42 @@ def test_a_compilation_is_made_once_per_command_compilers_and_source_bytes(tmp_p
         toolchain.compile_for(host, src, ["twice.c"], name)
     assert len(runs) == 5
     assert len(list((tmp_path / "cache" / "compile").iterdir())) == 3
+
+
+def test_a_common_object_is_compiled_once_for_every_library_and_only_from_what_it_reads(tmp_path, monkeypatch):
+    """``compile_for(..., common=...)`` (how an FMI layer is compiled: once per target for every
+    FMU): the common file is compiled alone into an object, cached by the sources it declares it
+    reads, and linked into each library; a library with another model file links the cached
+    object (one compiler run, not two); a changed header it reads compiles it again; a header it
+    does not declare is not there to be read (the compilation fails naming it), so its cache
+    entry names everything it was made from."""
+    import ctypes
+
+    from latobs.cbackend import toolchain
+
+    host, runs = _counted_compilations(tmp_path, monkeypatch)
+    src = {"api.h": b"double model(double x);\n",
+           "layer.c": b'#include "api.h"\n__attribute__((visibility("default"))) double call(double x) '
+                      b"{ return model(x) + 1.0; }\n",
+           "a.c": b"double model(double x) { return 2.0 * x; }\n",
+           "b.c": b"double model(double x) { return 3.0 * x; }\n"}
+    common = {"layer.c": ("api.h",)}
+
+    def build(model: str, sources=src) -> float:
+        name = f"lib{model}{toolchain.SUFFIX[host]}"
+        raw = toolchain.compile_for(host, sources, ["layer.c", f"{model}.c"], name, common=common)
+        path = tmp_path / f"{len(runs)}-{name}"          # (a new file each time: a loaded library stays loaded)
+        path.write_bytes(raw)
+        fn = ctypes.CDLL(str(path)).call
+        fn.restype, fn.argtypes = ctypes.c_double, [ctypes.c_double]
+        return fn(1.5)
+
+    assert build("a") == 4.0 and len(runs) == 2                 # the object, then the library
+    assert any("-c" in cmd and "layer.c" in cmd for cmd in runs)
+    assert build("b") == 5.5 and len(runs) == 3                 # the cached object linked with b.c
+    assert "layer.o" in runs[-1] and "layer.c" not in runs[-1]
+    changed = {**src, "api.h": src["api.h"] + b"/* changed */\n"}
+    assert build("a", changed) == 4.0 and len(runs) == 5        # another header: compiled again
+    sneaky = {**src, "layer.c": b'#include "other.h"\n' + src["layer.c"], "other.h": b"/* not declared */\n"}
+    with pytest.raises(toolchain.ToolchainError, match="other.h"):
+        build("a", sneaky)
