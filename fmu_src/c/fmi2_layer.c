@@ -5,7 +5,7 @@
  * types and statuses onto the instance, state machine, logging and checks that both FMI layers
  * share (layer.h); fmi3_layer.c is its FMI 3.0 counterpart. A model file (<runtime>.c) gives the
  * maths through model.h; the FMU's identifiers, guid and variable table are read at run time from
- * LAYER_CONFIG (layer_config.h, defined by layer_config.c from the FMU's generated fmu_config.h),
+ * LAYER_CONFIG (layer_config.h, defined by layer_config.c from the FMU's generated headers),
  * so one compiled layer serves every FMU.
  *
  * Value references (the same as the pythonfmu backend's, latobs.fmu_src.framework.variable_table,

@@ -1,13 +1,14 @@
 /*
- * layer_config.c - LAYER_CONFIG (layer_config.h): the FMU's identifiers, sizes and variable tables
- * of its generated fmu_config.h, for the FMI layer, which is compiled without them. No maths here.
+ * layer_config.c - LAYER_CONFIG (layer_config.h): the FMU's sizes (its generated fmu_config.h) and
+ * its identifiers, token and variable tables (its generated fmu_tables.h), for the FMI layer, which
+ * is compiled without them. No maths here.
  * For a co-simulation-only model (no states) it also defines the model exchange functions of
  * model.h, never called (the layers refuse a ModelExchange instance of such an FMU), so that the
  * same layer object links with every model.
  */
-#define FMU_CONFIG_TABLES /* the variable tables of fmu_config.h */
 #include "model.h"
 
+#include "fmu_tables.h"
 #include "layer_config.h"
 
 /* compile-time checks (C99: an array of negative size is an error): the layer's buffers fit */

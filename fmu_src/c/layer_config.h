@@ -1,12 +1,13 @@
 /*
  * layer_config.h - what an FMI layer (fmi2_layer.c, fmi3_layer.c) knows of the FMU it serves: one
- * constant, LAYER_CONFIG, defined by layer_config.c from the FMU's generated fmu_config.h. The
+ * constant, LAYER_CONFIG, defined by layer_config.c from the FMU's generated fmu_config.h and
+ * fmu_tables.h. The
  * layers read the FMU's sizes, tables and token from it at run time, so a layer's object file is
  * the same for every FMU and is compiled once per platform (latobs.cbackend.toolchain); the model
  * file keeps the compile-time constants of fmu_config.h.
  *
  * A layer defines LATOBS_LAYER before including model.h (which then leaves fmu_config.h out) and
- * this file gives it the names of fmu_config.h (N_INPUTS, IN_MIN, INSTANTIATION_TOKEN, ...) as
+ * this file gives it the names of those headers (N_INPUTS, IN_MIN, INSTANTIATION_TOKEN, ...) as
  * reads of LAYER_CONFIG. Its fixed-size buffers hold up to LAYER_MAX_VARS values of each group,
  * LAYER_MAX_STATES states and LAYER_MAX_EVENT_INDICATORS event indicators (layer_config.c refuses
  * to compile an FMU with more).

@@ -5,15 +5,17 @@
  * and knows nothing of FMI. C99, libc and libm only.
  *
  * Generated per FMU at build time (latobs.cbackend):
- *   fmu_config.h  identifiers, guid, the variable table's sizes and indices:
+ *   fmu_config.h  the variable table's sizes and indices (no identifier or guid: the same for
+ *                 both FMI versions):
  *                 N_PARAMETERS, N_INPUTS, N_OUTPUTS (Real), N_INT_OUTPUTS, N_STATES (ModelExchange
  *                 continuous states, 0 = co-simulation only), N_EVENT_INDICATORS, and one index
  *                 macro per variable in the order of the model file's ModelSpec:
  *                 PAR_<name>, IN_<name>, OUT_<name>, INT_<name> (0-based within its group);
- *                 MAX_STEP (s, the ModelSpec's max_step) and, for layer_config.c, the start
- *                 values and declared [min, max] of the parameters and inputs. The layers do not
- *                 include it: they read it through LAYER_CONFIG (layer_config.h), so that one
- *                 compiled layer serves every FMU.
+ *                 MAX_STEP (s, the ModelSpec's max_step). The layers do not include it: they
+ *                 read it through LAYER_CONFIG (layer_config.h), so that one compiled layer
+ *                 serves every FMU.
+ *   fmu_tables.h  for layer_config.c only: identifiers, guid, the variables' names, start
+ *                 values and declared [min, max].
  *   model_data.h  the design (certified gains, discretisation, tables) as static const data,
  *                 written by the model's emitter (latobs/cbackend/<runtime>.py); included by the
  *                 model file only.

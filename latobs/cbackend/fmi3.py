@@ -127,7 +127,7 @@ def gain_arrays(emitter, data: dict) -> list[GainArray]:
 
 
 def config_tables(gains: list[GainArray]) -> str:
-    """The gain arrays' tables of ``fmu_config.h`` for the FMI 3.0 layer (inside FMU_CONFIG_TABLES)."""
+    """The gain arrays' tables of ``fmu_tables.h`` for the FMI 3.0 layer (through layer_config.c)."""
     out = [c_define("N_ARRAYS", len(gains))]
     offsets, pos = [], 0
     for g in gains:

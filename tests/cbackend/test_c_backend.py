@@ -89,7 +89,7 @@ def test_model_description_declares_both_interfaces_and_the_sources(built_fmus, 
         build = ElementTree.fromstring(z.read("sources/buildDescription.xml"))
     listed = [f.get("name") for f in build.iter("SourceFile")]
     assert listed == md.buildConfigurations[0].sourceFileSets[0].sourceFiles   # the model description's list
-    for f in listed + ["fmu_config.h", "model_data.h", "model.h", "fmi2Functions.h"]:
+    for f in listed + ["fmu_config.h", "fmu_tables.h", "model_data.h", "model.h", "fmi2Functions.h"]:
         assert f"sources/{f}" in names
     assert f"resources/{name}.{'plant' if name in packaging.PLANTS else 'design'}.json" in names
     assert not any(n.endswith(".py") for n in names)
