@@ -210,7 +210,8 @@ def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_fil
                     common: dict[str, tuple[str, ...]] | None = None) -> bytes:
     """One target's file, compiled in a scratch folder of its own: every source under its relative
     name, the output under its final name (a Windows DLL records its own name). ``common``: the
-    files of ``c_files`` that are the same for many outputs (an FMI layer), each with the names of
+    files of ``c_files`` that are the same for many outputs (an FMI layer; a model file for both FMI
+    versions), each with the names of
     the sources it reads: each is compiled alone into an object, in a folder holding only those
     sources (so that its cache entry names everything it was made from), and linked in. ``cached``:
     taken from latobs's cache when the same compilation was made before (and kept there)."""
@@ -221,7 +222,7 @@ def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_fil
         obj = Path(c_file).stem + ".o"
         objects[obj] = _cached_run(cmd, [*_compile_flags(target, reads), "-I.", "-c", "-o", obj, c_file], reads,
                                    obj, cached)
-    rest = [c for c in c_files if c not in objects and c not in (common or {})]
+    rest = [c for c in c_files if c not in (common or {})]
     args = [*_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *rest, *objects,
             *(libs if "windows" not in target else ())]
     return _cached_run(cmd, args, sources, out_name, cached, objects)
@@ -238,7 +239,7 @@ def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_fi
     cache (``latobs.cache``, kind "compile"), unless ``cached`` is False or the cache is off.
     ``common`` {file of ``c_files``: the names of the sources it reads}: files compiled into
     objects of their own, cached by those sources alone (``_compile_target``): an FMI layer,
-    compiled once per target for every FMU."""
+    compiled once per target for every FMU; a model file, once for both FMI versions."""
     from concurrent.futures import ThreadPoolExecutor
 
     unknown = [p for p in out_names if p not in PLATFORMS]
