@@ -15,8 +15,8 @@ system C compiler for this machine's platform when there is one):
 * compiled with the hand-written sources of ``fmu_src/c``: ``fmi2_layer.c`` (the FMI 2.0 layer;
   ``fmi3_layer.c`` with ``--fmi 3``) over ``layer.h`` (what both layers share: instance, state
   machine, variables, logging, checks; CoSimulation and ModelExchange), ``layer_config.c`` (the
-  layer's view of ``fmu_config.h``, read at run time: the layer itself is compiled once per
-  platform for every FMU), ``model.h`` (the layers'
+  layer's view of ``fmu_config.h`` and ``fmu_tables.h``, read at run time: the layer itself is
+  compiled once per platform for every FMU), ``model.h`` (the layers'
   interface to the model files), ``<runtime>.c`` (the maths), shared helpers (``linalg.h``),
   ``fp_contract.h`` (no FMA contraction, stated in the sources for every compiler that rebuilds
   them; included by ``model.h``) and ``glibc_compat.h`` (the old-glibc baseline, below).
