@@ -20,6 +20,7 @@ __all__ = ["MODULES", "Entry", "Reference", "ENTRIES", "PART_EMITTERS", "OBSERVE
 MODULES = {
     # design time (latobs.synthesis): the design of each paper, its certificate
     "design_000": "latobs.synthesis.sideslip_bank_observer",
+    "design_000_h2": "latobs.synthesis.sideslip_bank_observer_h2",
     "design_001": "latobs.synthesis.lateral_interval_observer",
     "design_002": "latobs.synthesis.sideslip_fixed_order_estimator",
     "design_kalman": "latobs.synthesis.sideslip_kalman_filter",
@@ -141,14 +142,17 @@ _MOTORCYCLE = Reference("motorcycle-lane-change", _SECONDS,
 _CG = (("vy", "vy_cg"), ("beta", "beta_cg"))     # the bicycle model's states are the CG's
 
 
-def _paper_000(name: str, switching: str, faithful: bool, description: str, build_seconds: float) -> Entry:
-    """The four paper-000 FMUs: one design, model file, runtime and C model, other design options."""
+def _paper_000(name: str, switching: str, faithful: bool, description: str, build_seconds: float,
+               design: str = "design_000") -> Entry:
+    """The four paper-000 FMUs: one model file, runtime and C model, other design options; ``design``:
+    the module of their gains (Theorem 2, or the robust-H2 departure)."""
     return Entry(
         name, "observer", "000", _m("{m[papers]}:MENHOUR_2014"), "sedan", description,
         model=_m("{m[models]}.sideslip_bank_observer"), runtime=_m("{m[runtime_000]}:SwitchedPIObserver"),
         c_model="sideslip_bank_observer.c", emitter=_m("{m[emitter_000]}"), reference=_BANK_BRAKING,
-        options=_m("{m[design_000]}:DesignOptions"), option_args=(("switching", switching), ("faithful", faithful)),
-        design=_m("{m[design_000]}:design"), to_dict=_m("{m[design_000]}:to_design_dict"),
+        options=MODULES[design] + (":H2Options" if design == "design_000_h2" else ":DesignOptions"),
+        option_args=(("switching", switching), ("faithful", faithful)),
+        design=MODULES[design] + ":design", to_dict=MODULES[design] + ":to_design_dict",
         certificate=_m("{m[certificate]}.sideslip_bank_observer:certify"), plant="CarPlant", validate=True, campaign="robustness-000",
         build_seconds=build_seconds)
 
@@ -156,8 +160,9 @@ def _paper_000(name: str, switching: str, faithful: bool, description: str, buil
 #: every FMU of ``latobs build``: the observers, then the plants
 ENTRIES: tuple[Entry, ...] = (
     _paper_000("SideslipBankObserver", "speed", False,
-               "switched H-inf PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model "
-               "at the measured speed, robust to model error, valid flag with integral freeze", 8.0),
+               "switched PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model at the "
+               "measured speed, gains robust-H2 over a +-10 % cornering-stiffness box (latobs), valid flag with "
+               "integral freeze", 8.0, "design_000_h2"),
     _paper_000("SideslipBankObserverTire", "tire", False,
                "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) "
                "at alpha* = 0.5 deg (eq. 27), robust to model error, valid flag with integral freeze", 9.0),

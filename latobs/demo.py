@@ -83,7 +83,8 @@ def _design_section(path: Path) -> str:
              f"passed; common-P LMI bounds gamma (bank -> beta error) = {s['gamma']:.4g}"
              + (f", gamma2 (model error -> weighted [bank; beta] error) = {g2:.4g}" if g2 is not None else "")
              + f"; cond(P) = {s['cond_P']:.3g}; pole region Re < -{o['alpha']:g}, |lambda| < {o['radius']:g}; "
-             f"{d['objective']}; Clarabel {d['solver']['status']} in {d['solver']['seconds']:.2f} s.",
+             f"{d['objective']}; Clarabel {d['solver']['status']} in {d['solver']['seconds']:.2f} s."
+             + (_robust_h2_line(d, s) if "robust_h2" in d else ""),
              "",
              "Per mode, the worst case over a dense speed grid of its model range (frozen speed, Hamiltonian "
              "bisection, no P):", "",
@@ -104,6 +105,15 @@ def _design_section(path: Path) -> str:
                       "speed change during the freeze)."]
     lines += ["", *(f"- {n}" for n in d["notes"]), ""]
     return "\n".join(lines)
+
+
+def _robust_h2_line(d: dict, s: dict) -> str:
+    """Paper 000's robust-H2 gains: the bound over the stiffness box and the worst frozen norm."""
+    h, f = d["robust_h2"], s.get("robust_h2") or {}
+    lo, hi = h["stiffness_box"]
+    return (f" Gains robust-H2 over cornering stiffnesses x {lo:g}..{hi:g} (each axle): H2 bound {h['bound']:.4g} "
+            f"(weighted steering, bank rate and sensor noise -> [beta error; {h['bank_weight']:g} x bank error]); worst "
+            f"frozen H2 norm {f.get('worst_frozen_norm', float('nan')):.4g} ({f.get('worst_frozen_at', '-')}).")
 
 
 def _design_section_002(d: dict, s: dict) -> str:

@@ -329,7 +329,111 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
     checks.append(_ge("P positive definite: min eig(P) / max eig(P)", float(w_[0] / w_[-1]), 1e-12))
     figures.update(gamma=gamma, gamma_model_error=gamma2, frozen_integral=frozen, decay_rate=lam_v,
                    cond_P=float(np.linalg.cond(P)))
+    if "robust_h2" in d:
+        h2_checks, figures["robust_h2"] = _robust_h2_000(d, vehicle, modes, verts)
+        checks += h2_checks
     return checks, figures
+
+
+def robust_system_000(d: dict, mode: dict, car: dict, v: float, w: float | None = None):
+    """The certificate's own [x; e_a] system of the robust-H2 criterion for ``mode`` (its gains) and the
+    car ``car`` (1/Vx coefficients at the car's stiffnesses), at (v, w) = (1/Vx, 1/Vx^2), from the
+    design file's numbers: the car x' = A_t x + B_t delta; the observer's error e_a = [T x - z; phi_r - w^]
+    (eq. 19) with y = C x + n and the bank's rate omega:
+        e_a' = A_cl e_a + [T (A_t - A); 0] x + [T (B_t - B); 0] delta + [0; 1] omega
+               - ([T A N; 0] + K_a (I - C N)) n
+    (the observer's z' = T (A x^ + B delta + F w^) + K_P (y - C x^), x^ = z + N y, w^' = K_I (y - C x^)
+    subtracted from T x'); inputs weighted by robust_h2.input_weights, outputs [e_a[0];
+    bank_weight e_a[4]]. Returns (A, B, C_z)."""
+    w = v * v if w is None else w
+    h = d["robust_h2"]
+    T, N, C = (np.asarray(d["structure"][k], float) for k in ("T", "N", "C"))
+    wd, wo, *wn = (float(x) for x in h["input_weights"])
+    Wn = np.diag(wn)
+    A, B = _model_at(mode["model"]["A"], v, w), _model_at(mode["model"]["B"], v, w)
+    At, Bt = _model_at(car["A"], v, w), _model_at(car["B"], v, w)
+    Acl = closed_loop_000(d, mode, v, w)["Acl"]
+    Ka = np.vstack([np.asarray(mode["gains"]["K_P"], float), np.asarray(mode["gains"]["K_I"], float)])
+    n, ny = At.shape[0], C.shape[0]
+    e_top = lambda M: np.vstack([M, np.zeros((1, M.shape[1]))])
+    Abig = np.block([[At, np.zeros((n, n + 1))], [e_top(T @ (At - A)), Acl]])
+    omega = np.zeros((n + 1, 1))
+    omega[n, 0] = wo
+    Bbig = np.block([[Bt * wd, np.zeros((n, 1 + ny))],
+                     [e_top(T @ (Bt - B)) * wd, omega, -e_top(T @ A @ N) @ Wn - Ka @ (np.eye(ny) - C @ N) @ Wn]])
+    Cz = np.zeros((2, 2 * n + 1))
+    Cz[0, n] = 1.0
+    Cz[1, 2 * n] = float(h["bank_weight"])
+    return Abig, Bbig, Cz
+
+
+def _h2_norm(A: np.ndarray, B: np.ndarray, Cz: np.ndarray) -> tuple[float, float]:
+    """H2 norm of (A, B, Cz) (A Hurwitz) twice: from the controllability and the observability
+    Gramian (two Lyapunov equations); inf if A is not Hurwitz."""
+    import scipy.linalg
+
+    if not np.max(np.linalg.eigvals(A).real) < 0:
+        return math.inf, math.inf
+    Wc = scipy.linalg.solve_continuous_lyapunov(A, -B @ B.T)
+    Wo = scipy.linalg.solve_continuous_lyapunov(A.T, -Cz.T @ Cz)
+    return (math.sqrt(max(float(np.trace(Cz @ Wc @ Cz.T)), 0.0)), math.sqrt(max(float(np.trace(B.T @ Wo @ B)), 0.0)))
+
+
+def _robust_h2_000(d: dict, vehicle, modes: dict, verts: list) -> tuple[list[Check], dict]:
+    """Checks of the robust-H2 section (``docs/certificates.md``): the stored corners are the box's; at every
+    LMI vertex and stiffness corner, the Lyapunov LMI on diag(P_car, P_err) and trace(B' diag(P_car, P_err) B) <= bound^2
+    (both affine in the car and the speed, so they hold on the whole box and speed polytope); on the dense grid
+    (frozen speeds x the corners and the box's centre), the frozen H2 norm from two Gramians <= bound."""
+    h = d["robust_h2"]
+    checks: list[Check] = []
+    bound = float(h["bound"])
+    lo, hi = (float(x) for x in h["stiffness_box"])
+    box_ok = math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= 1 <= hi
+    corners = sorted({(a, b) for a in (lo, hi) for b in (lo, hi)}) if box_ok else []
+    stored = sorted(tuple(float(x) for x in c) for c in h["stiffness_corners"])
+    checks.append(_le("robust H2: stored stiffness corners are the corners of the box (count differing)",
+                      len(set(stored) ^ set(corners)) if box_ok else math.inf, 0, f"box {h['stiffness_box']}"))
+    P_car, P_err = (_sym(np.asarray(h[k], float)) for k in ("P_car", "P_err"))
+    n = P_car.shape[0]
+    Pbig = np.block([[P_car, np.zeros((n, P_err.shape[0]))], [np.zeros((P_err.shape[0], n)), P_err]])
+    ev = np.linalg.eigvalsh(Pbig)
+    checks.append(_ge("robust H2: diag(P_car, P_err) positive definite (min eig / max eig)", float(ev[0] / ev[-1]), 1e-12))
+    worst = {"norm": (0.0, "")}
+    for i, mode in modes.items():
+        cars = {c: brm.lpv_coefficients(vehicle, c[0] * vehicle.Cf * float(mode["stiffness_scale"][0]),
+                                        c[1] * vehicle.Cr * float(mode["stiffness_scale"][1]))
+                for c in corners + [(1.0, 1.0)]}
+        lyap, trace = (-math.inf, ""), (-math.inf, "")
+        for x in (x for x in verts if int(x["mode"]) == i):
+            for c in corners:
+                A, B, Cz = robust_system_000(d, mode, cars[c], float(x["v"]), float(x["w"]))
+                where = f"{x['label']}, stiffness x {c}"
+                val = _neg_margin(Pbig @ A + A.T @ Pbig + Cz.T @ Cz)
+                if not val <= lyap[0]:
+                    lyap = (val, where)
+                tr = float(np.trace(B.T @ Pbig @ B))
+                if not tr <= trace[0]:
+                    trace = (tr, where)
+        checks.append(_le(f"robust H2 Lyapunov LMI He(P A) + Cz'Cz < 0 on diag(P_car, P_err): max eig (Jacobi-scaled) over "
+                          f"the vertices x corners, mode {i}", lyap[0] if corners else math.inf, 0.0, f"worst at {lyap[1]}"))
+        checks.append(_le(f"robust H2 bound: max trace(B' diag(P_car, P_err) B) over the vertices x corners <= bound^2, mode {i}",
+                          trace[0] if corners else math.inf, bound**2 * (1 + REL_TOL), f"worst at {trace[1]}"))
+        kind, vlo, vhi, ok = _mode_ranges_000(mode)
+        grid = np.linspace(vlo, vhi, 9) if ok else []
+        gap, frozen = 0.0, (-math.inf, "")
+        for vx in grid:
+            for c in corners + [(1.0, 1.0)]:
+                n1, n2 = _h2_norm(*robust_system_000(d, mode, cars[c], 1.0 / vx))
+                gap = max(gap, abs(n1 - n2) / max(n1, 1e-300)) if math.isfinite(n1) else math.inf
+                if not n1 <= frozen[0]:
+                    frozen = (n1, f"{vx * 3.6:.4g} km/h, stiffness x {c}")
+        checks.append(_le(f"robust H2: frozen H2 norm (controllability Gramian) <= bound on the dense grid "
+                          f"({len(grid)} speeds x {len(corners) + 1} cars), mode {i}", frozen[0] if len(grid) else math.inf,
+                          bound * (1 + REL_TOL), f"worst at {frozen[1]}"))
+        checks.append(_le(f"robust H2: the two Gramians' H2 norms agree (relative difference), mode {i}", gap, 1e-6))
+        if frozen[0] > worst["norm"][0]:
+            worst["norm"] = (frozen[0], f"mode {i} at {frozen[1]}")
+    return checks, {"bound": bound, "worst_frozen_norm": worst["norm"][0], "worst_frozen_at": worst["norm"][1]}
 
 
 _ANALYSES_000: dict = {}    # fingerprint of a design dict -> (checks, figures), for ``summary`` only
@@ -388,4 +492,6 @@ def summary(data: dict) -> dict:
                 "band_kmh": band["range_kmh"], "gamma_band": band["gamma_band"], "gamma2_band": band["gamma2_band"],
             })
     out["cond_P"] = fig["cond_P"]
+    if "robust_h2" in fig:
+        out["robust_h2"] = fig["robust_h2"]
     return out
