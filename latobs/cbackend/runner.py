@@ -323,20 +323,27 @@ def execute(platform: str, program: Path, args: Sequence[str], timeout: float = 
     if prefix is None:
         raise RunnerError(f"{what}: {why}")
     env = dict(os.environ)
-    wine = _wine_prefix(env, prefix[0]) if platform == "win64" and prefix else nullcontext()
+    wine = platform == "win64" and bool(prefix) and toolchain.host_platform() != "win64"
     cmd = [*prefix, str(program), *args]
-    with wine, tempfile.TemporaryFile() as out:
-        t0 = _time.perf_counter()
-        try:    # a file, not a pipe: wineserver outlives wine and would hold a pipe open
-            code = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=out, env=env,
-                                  timeout=timeout).returncode
-        except subprocess.TimeoutExpired:
-            raise RunnerError(f"{what}: took longer than {timeout:g} s") from None
-        except OSError as exc:
-            raise RunnerError(f"{what}: cannot start {cmd[0]}: {exc}") from exc
-        seconds = _time.perf_counter() - t0
-        out.seek(0)
-        return code, out.read().decode("utf-8", "replace"), seconds
+    for attempt in (1, 2):
+        with (_wine_prefix(env, prefix[0]) if wine else nullcontext()), tempfile.TemporaryFile() as out:
+            t0 = _time.perf_counter()
+            try:    # a file, not a pipe: wineserver outlives wine and would hold a pipe open
+                code = subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=out, env=env,
+                                      timeout=timeout).returncode
+            except subprocess.TimeoutExpired:
+                raise RunnerError(f"{what}: took longer than {timeout:g} s") from None
+            except OSError as exc:
+                raise RunnerError(f"{what}: cannot start {cmd[0]}: {exc}") from exc
+            seconds = _time.perf_counter() - t0
+            out.seek(0)
+            text = out.read().decode("utf-8", "replace")
+        # Wine's client exits 1 without a word when the server it reaches is shutting down (its
+        # linger time ran out between our check and the start): the program never ran, so run it
+        # once more. Every program run here prints its own errors, so an empty exit 1 is Wine's.
+        if not (wine and attempt == 1 and code == 1 and not text.strip()):
+            return code, text, seconds
+    return code, text, seconds
 
 
 def host_path(platform: str, path: str | os.PathLike) -> str:

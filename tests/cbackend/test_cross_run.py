@@ -253,3 +253,32 @@ def test_a_refused_step_is_recorded_not_hidden(built_fmus, platform):
     assert list(got.status) == [0, 0, 0, 3]
     assert np.all(np.isfinite(got["beta_hat"][:3])) and np.isnan(got["beta_hat"][3])
     assert "delta = nan" in got.log and "fmi2Error at t = 0.015" in got.failure()
+
+
+def test_a_silent_wine_failure_is_run_once_more_and_a_real_one_is_not(monkeypatch, tmp_path):
+    """Wine's client exits 1 without output when the server it reaches is shutting down: the host is
+    run again once; a failure that says something (the host's own errors) is returned at once."""
+    import subprocess
+
+    monkeypatch.setattr(runner, "_emulator", lambda platform: (["wine"], None))
+    monkeypatch.setattr(runner.toolchain, "host_platform", lambda: "linux64")
+    monkeypatch.setattr(runner, "cache_dir", lambda: tmp_path)
+    (tmp_path / "wine").mkdir()
+    (tmp_path / "wine" / ".latobs-ready").write_text("")
+    monkeypatch.setattr(runner.shutil, "which", lambda name: None)
+    calls = []
+
+    def fake(outcomes):
+        def run(cmd, stdout=None, **kw):
+            code, text = outcomes[len(calls)]
+            calls.append(cmd)
+            stdout.write(text.encode())
+            return subprocess.CompletedProcess(cmd, code)
+        return run
+
+    monkeypatch.setattr(runner.subprocess, "run", fake([(1, ""), (0, "ok")]))
+    assert runner.execute("win64", Path("host.exe"), [])[:2] == (0, "ok") and len(calls) == 2
+    calls.clear()
+    monkeypatch.setattr(runner.subprocess, "run", fake([(1, "fmu_runner: cannot load the binary"), (0, "")]))
+    assert runner.execute("win64", Path("host.exe"), [])[:2] == (1, "fmu_runner: cannot load the binary")
+    assert len(calls) == 1
