@@ -252,12 +252,15 @@ def test_a_user_error_is_one_line_and_exit_2(argv, command, culprits, tmp_path, 
     assert not (tmp_path / "build").exists() and not list(files["empty"].iterdir())   # nothing written
 
 
-@pytest.mark.parametrize("values, culprit", [({"hr": 100}, "no solution"), ({"Iz": 1e9}, "failed its certificate")],
+# not-certified: the tire-mode design (Theorem 2) refuses Iz = 1e9 in 1.5 s (gains and cond(P) over their
+# limits); the speed-mode default's robust-H2 LMIs take Clarabel 9 s on that car before their certificate fails
+@pytest.mark.parametrize("name, values, culprit", [("SideslipBankObserver", {"hr": 100}, "no solution"),
+                                                   ("SideslipBankObserverTire", {"Iz": 1e9}, "failed its certificate")],
                          ids=["infeasible", "not-certified"])
-def test_a_design_that_fails_is_one_line_and_exit_2(values, culprit, tmp_path, capsys):
+def test_a_design_that_fails_is_one_line_and_exit_2(name, values, culprit, tmp_path, capsys):
     veh = _vehicle_file(tmp_path, "extreme", **values)
-    rc, out, err = _cli(["design", "SideslipBankObserver", "--vehicle", veh, "--out", tmp_path / "out"], capsys)
-    _assert_one_line(rc, err, "design", ["SideslipBankObserver_extreme", culprit])
+    rc, out, err = _cli(["design", name, "--vehicle", veh, "--out", tmp_path / "out"], capsys)
+    _assert_one_line(rc, err, "design", [f"{name}_extreme", culprit])
     assert not (tmp_path / "out").exists()
 
 
