@@ -170,8 +170,8 @@ def closed_loop(design: H2Design, i: int, car: dict, v: float, w: float) -> tupl
 
 def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
     """Solve the robust-H2 LMIs (module docstring) with cvxpy; DesignError names the LMI family.
-    After the solve, LMI (20)'s gamma and the H2 bound are evaluated on the returned P (round-off of
-    the solver decides neither)."""
+    After the solve the H2 bound is evaluated on the returned numbers and LMI (20)'s P is solved for
+    the gains (``_lmi20``): round-off of the solver decides neither figure."""
     import cvxpy as cp  # design time only
 
     opts.validate()

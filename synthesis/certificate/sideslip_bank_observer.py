@@ -398,7 +398,7 @@ def _robust_h2_000(d: dict, vehicle, modes: dict, verts: list) -> tuple[list[Che
     Pbig = np.block([[P_car, np.zeros((n, P_err.shape[0]))], [np.zeros((P_err.shape[0], n)), P_err]])
     ev = np.linalg.eigvalsh(Pbig)
     checks.append(_ge("robust H2: diag(P_car, P_err) positive definite (min eig / max eig)", float(ev[0] / ev[-1]), 1e-12))
-    worst = {"norm": (0.0, "")}
+    worst = (0.0, "")                      # the largest frozen H2 norm over the modes, and where
     for i, mode in modes.items():
         cars = {c: brm.lpv_coefficients(vehicle, c[0] * vehicle.Cf * float(mode["stiffness_scale"][0]),
                                         c[1] * vehicle.Cr * float(mode["stiffness_scale"][1]))
@@ -431,9 +431,9 @@ def _robust_h2_000(d: dict, vehicle, modes: dict, verts: list) -> tuple[list[Che
                           f"({len(grid)} speeds x {len(corners) + 1} cars), mode {i}", frozen[0] if len(grid) else math.inf,
                           bound * (1 + REL_TOL), f"worst at {frozen[1]}"))
         checks.append(_le(f"robust H2: the two Gramians' H2 norms agree (relative difference), mode {i}", gap, 1e-6))
-        if frozen[0] > worst["norm"][0]:
-            worst["norm"] = (frozen[0], f"mode {i} at {frozen[1]}")
-    return checks, {"bound": bound, "worst_frozen_norm": worst["norm"][0], "worst_frozen_at": worst["norm"][1]}
+        if frozen[0] > worst[0]:
+            worst = (frozen[0], f"mode {i} at {frozen[1]}")
+    return checks, {"bound": bound, "worst_frozen_norm": worst[0], "worst_frozen_at": worst[1]}
 
 
 _ANALYSES_000: dict = {}    # fingerprint of a design dict -> (checks, figures), for ``summary`` only
