@@ -143,14 +143,14 @@ _CG = (("vy", "vy_cg"), ("beta", "beta_cg"))     # the bicycle model's states ar
 
 
 def _paper_000(name: str, switching: str, faithful: bool, description: str, build_seconds: float,
-               design: str = "design_000") -> Entry:
+               design: str = "design_000", options: str = "DesignOptions") -> Entry:
     """The four paper-000 FMUs: one model file, runtime and C model, other design options; ``design``:
-    the module of their gains (Theorem 2, or the robust-H2 departure)."""
+    the module of their gains (Theorem 2, or the robust-H2 departure), ``options`` its options class."""
     return Entry(
         name, "observer", "000", _m("{m[papers]}:MENHOUR_2014"), "sedan", description,
         model=_m("{m[models]}.sideslip_bank_observer"), runtime=_m("{m[runtime_000]}:SwitchedPIObserver"),
         c_model="sideslip_bank_observer.c", emitter=_m("{m[emitter_000]}"), reference=_BANK_BRAKING,
-        options=MODULES[design] + (":H2Options" if design == "design_000_h2" else ":DesignOptions"),
+        options=f"{MODULES[design]}:{options}",
         option_args=(("switching", switching), ("faithful", faithful)),
         design=MODULES[design] + ":design", to_dict=MODULES[design] + ":to_design_dict",
         certificate=_m("{m[certificate]}.sideslip_bank_observer:certify"), plant="CarPlant", validate=True, campaign="robustness-000",
@@ -162,7 +162,7 @@ ENTRIES: tuple[Entry, ...] = (
     _paper_000("SideslipBankObserver", "speed", False,
                "switched PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model at the "
                "measured speed, gains robust-H2 over a +-10 % cornering-stiffness box (latobs), valid flag with "
-               "integral freeze", 8.0, "design_000_h2"),
+               "integral freeze", 8.0, "design_000_h2", "H2Options"),
     _paper_000("SideslipBankObserverTire", "tire", False,
                "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) "
                "at alpha* = 0.5 deg (eq. 27), robust to model error, valid flag with integral freeze", 9.0),

@@ -219,10 +219,9 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
         # the paper's pole region on the nominal error system (Theorem 2's LMIs 21-22), with P2
         A, _, F = _at(nominal, v, w)
         Aa, Ca, _, _ = augmented(A, F, C, T)
-        PA2 = P2 @ (Si @ Aa @ S / tau) - Y[i] @ (Ca @ S)
-        fam[k_alpha].append(PA2 + PA2.T + 2 * a_s * P2 << -eps * np.eye(n + 1))
-        D = cp.bmat([[-R_s * P2, PA2], [PA2.T, -R_s * P2]])
-        fam[k_disk].append((D + D.T) / 2 << -eps * np.eye(2 * n + 2))
+        alpha_lmi, disk_lmi = _region(P2, P2 @ (Si @ Aa @ S / tau) - Y[i] @ (Ca @ S), a_s, R_s, eps)
+        fam[k_alpha].append(alpha_lmi)
+        fam[k_disk].append(disk_lmi)
     base = [P1 >> eps * np.eye(n), P2 >> eps * np.eye(n + 1)]
     prob = cp.Problem(cp.Minimize(cp.trace(W)), base + [c for cs in fam.values() for c in cs])
     status, seconds = lmi.solve(prob)
@@ -245,6 +244,15 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
                    P_car=P_car, P_err=P_err)
     out.h2_bound = robust_h2_bound(out, vertices, cars)
     return out
+
+
+def _region(P, PA, a_s: float, R_s: float, eps: float) -> list:
+    """The paper's pole region on P A_cl = ``PA`` (scaled time): alpha-stability and the disk (LMIs 21-22)."""
+    import cvxpy as cp
+
+    na = P.shape[0]
+    D = cp.bmat([[-R_s * P, PA], [PA.T, -R_s * P]])
+    return [PA + PA.T + 2 * a_s * P << -eps * np.eye(na), (D + D.T) / 2 << -eps * np.eye(2 * na)]
 
 
 def _sym(M: np.ndarray) -> np.ndarray:
@@ -285,9 +293,7 @@ def _lmi20(modes, vertices, K_P, K_I, T, C, S, tau, opts: H2Options) -> tuple[np
         PA = P @ As
         M = cp.bmat([[PA + PA.T, P @ Fs, Ls.T], [(P @ Fs).T, -g * np.eye(1), np.zeros((1, 1))],
                      [Ls, np.zeros((1, 1)), -np.eye(1)]])
-        cons += [(M + M.T) / 2 << -eps * np.eye(na + 2), PA + PA.T + 2 * a_s * P << -eps * np.eye(na)]
-        D = cp.bmat([[-R_s * P, PA], [PA.T, -R_s * P]])
-        cons.append((D + D.T) / 2 << -eps * np.eye(2 * na))
+        cons += [(M + M.T) / 2 << -eps * np.eye(na + 2), *_region(P, PA, a_s, R_s, eps)]
     status, _ = lmi.solve(cp.Problem(cp.Minimize(g), cons))
     if not lmi.solved(status) or P.value is None:
         raise DesignError(f"design {opts.name}: LMI (20) + pole region have no common P for the robust-H2 gains "

@@ -323,7 +323,7 @@ def execute(platform: str, program: Path, args: Sequence[str], timeout: float = 
     if prefix is None:
         raise RunnerError(f"{what}: {why}")
     env = dict(os.environ)
-    wine = platform == "win64" and bool(prefix) and toolchain.host_platform() != "win64"
+    wine = platform == "win64" and bool(prefix)          # a prefix for win64: Wine (none on Windows)
     cmd = [*prefix, str(program), *args]
     for attempt in (1, 2):
         with (_wine_prefix(env, prefix[0]) if wine else nullcontext()), tempfile.TemporaryFile() as out:
@@ -341,9 +341,9 @@ def execute(platform: str, program: Path, args: Sequence[str], timeout: float = 
         # Wine's client exits 1 without a word when the server it reaches is shutting down (its
         # linger time ran out between our check and the start): the program never ran, so run it
         # once more. Every program run here prints its own errors, so an empty exit 1 is Wine's.
-        if not (wine and attempt == 1 and code == 1 and not text.strip()):
-            return code, text, seconds
-    return code, text, seconds
+        if wine and attempt == 1 and code == 1 and not text.strip():
+            continue
+        return code, text, seconds
 
 
 def host_path(platform: str, path: str | os.PathLike) -> str:
