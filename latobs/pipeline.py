@@ -21,9 +21,11 @@ class PipelineError(RuntimeError):
     pass
 
 
-def solve(name: str, vehicle: str | None, quiet: bool = False, **overrides) -> dict:
+def solve(name: str, vehicle: str | None, quiet: bool = False, runtime_facts: bool = True, **overrides) -> dict:
     """Design and certify (``designs.run``, with design-option ``overrides``) through the cache
-    (``latobs.cache``: solved once per inputs); prints the headline figures."""
+    (``latobs.cache``: solved once per inputs); prints the headline figures. ``runtime_facts``:
+    completed with what only running its runtime decides (``packaging.complete_runtime_data``, as
+    ``latobs design`` writes it); False: the design as ``designs.run`` made it."""
     import json
 
     from . import cache, identity
@@ -39,7 +41,9 @@ def solve(name: str, vehicle: str | None, quiet: bool = False, **overrides) -> d
         solved.append(True)
         return json.loads(design_file.dumps(designs.run(name, vehicle, **overrides)))
 
-    data = complete_runtime_data(cache.remember("design", _design_cache_parts(ident), compute))
+    data = cache.remember("design", _design_cache_parts(ident), compute)
+    if runtime_facts:
+        data = complete_runtime_data(data)
     if not quiet and not solved:
         print(f"{data['name']}: the cached design of identical inputs (latobs.cache), not solved again")
     if not quiet:

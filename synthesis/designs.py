@@ -151,15 +151,16 @@ def design_errors() -> tuple[type, ...]:
     return tuple(catalogue.resolve(m).DesignError for m in modules)
 
 
-def attempt(name: str, vehicle: str, **overrides) -> Outcome:
-    """``run`` with its user-facing failures as an :class:`Outcome` (a bug still raises)."""
+def attempt(name: str, vehicle: str, *, runner=run, **overrides) -> Outcome:
+    """``run`` with its user-facing failures as an :class:`Outcome` (a bug still raises).
+    ``runner``: what designs (``run``'s signature): e.g. ``run`` through a cache."""
     import time
 
     from .params import VehicleParameterError
 
     t0 = time.perf_counter()
     try:
-        data = run(name, vehicle, **overrides)
+        data = runner(name, vehicle, **overrides)
         status, detail = "certified", ""
     except VehicleParameterError as exc:
         data, status, detail = None, "n/a", str(exc)

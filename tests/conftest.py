@@ -88,11 +88,13 @@ class SessionBuild:
         self._c_paths: dict[str, Path] = {}
         self._c3_paths: dict[str, Path] = {}
 
-    def design(self, name: str, vehicle: str | None = None) -> dict:
-        """(``vehicle``: a shipped set other than the design's default, also solved once per run.)"""
+    def design(self, name: str, vehicle: str | None = None, runtime_facts: bool = True) -> dict:
+        """(``vehicle``: a shipped set other than the design's default, also solved once per run.
+        ``runtime_facts=False``: without what only running its runtime decides, e.g. paper 001's
+        longest step, whose search takes ~15 s for a 12-band design: ``pipeline.solve``.)"""
         if name not in packaging.OBSERVERS:
             raise KeyError(f"{name!r} is not an observer of latobs.packaging.OBSERVERS")
-        key = name if vehicle is None else f"{name}_{vehicle}"
+        key = (name if vehicle is None else f"{name}_{vehicle}") + ("" if runtime_facts else "~without-facts")
         if key not in self._designs:
             # as `latobs design` writes it (pipeline.solve): what only running the runtime decides
             # included; solved by the first worker that needs it (under a lock of its own: the other
@@ -106,7 +108,7 @@ class SessionBuild:
                 if not path.is_file():
                     from latobs import pipeline
 
-                    data = pipeline.solve(name, vehicle, quiet=True)     # (through the run's cache)
+                    data = pipeline.solve(name, vehicle, quiet=True, runtime_facts=runtime_facts)   # (the run's cache)
                     atomic_write_text(path, design_file.dumps(data))
                 self._designs[key] = json.loads(path.read_text(encoding="utf-8"))
         return self._designs[key]

@@ -498,7 +498,7 @@ def _fit(xs, ys) -> dict:
 def scaling_section(folder: Path, backend: str, repeats: int) -> dict:
     """Wall seconds per coupled run against scenario length and number of observers (see the
     module docstring), FMUs extracted per run and extracted once."""
-    from fmpy import extract
+    from ..validation.instance import extract
 
     from ..validation.scenarios import get_scenario
 

@@ -252,7 +252,7 @@ def _local(ref: FmuRef, blob: bytes | None = None) -> tuple[str, str]:
     import shutil
     import tempfile
 
-    from fmpy import extract
+    from .instance import extract
 
     with _CACHE_LOCK:
         hit = _WORKER_CACHE.get(ref.sha256)

@@ -21,7 +21,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
-from fmpy import calloc, extract, free, read_model_description
+import fmpy
+from fmpy import calloc, free, read_model_description
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2Boolean,
@@ -33,6 +34,19 @@ from fmpy.fmi2 import (
     fmi2Real,
     fmi2ValueReference,
 )
+
+def extract(path: str, unzipdir: str | None = None) -> str:
+    """``fmpy.extract`` of what loading and running the FMU here needs: its model description, its
+    resources and this platform's binaries (FMI 2.0 ``binaries/linux64``, FMI 3.0
+    ``binaries/x86_64-linux``); not its sources, documentation or other platforms' binaries (a
+    native latobs FMU carries four platforms' binaries and its C sources: most of its bytes). Returns
+    the folder (a temporary one when ``unzipdir`` is None)."""
+    mine = (f"binaries/{fmpy.platform}/", f"binaries/{fmpy.platform_tuple}/")
+
+    def needed(name: str) -> bool:
+        return not name.startswith(("sources/", "documentation/", "extra/", "binaries/")) or name.startswith(mine)
+    return str(fmpy.extract(path, unzipdir=unzipdir, include=needed))
+
 
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 MAX_LOG_MESSAGES = 10_000  # per FMU; further messages are counted, not stored

@@ -17,9 +17,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from fmpy import extract
 
-from .instance import (FMI_TYPES, CoSimulationError, FmuInstance, WiringError, _unit_of, fmi_type,
+from .instance import (FMI_TYPES, CoSimulationError, FmuInstance, WiringError, _unit_of, extract, fmi_type,
                        observer_design)
 from .scenarios import Scenario, get_scenario
 

@@ -163,25 +163,23 @@ def test_a_design_file_of_the_same_inputs_is_packaged_without_solving_again(tmp_
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["c", "python"])
-def test_latobs_build_twice_gives_byte_identical_fmus(backend, tmp_path):
-    """Two `latobs build` processes (each solving its designs): the same bytes. The issue's case
-    is the interval observer, whose design carried the solver's wall time into the FMU. Paper
-    000's tire-mode design, a second LMI design, is built in the pythonfmu variant only (a design
-    is the same for both backends); the native variant adds the compilers' reproducibility, for
-    every platform."""
+def test_latobs_build_twice_gives_byte_identical_fmus(backend, tmp_path, built_fmus):
+    """Two builds, each solving its designs: the same bytes. One is a `latobs build` process
+    without the cache, the other this run's session build (solved and packaged in a test worker).
+    The issue's case is the interval observer, whose design carried the solver's wall time into
+    the FMU. Paper 000's tire-mode design, a second LMI design, is built in the pythonfmu variant
+    only (a design is the same for both backends); the native variant adds the compilers'
+    reproducibility, for every platform."""
     if backend == "c" and find_compiler() is None:
         pytest.skip("no C compiler")
     names = ["LateralIntervalObserver", *(["SideslipBankObserverTirePaper"] if backend == "python" else []), "CarPlant"]
-    # without the cache (latobs.cache): each process solves and compiles everything itself
-    runs = [_latobs("build", *names, "--backend", backend, "--out", tmp_path / f"run{k}", "--no-cache")
-            for k in range(2)]
-    for proc in runs:
-        out, err = proc.communicate(timeout=600)
-        assert proc.returncode == 0, err
-    a, b = _tree(tmp_path / "run0"), _tree(tmp_path / "run1")
-    fmus = sorted(n for n in a if n.endswith(".fmu"))
-    assert fmus == sorted(f"{n}.fmu" for n in names)
-    assert [n for n in fmus if a[n] != b[n]] == []
+    # without the cache (latobs.cache): the process solves and compiles everything itself
+    proc = _latobs("build", *names, "--backend", backend, "--out", tmp_path / "run", "--no-cache")
+    out, err = proc.communicate(timeout=600)
+    assert proc.returncode == 0, err
+    got = _tree(tmp_path / "run")
+    assert sorted(n for n in got if n.endswith(".fmu")) == sorted(f"{n}.fmu" for n in names)
+    assert [n for n in names if got[f"{n}.fmu"] != built_fmus.get(n, backend).read_bytes()] == []
 
 
 @pytest.mark.slow
@@ -190,7 +188,7 @@ def test_every_fmu_built_twice_is_byte_identical(variant, built_fmus, tmp_path):
     """Every FMU of `latobs build`, both backends: packaged a second time from its design (whose
     wall-clock figures differ, as they do between two solves), the bytes of the session build.
     The designs themselves are solved once here (paper 002's scheduled design alone takes ~40 s):
-    that two solves give the same numbers is checked by the two-process test above and by
+    that two solves give the same numbers is checked by the no-cache build test above and by
     `latobs build` twice on every design (identical but for the wall-clock figures)."""
     name, backend = variant
     first = built_fmus.get(name, backend)

@@ -585,7 +585,7 @@ def test_additive_disturbance_bound_is_enclosed(design):
 
 def test_a_design_with_many_bands(built_fmus):
     """The real-data vehicle's design: 12 bands over 15-63 m/s (any number of modes)."""
-    d = built_fmus.design("LateralIntervalObserver", "mbds_250lm")      # solved once per test run
+    d = built_fmus.design("LateralIntervalObserver", "mbds_250lm", runtime_facts=False)   # solved once per test run
     # the longest step this design accepts, stated as the step used (its search, ~20 s of probes
     # over 12 bands, is tested on the default design: test_max_communication_step_is_where_...)
     d = {**d, "tables": {**d["tables"], "max_communication_step": 0.005}}

@@ -7,6 +7,7 @@ paper 003's manoeuvre while reaching the tyres' saturation zone.
 """
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
@@ -20,14 +21,21 @@ from latobs.synthesis import params as params_mod
 from latobs.validation.harness import FmuInstance
 from latobs.validation.scenarios import get_scenario
 
-DATA = packaging.plant_data("sharp_motorcycle")
-STRUCT = DATA["structure"]
+
+
+@functools.cache
+def _data() -> dict:
+    """The plant data (its equations derived with sympy, ~2 s: when a test first needs them, not
+    while the run collects its tests)."""
+    return packaging.plant_data("sharp_motorcycle")
+
+
 H = 0.005  # s, communication step
 CONTRACT_OUTPUTS = {"steer_angle", "steer_rate", "yaw_rate", "roll_angle", "roll_rate", "vy", "Ff", "Fr"}
 
 
 def plant(**params) -> MotorcyclePlantModel:
-    return MotorcyclePlantModel(DATA, params)
+    return MotorcyclePlantModel(_data(), params)
 
 
 def jacobian(p: MotorcyclePlantModel, vx: float):
@@ -60,7 +68,7 @@ def run_runtime(p: MotorcyclePlantModel, scenario, h: float = H):
 # ------------------------------------------------------------------------------------------
 def test_constants():
     assert G == params_mod.G
-    assert MotorcyclePlantModel.parameter_defaults(DATA)["sigma"] == pytest.approx(0.2438)
+    assert MotorcyclePlantModel.parameter_defaults(_data())["sigma"] == pytest.approx(0.2438)
 
 
 @pytest.mark.parametrize("linear", [0.0, 1.0])
@@ -102,7 +110,8 @@ def test_substep_estimate_bounds_the_spectral_radius(sigma):
 # ------------------------------------------------------------------------------------------
 def _state_for(alpha_f=0.0, alpha_r=0.0, phi=0.0, vx=20.0):
     """A state whose slips are alpha_f, alpha_r (via vy and yaw rate) and roll phi, delta = 0."""
-    lf, lr = STRUCT["tyres"]["front"]["slip_velocity"][1], -STRUCT["tyres"]["rear"]["slip_velocity"][1]
+    tyres = _data()["structure"]["tyres"]
+    lf, lr = tyres["front"]["slip_velocity"][1], -tyres["rear"]["slip_velocity"][1]
     # alpha_f = -(vy + lf r)/vx, alpha_r = -(vy - lr r)/vx
     r = -(alpha_f - alpha_r) * vx / (lf + lr)
     vy = -alpha_r * vx + lr * r
@@ -112,7 +121,7 @@ def _state_for(alpha_f=0.0, alpha_r=0.0, phi=0.0, vx=20.0):
 @pytest.mark.parametrize("mu", [1.0, 0.5])
 def test_tyre_slope_at_zero_is_paper_stiffness(mu):
     p = plant(mu=mu, sigma=0.0)
-    t = STRUCT["tyres"]
+    t = _data()["structure"]["tyres"]
     u = {"rider_torque": 0.0, "vx": 20.0}
     a = 1e-6
     d = p.tyre_state(_state_for(alpha_f=a, alpha_r=a), u)
@@ -128,7 +137,7 @@ def test_tyre_slope_at_zero_is_paper_stiffness(mu):
 @pytest.mark.parametrize("mu", [1.0, 0.3])
 def test_tyre_saturates_at_mu_times_static_load(mu):
     p = plant(mu=mu, sigma=0.0)
-    t = STRUCT["tyres"]
+    t = _data()["structure"]["tyres"]
     u = {"rider_torque": 0.0, "vx": 20.0}
     peak = [0.0, 0.0]
     for a in np.linspace(-0.6, 0.6, 241):
@@ -150,7 +159,8 @@ def test_tyre_saturates_at_mu_times_static_load(mu):
 def test_linear_tyres_have_no_gamma():
     p = plant(linear_tires=1, sigma=0.0)
     d = p.tyre_state(_state_for(alpha_f=0.3, alpha_r=-0.2, phi=0.4), {"rider_torque": 0.0, "vx": 20.0})
-    assert d["Gamma_f"] == 0.0 and d["Gamma_r"] == 0.0 and abs(d["Ff"]) > 2 * STRUCT["tyres"]["front"]["Fz"]
+    front = _data()["structure"]["tyres"]["front"]
+    assert d["Gamma_f"] == 0.0 and d["Gamma_r"] == 0.0 and abs(d["Ff"]) > 2 * front["Fz"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -235,7 +245,7 @@ def test_invalid_parameters_raise_naming_them(params, name):
 
 def test_refuses_data_without_structure():
     with pytest.raises(ValueError, match="structure"):
-        MotorcyclePlantModel({"vehicle": DATA["vehicle"]}, {})
+        MotorcyclePlantModel({"vehicle": _data()["vehicle"]}, {})
     with pytest.raises(ValueError, match="structure"):
         MotorcyclePlantModel(packaging.plant_data("sedan"), {})
 
@@ -327,7 +337,7 @@ def test_fmu_on_paper_003_scenario_reaches_saturation_and_stays_upright(fmu_path
     ratio_f = np.abs(y["Gamma_f"]).max() / np.abs(y["Ff"]).max()
     ratio_r = np.abs(y["Gamma_r"]).max() / np.abs(y["Fr"]).max()
     assert ratio_f > 0.1 and ratio_r > 0.1, (ratio_f, ratio_r)      # the saturation zone is reached
-    Fz = STRUCT["tyres"]
+    Fz = _data()["structure"]["tyres"]
     assert np.abs(y["Ff"]).max() < Fz["front"]["Fz"] and np.abs(y["Fr"]).max() < Fz["rear"]["Fz"]
     # the speed visits three of paper 003's grid modes (nearest of 10, 15, ..., 30 m/s)
     modes = {int(round(v / 5.0)) * 5 for v in sig["vx"]}

@@ -116,7 +116,7 @@ def test_stiffness_bounds_are_the_box_vertices():
 
 
 def test_the_real_data_vehicle_gets_bands_over_its_speed_range(built_fmus):
-    d = built_fmus.design("LateralIntervalObserver", "mbds_250lm")     # (designs.run, solved once per test run)
+    d = built_fmus.design("LateralIntervalObserver", "mbds_250lm", runtime_facts=False)   # (solved once per run)
     assert d["name"] == "LateralIntervalObserver_mbds_250lm" and d["certified"]
     edges = d["switching"]["edges"]
     assert edges[0] <= 16.5 and edges[-1] >= 61.2 and max(b - a for a, b in zip(edges, edges[1:])) <= 4.0 + 1e-12
@@ -129,7 +129,7 @@ speed = { min = 2.5, max = 10.5, unit = "m/s", description = "low-speed range" }
 
 
 @pytest.mark.parametrize("vehicle", ["compact", "suv", "delibasi", "slow sedan"])
-def test_solver_round_off_is_projected_onto_the_exact_metzler_structure(vehicle, tmp_path):
+def test_solver_round_off_is_projected_onto_the_exact_metzler_structure(vehicle, tmp_path, built_fmus):
     """The solver meets (36) only to ~1e-8: the design projects N onto {N + eta I >= 0} exactly,
     re-solves E, K for it (eq. 33 still holds), re-checks (35) on the projected numbers with the
     stated margin, and the certificate passes on exactly what the runtime uses."""
@@ -138,8 +138,9 @@ def test_solver_round_off_is_projected_onto_the_exact_metzler_structure(vehicle,
         text = (resources.files("latobs.synthesis") / "vehicles" / "sedan.toml").read_text()
         vehicle = tmp_path / "sedan_slow.toml"
         vehicle.write_text(text.replace('name = "sedan"', 'name = "sedan_slow"') + SLOW_SEDAN)
-        vehicle = str(vehicle)
-    d = designs.run("LateralIntervalObserver", vehicle)
+        d = designs.run("LateralIntervalObserver", str(vehicle))
+    else:
+        d = built_fmus.design("LateralIntervalObserver", vehicle, runtime_facts=False)   # (solved once per run)
     assert d["certified"]
     st = d["solver"]["structure"]
     assert 0.0 <= st["largest_projection_shift"] <= 1e-6
@@ -161,8 +162,8 @@ def test_projection_refuses_more_than_round_off():
     assert Y[0, 1] == 0.0 and Y[1, 1] == -3.0 and shift == 1e-9
 
 
-def test_a_speed_range_in_km_h_sets_the_bands():
+def test_a_speed_range_in_km_h_sets_the_bands(built_fmus):
     """delibasi declares 20..40 km/h: the bands cover 5.56..11.11 m/s, not the paper's 10..20 m/s."""
-    d = designs.run("LateralIntervalObserver", "delibasi")
+    d = built_fmus.design("LateralIntervalObserver", "delibasi", runtime_facts=False)   # (solved once per run)
     edges = d["switching"]["edges"]
     assert d["certified"] and edges[0] == pytest.approx(20 / 3.6) and edges[-1] == pytest.approx(40 / 3.6)

@@ -46,9 +46,21 @@ for _obs in ("SideslipBankObserverTire", "SideslipBankObserverTirePaper"):
 EXPECTED["sedan_no_roll", "SideslipBankObserverTire"] = "refused: largest gain entry; cond(P)"
 
 
-def _outcome(vehicle: str, observer: str) -> str:
+def _solved(built_fmus):
+    """``designs.run`` through the run's cache (``latobs.cache``): a design that the session build
+    or another test also needs is solved once per test run."""
+    from latobs import pipeline
+
+    def run(name: str, vehicle: str, **overrides) -> dict:
+        if overrides:
+            return pipeline.solve(name, vehicle, quiet=True, runtime_facts=False, **overrides)
+        return built_fmus.design(name, vehicle, runtime_facts=False)
+    return run
+
+
+def _outcome(vehicle: str, observer: str, runner) -> str:
     overrides = FAST_002 if observer.startswith("SideslipFixedOrder") else {}
-    out = designs.attempt(observer, vehicle, **overrides)
+    out = designs.attempt(observer, vehicle, runner=runner, **overrides)
     if out.status == "certified":
         assert out.data["certified"] and out.data["vehicle"]["name"] == vehicle
     return f"{out.status}: {out.detail}"
@@ -60,8 +72,9 @@ def test_the_matrix_lists_every_shipped_car_and_car_observer():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("vehicle", CARS)
-def test_every_car_designs_and_certifies_every_observer_that_applies(vehicle):
-    got = {obs: _outcome(vehicle, obs) for obs in OBSERVERS}
+def test_every_car_designs_and_certifies_every_observer_that_applies(vehicle, built_fmus):
+    runner = _solved(built_fmus)
+    got = {obs: _outcome(vehicle, obs, runner) for obs in OBSERVERS}
     for obs, outcome in got.items():
         want = EXPECTED[vehicle, obs]
         kind, _, detail = want.partition(": ")
@@ -74,11 +87,11 @@ def test_every_car_designs_and_certifies_every_observer_that_applies(vehicle):
 @pytest.mark.parametrize("observer, vehicle", [("LateralIntervalObserver", "compact"),
                                                ("SideslipFixedOrderEstimator", "mbds_250lm"),
                                                ("SideslipBankObserverTire", "suv")])
-def test_a_certified_pair_builds(observer, vehicle, tmp_path):
+def test_a_certified_pair_builds(observer, vehicle, tmp_path, built_fmus):
     from latobs import packaging
     from latobs.synthesis import design_file
 
     overrides = FAST_002 if observer.startswith("SideslipFixedOrder") else {}
-    data = designs.run(observer, vehicle, **overrides)
+    data = _solved(built_fmus)(observer, vehicle, **overrides)       # (the design of the matrix above)
     fmu = packaging.package_design(design_file.write(data, tmp_path), tmp_path)
     assert fmu.name == f"{observer}_{vehicle}.fmu" and fmu.stat().st_size > 0

@@ -45,3 +45,31 @@ def test_every_instance_gets_fmpys_own_function_table(built_fmus, fmi, tmp_path,
     finally:
         for s in (plain, first, second):
             s.freeLibrary()
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_the_harness_extracts_what_this_platform_runs(built_fmus, fmi, tmp_path):
+    """``instance.extract`` of a native FMU (four platforms' binaries and its C sources inside):
+    all but its sources, documentation, extra folder and other platforms' binaries; the FMU runs
+    from there."""
+    import fmpy
+    import zipfile
+
+    path = built_fmus.c_path("CarPlant") if fmi == 2 else built_fmus.c3_path("CarPlant")
+    names = zipfile.ZipFile(path).namelist()
+    mine = f"binaries/{fmpy.platform if fmi == 2 else fmpy.platform_tuple}/"
+    assert any(n.startswith("sources/") for n in names) and any(
+        n.startswith("binaries/") and not n.startswith(mine) for n in names)
+    folder = tmp_path / "x"
+    assert instance.extract(str(path), str(folder)) == str(folder)
+    got = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+    skipped = ("sources/", "documentation/", "extra/", "binaries/")
+    assert got == sorted(n for n in names if not n.endswith("/") and (not n.startswith(skipped) or n.startswith(mine)))
+    assert "modelDescription.xml" in got and any(n.startswith(mine) for n in got)
+    f = instance.FmuInstance("plant", path, str(folder))
+    try:
+        out = f.start()
+        f.do_step(0.0, 0.01)
+        assert out and all(v == v for v in out.values())
+    finally:
+        f.close()
