@@ -148,7 +148,8 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         As = (A0 + vx * A1) / tau
         L = Q @ As - X[i] @ C @ As - W[i] @ C               # = Q N_i / tau
         M = cp.bmat([[L + L.T + eps_s * Q, Q], [Q, -g * np.eye(n)]])
-        lmi35.append((M + M.T) / 2 << -opts.margin * np.eye(2 * n))
+        # (a cvxpy semidefinite constraint is on the symmetric part (M + M') / 2 of its matrix)
+        lmi35.append(M << -opts.margin * np.eye(2 * n))
         lmi36.append(L + eta_s * Q >= 0)
     base = [q >= 1.0]                                        # (34) with alpha = 1
     prob = cp.Problem(cp.Minimize(g), base + lmi35 + lmi36)

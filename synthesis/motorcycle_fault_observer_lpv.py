@@ -236,9 +236,10 @@ def _lmis(P, U, g, An, Bn, Cn, Cz, opts, eps, cp):
     hinf = cp.bmat([[core + Cz.T @ Cz, P @ Bn], [(P @ Bn).T, -g * np.eye(nd)]])
     alpha, radius = opts.alpha * (1 + opts.region_margin), opts.radius * (1 - opts.region_margin)
     disk = cp.bmat([[-radius * P, PA], [PA.T, -radius * P]])
-    return {"H-infinity w -> z": (hinf + hinf.T) / 2 << -eps * np.eye(na + nd),
+    # (a cvxpy semidefinite constraint is on the symmetric part (M + M') / 2 of its matrix)
+    return {"H-infinity w -> z": hinf << -eps * np.eye(na + nd),
             f"decay Re < -{opts.alpha:g}": core + 2 * alpha * P << -eps * np.eye(na),
-            f"disk |lambda| < {opts.radius:g}": (disk + disk.T) / 2 << -eps * np.eye(2 * na)}
+            f"disk |lambda| < {opts.radius:g}": disk << -eps * np.eye(2 * na)}
 
 
 def design(vehicle: Vehicle, opts: DesignOptions, model=None) -> dict:

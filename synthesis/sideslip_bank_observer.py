@@ -310,10 +310,11 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
         M = cp.bmat([[lyap, P @ Fs, Ls.T],
                      [(P @ Fs).T, -g * np.eye(nw), np.zeros((nw, 1))],
                      [Ls, np.zeros((1, nw)), -np.eye(1)]])
-        families[hinf_key].append((M + M.T) / 2 << -eps * np.eye(na + nw + 1))
+        # (a cvxpy semidefinite constraint is on the symmetric part (M + M') / 2 of its matrix)
+        families[hinf_key].append(M << -eps * np.eye(na + nw + 1))
         families[alpha_key].append(lyap + 2 * a_s * P << -eps * np.eye(na))
         D = cp.bmat([[-R_s * P, PA], [PA.T, -R_s * P]])
-        families[disk_key].append((D + D.T) / 2 << -eps * np.eye(2 * na))
+        families[disk_key].append(D << -eps * np.eye(2 * na))
         if opts.robust:
             # departure (not in the paper, docs/papers/000.md): a second H-infinity channel on the same P,
             # from the weighted model error Wd d to the weighted [bank estimate; beta error]
@@ -323,7 +324,7 @@ def design(vehicle: Vehicle, opts: DesignOptions) -> Design:
             M2 = cp.bmat([[lyap, P @ Es, Zs.T],
                           [(P @ Es).T, -g2 * np.eye(nd), np.zeros((nd, nz))],
                           [Zs, np.zeros((nz, nd)), -np.eye(nz)]])
-            families[robust_key].append((M2 + M2.T) / 2 << -eps * np.eye(na + nd + nz))
+            families[robust_key].append(M2 << -eps * np.eye(na + nd + nz))
     base = [P >> eps * np.eye(na)]
     cons = base + [c for cs in families.values() for c in cs]
     if opts.robust:

@@ -211,11 +211,12 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
             PA = cp.bmat([[P1 @ (Sxi @ At @ Sx / tau), zx],
                           [P2 @ (Si @ dX @ Sx / tau), P2 @ (Si @ Aa @ S / tau) - Y[i] @ (Ca @ S)]])
             M = PA + PA.T + Cz.T @ Cz
-            fam[k_lyap].append((M + M.T) / 2 << -eps * np.eye(2 * n + 1))
+            # (a cvxpy semidefinite constraint is on the symmetric part (M + M') / 2 of its matrix)
+            fam[k_lyap].append(M << -eps * np.eye(2 * n + 1))
             # P2 Si K_a B_en / rt = rt Y B_en, as K_a = tau S P2^-1 Y
             PB = sb * cp.vstack([P1 @ (Sxi @ Bx / rt), P2 @ (Si @ Be0 / rt) - rt * Y[i] @ Ben])
             B2 = cp.bmat([[W, PB.T], [PB, Pbig]])
-            fam[k_bound].append((B2 + B2.T) / 2 >> 0)
+            fam[k_bound].append(B2 >> 0)
         # the paper's pole region on the nominal error system (Theorem 2's LMIs 21-22), with P2
         A, _, F = _at(nominal, v, w)
         Aa, Ca, _, _ = augmented(A, F, C, T)
@@ -252,7 +253,7 @@ def _region(P, PA, a_s: float, R_s: float, eps: float) -> list:
 
     na = P.shape[0]
     D = cp.bmat([[-R_s * P, PA], [PA.T, -R_s * P]])
-    return [PA + PA.T + 2 * a_s * P << -eps * np.eye(na), (D + D.T) / 2 << -eps * np.eye(2 * na)]
+    return [PA + PA.T + 2 * a_s * P << -eps * np.eye(na), D << -eps * np.eye(2 * na)]
 
 
 def _sym(M: np.ndarray) -> np.ndarray:
@@ -293,7 +294,7 @@ def _lmi20(modes, vertices, K_P, K_I, T, C, S, tau, opts: H2Options) -> tuple[np
         PA = P @ As
         M = cp.bmat([[PA + PA.T, P @ Fs, Ls.T], [(P @ Fs).T, -g * np.eye(1), np.zeros((1, 1))],
                      [Ls, np.zeros((1, 1)), -np.eye(1)]])
-        cons += [(M + M.T) / 2 << -eps * np.eye(na + 2), *_region(P, PA, a_s, R_s, eps)]
+        cons += [M << -eps * np.eye(na + 2), *_region(P, PA, a_s, R_s, eps)]
     status, _ = lmi.solve(cp.Problem(cp.Minimize(g), cons))
     if not lmi.solved(status) or P.value is None:
         raise DesignError(f"design {opts.name}: LMI (20) + pole region have no common P for the robust-H2 gains "

@@ -56,9 +56,23 @@ _BUILD_SHARES = {"on": False}
 
 def pytest_collection_modifyitems(config, items):
     """A run where many tests use the session build (the whole suite, not a few tests) on several
-    workers: each worker starts by building its share of the FMUs (``SessionBuild.build_share``)."""
+    workers: each worker starts by building its share of the FMUs (``SessionBuild.build_share``).
+
+    The order in which the workers take the test files (``--dist loadfile``, ``--no-loadscope-reorder``
+    in pyproject.toml): first the files marked ``schedule_first`` (a few tests of seconds to a minute
+    each: taken last, one of them kept a worker busy ~12 s after the other had finished), then the
+    others by their number of tests, most first (pytest-xdist's own reordering); each file's tests
+    in their order."""
     users = sum("built_fmus" in getattr(item, "fixturenames", ()) for item in items)
     _BUILD_SHARES["on"] = users >= 200 and int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1
+    count, first = {}, set()
+    for item in items:
+        f = item.nodeid.split("::")[0]
+        count[f] = count.get(f, 0) + 1
+        if item.get_closest_marker("schedule_first") is not None:
+            first.add(f)
+    rank = {f: (f not in first, -n) for f, n in count.items()}
+    items.sort(key=lambda item: rank[item.nodeid.split("::")[0]])       # (stable: a file's order kept)
 
 
 #: (name, backend) of every FMU in both backends, ids "NAME" (pythonfmu) and "NAME[c]" (native C):

@@ -18,7 +18,7 @@ import textwrap
 
 import pytest
 
-pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind")
+pytestmark = [pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind"), pytest.mark.schedule_first]
 # Memcheck without its definedness tracking (about a quarter faster here): the use-after-free is an
 # access to a freed block, which its addressability checks report whatever this setting
 VALGRIND_FAST = ["--undef-value-errors=no"]

@@ -374,7 +374,7 @@ def test_a_build_waits_for_the_folder_lock_then_gives_up_saying_why(tmp_path):
     out = tmp_path / "fmus"
     with locked_folder(out, "test holder"):
         proc = _latobs("build", "CarPlant", "--backend", "python", "--out", out,
-                       env={**os.environ, LOCK_TIMEOUT_ENV: "2"})
+                       env={**os.environ, LOCK_TIMEOUT_ENV: "0.5"})
         stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 2, stderr
     assert "waiting for another latobs (pid" in stderr and "test holder" in stderr

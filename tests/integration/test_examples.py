@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.schedule_first      # (few long tests: tests/conftest.py)
+
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 WORKFLOW = ROOT / ".github" / "workflows" / "build-fmus.yml"

@@ -17,7 +17,7 @@ from test_walkthrough import ROOT, blocks
 
 PAGE = ROOT / "docs" / "identify.md"
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.schedule_first]
 
 
 def test_the_page_runs_from_a_log_to_a_scored_fmu(tmp_path):

@@ -25,7 +25,7 @@ from latobs.synthesis import design_file, designs
 
 from conftest import HOST_ONLY
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.schedule_first]
 RUNS = 200
 SIGNALS = ("vy", "beta", "yaw_rate", "Fyf", "Fyr")
 

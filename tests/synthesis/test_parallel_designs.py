@@ -13,6 +13,8 @@ from latobs.synthesis import lmi
 from latobs.synthesis import sideslip_fixed_order_estimator as sfo
 from latobs.synthesis.params import load_vehicle
 
+pytestmark = pytest.mark.schedule_first      # (few long tests: tests/conftest.py)
+
 
 def solver_here(_):
     return lmi.current()

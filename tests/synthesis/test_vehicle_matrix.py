@@ -18,6 +18,8 @@ import pytest
 from latobs.synthesis import designs
 from latobs.synthesis.params import load_vehicle, vehicle_names
 
+pytestmark = pytest.mark.schedule_first      # (few long tests: tests/conftest.py)
+
 CARS = [v for v in vehicle_names() if load_vehicle(v).kind == "car"]
 OBSERVERS = [n for n, e in designs.DESIGNS.items() if e.plant == "CarPlant"]
 FAST_002 = {"grid": (5, 5, 5), "polish": False, "recentre": 0}
