@@ -1,7 +1,8 @@
 """Paper 000's linear design model, eq. (1)-(2): the bicycle model with roll, re-derived from first
 principles (three entries differ from the printed eq. (1), commented where they are computed),
-and its coefficients as polynomials in 1/Vx for the runtime (``lpv_coefficients``). The
-documentation's paper-000 page gives the model."""
+and its coefficients as polynomials in 1/Vx for the runtime (``lpv_coefficients``); and the same
+model with its axle forces relaxed as in paper 001's eq. (9) (``relaxed_lpv_coefficients``: two
+more states, a term in Vx). The documentation's paper-000 page gives the model."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -93,15 +94,71 @@ def model_error_coefficients(vehicle: Vehicle) -> list[np.ndarray]:
     return [E0, E1]
 
 
-def evaluate(coeffs: dict[str, list[np.ndarray]], vx: float) -> LinearModel:
-    """The model at speed ``vx`` (m/s) from its 1/Vx coefficients."""
+RELAXED_STATES = STATES + ("front_axle_force", "rear_axle_force")
+RELAXED_STATE_UNITS = STATE_UNITS + ("N", "N")
+RELAXED_REQUIRED = REQUIRED + ("sigma",)
+RELAXED_C = np.hstack([C, np.zeros((3, 2))])
+
+
+def relaxed_lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: float | None = None) -> dict:
+    """Paper 000's model (1) with its axle forces Ff, Fr (N, body y) as states relaxed as in paper
+    001's eq. (9): sigma / Vx F' + F = C alpha, alpha_f = delta - beta - lf r / Vx, alpha_r = -beta +
+    lr r / Vx (the slip angles of eq. 1), sigma the vehicle's relaxation length (m). States
+    ``RELAXED_STATES``, measurements ``RELAXED_C`` (those of eq. 1). Not in the paper: its model has
+    algebraic tire forces, which lag the slip angles by ~sigma / Vx on a car (CarPlant's too).
+
+    Built from ``lpv_coefficients``, which is linear in Cf and Cr: delta reaches eq. (1) only through
+    the front force, so B = Cf g_f with g_f the model's response to 1 N of front force; the rear
+    force's response g_r is minus the beta column of dA/dCr (alpha_r = -beta + ...). The forces
+    taken out of A (A - Cf g_f alpha_f - Cr g_r alpha_r) return as the states' columns g_f, g_r.
+
+    Returns {"first_power": -1, "A": [...], "B": [...], "F": [...]}: M(Vx) = sum_k M[k] Vx**-(k - 1)
+    (a term in Vx: the relaxation rate Vx / sigma). ``evaluate`` takes it.
+    """
+    p = vehicle.require(RELAXED_REQUIRED, "the paper-000 model with relaxed axle forces")
+    sigma, lf, lr = p["sigma"], p["lf"], p["lr"]
+    if not (sigma > 0 and np.isfinite(sigma)):
+        raise ValueError(f"the relaxed model needs a relaxation length sigma > 0 m, got sigma={sigma}")
+    base = lpv_coefficients(vehicle, Cf, Cr)
+    Cf = p["Cf"] if Cf is None else float(Cf)
+    Cr = p["Cr"] if Cr is None else float(Cr)
+    unit_r = lpv_coefficients(vehicle, Cf, Cr + 1.0)
+    gf = [b[:, 0] / Cf for b in base["B"]]                                      # powers 0, 1 of 1/Vx
+    gr = [-(a1[:, 0] - a0[:, 0]) for a0, a1 in zip(base["A"], unit_r["A"])][:2]  # powers 0, 1
+    af = [np.array([-1.0, 0.0, 0.0, 0.0]), np.array([0.0, -lf, 0.0, 0.0])]      # alpha_f's x row, powers 0, 1
+    ar = [np.array([-1.0, 0.0, 0.0, 0.0]), np.array([0.0, lr, 0.0, 0.0])]
+    body = [M.copy() for M in base["A"]]                                         # A without the tire forces
+    for i in range(2):
+        for j in range(2):
+            body[i + j] -= Cf * np.outer(gf[i], af[j]) + Cr * np.outer(gr[i], ar[j])
+    # the 1/Vx^2 term of eq. (1) is the forces' (g ~ 1/Vx times alpha ~ r/Vx): nothing of it is left
+    assert np.max(np.abs(body[2])) <= 1e-9 * max(np.max(np.abs(base["A"][2])), 1e-300), body[2]
+    A = [np.zeros((6, 6)) for _ in range(3)]                                     # powers -1, 0, 1
+    for k in (0, 1):
+        A[k + 1][:4, :4] = body[k]
+        A[k + 1][:4, 4], A[k + 1][:4, 5] = gf[k], gr[k]
+    # F' = (Vx / sigma)(C alpha - F): Vx alpha_f = Vx (delta - beta) - lf r, so powers -1 and 0
+    for row, c, a in ((4, Cf, af), (5, Cr, ar)):
+        A[0][row, :4] = c / sigma * a[0]
+        A[1][row, :4] = c / sigma * a[1]
+        A[0][row, row] = -1.0 / sigma
+    B = [np.zeros((6, 1))]
+    B[0][4, 0] = Cf / sigma
+    F = [np.zeros((6, 1))] + [np.vstack([M, np.zeros((2, 1))]) for M in base["F"]]
+    return {"first_power": -1, "A": A, "B": B, "F": F}
+
+
+def evaluate(coeffs: dict, vx: float) -> LinearModel:
+    """The model at speed ``vx`` (m/s) from its 1/Vx coefficients: M(Vx) = sum_k M[k] Vx**-(k + p)
+    with p = coeffs["first_power"] (0 when absent)."""
     if not vx > 0:
         raise ValueError(f"the design model needs a speed > 0 m/s, got vx={vx}")
-    inv = 1.0 / vx
-    A = sum(M * inv**k for k, M in enumerate(coeffs["A"]))
-    B = sum(M * inv**k for k, M in enumerate(coeffs["B"]))
-    F = sum(M * inv**k for k, M in enumerate(coeffs["F"]))
-    return LinearModel(A=A, B=B, F=F, C=C.copy(), vx=float(vx))
+    inv, p = 1.0 / vx, int(coeffs.get("first_power", 0))
+    A = sum(M * inv**(k + p) for k, M in enumerate(coeffs["A"]))
+    B = sum(M * inv**(k + p) for k, M in enumerate(coeffs["B"]))
+    F = sum(M * inv**(k + p) for k, M in enumerate(coeffs["F"]))
+    out_C = RELAXED_C if A.shape[0] == RELAXED_C.shape[1] else C
+    return LinearModel(A=A, B=B, F=F, C=out_C.copy(), vx=float(vx))
 
 
 def model(vehicle: Vehicle, vx: float, Cf: float | None = None, Cr: float | None = None) -> LinearModel:

@@ -170,45 +170,18 @@ def model_kind(vals: Mapping[str, float]) -> str:
 
 def _roll_model(vals: Mapping[str, float], vx: np.ndarray, relax: bool) -> tuple[np.ndarray, np.ndarray]:
     """(A, B) per sample of paper 000's model (states beta, r, phi, phi'; ``synthesis.bicycle_roll_model``),
-    with relaxed axle forces Ff, Fr appended as states when ``relax``: sigma/vx F' + F = C alpha.
-    Paper 000's model is linear in Cf and Cr, so an axle force's column g (the model's response to
-    1 N of it) is the model's B at Cf + 1 N/rad minus at Cf: x' = A_0 x + g_f Ff + g_r Fr, with
-    Ff = Cf alpha_f, alpha_f = delta - beta - lf r / vx, Fr = Cr alpha_r, alpha_r = -beta + lr r / vx
-    (the slip angles of paper 000's eq. 1) without relaxation."""
-    from .bicycle_roll_model import lpv_coefficients
+    with its axle forces Ff, Fr relaxed as states when ``relax`` (sigma/vx F' + F = C alpha:
+    ``bicycle_roll_model.relaxed_lpv_coefficients``)."""
+    from .bicycle_roll_model import lpv_coefficients, relaxed_lpv_coefficients
     from .params import Parameter
 
-    names = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr")
+    names = ("m", "Iz", "Ix", "lf", "lr", "hr", "Kr", "br", "Cf", "Cr") + (("sigma",) if relax else ())
     veh = Vehicle("identification", "car", "", "",
                   {k: Parameter(k, float(vals[k]), "", "", "", "positive") for k in names}, {})
-    cf, cr = float(vals["Cf"]), float(vals["Cr"])
-    base = lpv_coefficients(veh)
-    unit_f = lpv_coefficients(veh, cf + 1.0, cr)
-    unit_r = lpv_coefficients(veh, cf, cr + 1.0)
-    inv = 1.0 / vx
-    at = lambda co, key: sum(M[None] * inv[:, None, None] ** k for k, M in enumerate(co[key]))  # noqa: E731
-    A, B = at(base, "A"), at(base, "B")[:, :, 0]
-    gf = at(unit_f, "B")[:, :, 0] - B                     # the response to 1 N of front axle force
-    Ar = at(unit_r, "A") - A                              # = g_r alpha_r's coefficients (1 N/rad more)
-    lf, lr = float(vals["lf"]), float(vals["lr"])
-    gr = -Ar[:, :, 0]                                     # alpha_r = -beta + ...: its beta column is -g_r
-    if not relax:
-        return A, B
-    n = len(vx)
-    # A without the tire forces (minus Cf g_f alpha_f and Cr g_r alpha_r); delta enters through Ff' alone
-    alpha_f = np.stack([-np.ones(n), -lf * inv, np.zeros(n), np.zeros(n)], axis=1)
-    alpha_r = np.stack([-np.ones(n), lr * inv, np.zeros(n), np.zeros(n)], axis=1)
-    A0 = A - cf * gf[:, :, None] * alpha_f[:, None, :] - cr * gr[:, :, None] * alpha_r[:, None, :]
-    rate = vx / float(vals["sigma"])
-    Ax = np.zeros((n, 6, 6))
-    Ax[:, :4, :4] = A0
-    Ax[:, :4, 4], Ax[:, :4, 5] = gf, gr
-    Ax[:, 4, :4] = rate[:, None] * cf * alpha_f
-    Ax[:, 5, :4] = rate[:, None] * cr * alpha_r
-    Ax[:, 4, 4] = Ax[:, 5, 5] = -rate
-    Bx = np.zeros((n, 6))
-    Bx[:, 4] = rate * cf
-    return Ax, Bx
+    co = relaxed_lpv_coefficients(veh) if relax else lpv_coefficients(veh)
+    inv, p = 1.0 / vx, int(co.get("first_power", 0))
+    at = lambda key: sum(M[None] * inv[:, None, None] ** (k + p) for k, M in enumerate(co[key]))  # noqa: E731
+    return at("A"), at("B")[:, :, 0]
 
 
 def expm_stack(M: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ import pytest
 
 from latobs.fmu_src.car_plant import G, CarPlantModel
 from latobs.synthesis import params as params_mod
-from latobs.synthesis.bicycle_roll_model import model
+from latobs.synthesis.bicycle_roll_model import evaluate, model, relaxed_lpv_coefficients
 from latobs.synthesis.params import load_vehicle
 
 VEH = load_vehicle("sedan")
@@ -117,6 +117,39 @@ def test_linearisation_with_relaxation_reduces_to_design_model():
     assert_close(np.linalg.inv(T) @ Bred, ref.B[:, 0], rtol=1e-6)
     # tire lag: dF/dt = (vx/sigma)(F_ss - F): diagonal -vx/sigma
     np.testing.assert_allclose(np.diag(A22), -vx / 0.5, rtol=1e-9)
+
+
+@pytest.mark.parametrize("vx, scale_f, scale_r, sigma", [(8.0, 1.0, 1.0, 0.5), (20.0, 0.8, 1.2, 0.5),
+                                                       (35.0, 1.1, 0.9, 0.3)])
+def test_linearisation_with_relaxation_equals_the_relaxed_design_model(vx, scale_f, scale_r, sigma):
+    """CarPlant's 8 states (four relaxed wheel forces) at straight driving, aggregated to the axles
+    (beta = vy / vx, Ff = Fy_fl + Fy_fr, Fr = Fy_rl + Fy_rr), are paper 000's model with relaxed axle
+    forces (``relaxed_lpv_coefficients``): the aggregation is exact (the two wheels of an axle obey
+    the same equation there), so Pi J = A Pi, Pi b = B for the Jacobians J, b of the plant."""
+    p = plant(sigma=sigma, scale_f=scale_f, scale_r=scale_r)
+    u0 = {"delta": 0.0, "vx": vx, "bank_angle": 0.0}
+    J = np.zeros((8, 8))
+    for j in range(8):
+        e = 1e-4 if j < 4 else 1.0
+        xp, xm = [0.0] * 8, [0.0] * 8
+        xp[j], xm[j] = e, -e
+        J[:, j] = (np.array(p.derivatives(xp, u0)) - np.array(p.derivatives(xm, u0))) / (2 * e)
+    cols = []
+    for key in ("delta", "bank_angle"):
+        up, um = dict(u0), dict(u0)
+        up[key], um[key] = 1e-5, -1e-5
+        cols.append((np.array(p.derivatives([0.0] * 8, up)) - np.array(p.derivatives([0.0] * 8, um))) / 2e-5)
+    Pi = np.zeros((6, 8))
+    Pi[0, 0] = 1.0 / vx
+    Pi[1, 1] = Pi[2, 2] = Pi[3, 3] = 1.0
+    Pi[4, 4] = Pi[4, 5] = Pi[5, 6] = Pi[5, 7] = 1.0
+    ref = evaluate(relaxed_lpv_coefficients(VEH.with_values(sigma=sigma), scale_f * P["Cf"], scale_r * P["Cr"]), vx)
+    R = np.linalg.pinv(Pi)                       # x_plant = R x_model on the aggregated subspace
+    assert_close(Pi @ J @ R, ref.A, rtol=1e-6)
+    # exact aggregation (to the central differences' error, ~1e-8 of the largest entry)
+    assert np.max(np.abs(Pi @ J - ref.A @ Pi)) <= 1e-7 * np.max(np.abs(ref.A))
+    assert_close(Pi @ cols[0], ref.B[:, 0], rtol=1e-6)
+    assert_close(Pi @ cols[1], ref.F[:, 0], rtol=1e-6)
 
 
 # ------------------------------------------------------------------------------------------
