@@ -61,6 +61,24 @@ def linearise(p: CarPlantModel, vx: float):
     return Ti @ A @ T, (Ti @ cols[0])[:, None], (Ti @ cols[1])[:, None]
 
 
+def linearise_relaxed(p: CarPlantModel, vx: float):
+    """Central-difference Jacobians of p.derivatives (all 8 states, the wheel forces relaxed) at
+    straight driving: J and the columns of delta and bank_angle, in the plant's coordinates."""
+    u0 = {"delta": 0.0, "vx": vx, "bank_angle": 0.0}
+    J = np.zeros((8, 8))
+    for j in range(8):
+        e = 1e-4 if j < 4 else 1.0
+        xp, xm = [0.0] * 8, [0.0] * 8
+        xp[j], xm[j] = e, -e
+        J[:, j] = (np.array(p.derivatives(xp, u0)) - np.array(p.derivatives(xm, u0))) / (2 * e)
+    cols = []
+    for key in ("delta", "bank_angle"):
+        up, um = dict(u0), dict(u0)
+        up[key], um[key] = 1e-5, -1e-5
+        cols.append((np.array(p.derivatives([0.0] * 8, up)) - np.array(p.derivatives([0.0] * 8, um))) / 2e-5)
+    return J, cols[0], cols[1]
+
+
 def assert_close(M, R, rtol=1e-5):
     atol = 1e-9 * max(1.0, np.abs(R).max())
     np.testing.assert_allclose(M, R, rtol=rtol, atol=atol)
@@ -97,17 +115,7 @@ def test_linearisation_with_relaxation_reduces_to_design_model():
     """With relaxation the tire states are fast first-order lags of the algebraic forces: the
     reduced (quasi-steady) model, A11 - A12 A22^-1 A21, is the design model again."""
     vx = 20.0
-    p = plant()  # sigma = 0.5 m
-    u0 = {"delta": 0.0, "vx": vx, "bank_angle": 0.0}
-    J = np.zeros((8, 8))
-    for j in range(8):
-        e = 1e-4 if j < 4 else 1.0
-        xp, xm = [0.0] * 8, [0.0] * 8
-        xp[j], xm[j] = e, -e
-        J[:, j] = (np.array(p.derivatives(xp, u0)) - np.array(p.derivatives(xm, u0))) / (2 * e)
-    Bf = np.zeros(8)
-    for sgn in (1, -1):
-        Bf += sgn * np.array(p.derivatives([0.0] * 8, dict(u0, delta=sgn * 1e-5))) / 2e-5
+    J, Bf, _ = linearise_relaxed(plant(), vx)  # sigma = 0.5 m
     A11, A12, A21, A22 = J[:4, :4], J[:4, 4:], J[4:, :4], J[4:, 4:]
     Ared = A11 - A12 @ np.linalg.solve(A22, A21)
     Bred = Bf[:4] - A12 @ np.linalg.solve(A22, Bf[4:])
@@ -126,19 +134,7 @@ def test_linearisation_with_relaxation_equals_the_relaxed_design_model(vx, scale
     (beta = vy / vx, Ff = Fy_fl + Fy_fr, Fr = Fy_rl + Fy_rr), are paper 000's model with relaxed axle
     forces (``relaxed_lpv_coefficients``): the aggregation is exact (the two wheels of an axle obey
     the same equation there), so Pi J = A Pi, Pi b = B for the Jacobians J, b of the plant."""
-    p = plant(sigma=sigma, scale_f=scale_f, scale_r=scale_r)
-    u0 = {"delta": 0.0, "vx": vx, "bank_angle": 0.0}
-    J = np.zeros((8, 8))
-    for j in range(8):
-        e = 1e-4 if j < 4 else 1.0
-        xp, xm = [0.0] * 8, [0.0] * 8
-        xp[j], xm[j] = e, -e
-        J[:, j] = (np.array(p.derivatives(xp, u0)) - np.array(p.derivatives(xm, u0))) / (2 * e)
-    cols = []
-    for key in ("delta", "bank_angle"):
-        up, um = dict(u0), dict(u0)
-        up[key], um[key] = 1e-5, -1e-5
-        cols.append((np.array(p.derivatives([0.0] * 8, up)) - np.array(p.derivatives([0.0] * 8, um))) / 2e-5)
+    J, *cols = linearise_relaxed(plant(sigma=sigma, scale_f=scale_f, scale_r=scale_r), vx)
     Pi = np.zeros((6, 8))
     Pi[0, 0] = 1.0 / vx
     Pi[1, 1] = Pi[2, 2] = Pi[3, 3] = 1.0
