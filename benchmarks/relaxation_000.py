@@ -1,7 +1,9 @@
-"""How much of paper 000's level-road error is the tires' relaxation, which its model lacks: the
-default speed-mode observer (``SideslipBankObserver``) on ``robustness-000-flat`` with the nominal
-car (stiffness scale 1, peak friction 1), with CarPlant's relaxation length as the vehicle has it
-and with ``sigma = 0`` (static tires, as in the observer's model). Sensors and manoeuvres as drawn.
+"""How much of paper 000's level-road error is the tires' relaxation, which its eq. (1) lacks: the
+default speed-mode observer (``SideslipBankObserver``, whose model now carries the relaxed axle
+forces; the study that led there ran it on eq. (1), ``tire_relaxation=False``: 0.77 and 0.37) on
+``robustness-000-flat`` with the nominal car (stiffness scale 1, peak friction 1), with CarPlant's
+relaxation length as the vehicle has it and with ``sigma = 0`` (static tires, as in eq. 1). Sensors
+and manoeuvres as drawn.
 
     python benchmarks/relaxation_000.py [--runs N] [--out DIR] [--fmu-dir DIR]
 

@@ -67,6 +67,7 @@ class SwitchedPIObserver:
             raise ValueError("design file lacks the paper-000 observer's tables (data['tables'], computed by "
                              "synthesis.tables when the design is made or packaged)")
         self.h0, self.max_step, self.N = tab["step"], tab["max_step"], tab["N"]
+        self.p0 = int(tab.get("first_power", 0))     # M[k] multiplies v**(k + p0); -1: a term in vx
         self.M, self.G, self.maps, self.modes = tab["M"], tab["G"], tab["maps"], tab["modes"]
         sw = tab["switching"]
         self.edges = sw["edges"] if sw["kind"] == "speed_bands" else None
@@ -95,8 +96,9 @@ class SwitchedPIObserver:
 
     # -- eq. (5) and its step -------------------------------------------------------------------
     def system(self, idx: int, v: float):
-        """M, G of map index idx at v = 1/vx: sum_k M_k v**k."""
-        vk = [1.0 if k == 0 else v ** k for k in range(len(self.M[idx]))]
+        """M, G of map index idx at v = 1/vx: sum_k M_k v**(k + p0) (v**-1 as 1 / v)."""
+        vk = [1.0 if k + self.p0 == 0 else 1.0 / v if k + self.p0 == -1 else v ** (k + self.p0)
+              for k in range(len(self.M[idx]))]
         M = [[0.0] * len(self.M[idx][0][0]) for _ in self.s]
         G = [[0.0] * len(self.G[idx][0][0]) for _ in self.s]
         for out, coeffs in ((M, self.M[idx]), (G, self.G[idx])):
@@ -248,10 +250,12 @@ class SwitchedPIObserver:
 
     def initialize(self, u: dict) -> None:
         """Start from the first measurement (the paper gives no initial state): x^(0) = [0, y(0)]
-        (z = x^ - N y), the mode of the initial speed (speed bands); the first-order hold restarts."""
+        (z = x^ - N y; relaxed axle forces: x^(0) = [0, y(0), 0, 0]), the mode of the initial speed
+        (speed bands); the first-order hold restarts."""
         w = [u["yaw_rate"], u["roll_angle"], u["roll_rate"]]
         ny = [_dot(row, w) for row in self.N]
-        self.s = [x - p for x, p in zip([0.0] + w, ny)] + self.s[self.n:]
+        x0 = [0.0] + w + [0.0] * (self.n - 1 - len(w))
+        self.s = [x - p for x, p in zip(x0, ny)] + self.s[self.n:]
         self._started, self._prev = True, None
         if self.edges and u["vx"] >= self.vx_hold:
             self.mode = self.band(u["vx"])

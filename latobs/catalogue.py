@@ -161,7 +161,8 @@ def _paper_000(name: str, switching: str, faithful: bool, description: str, buil
 ENTRIES: tuple[Entry, ...] = (
     _paper_000("SideslipBankObserver", "speed", False,
                "switched PI observer, sideslip + road bank angle, speed modes 36/63/90 km/h (eq. 25), model at the "
-               "measured speed, gains robust-H2 over a +-10 % cornering-stiffness box (latobs), valid flag with "
+               "measured speed with the axle forces relaxed as the tires' (latobs), gains robust-H2 over a +-15 % "
+               "cornering-stiffness box (latobs), valid flag with "
                "integral freeze", 8.0, "design_000_h2", "H2Options"),
     _paper_000("SideslipBankObserverTire", "tire", False,
                "switched H-inf PI observer, sideslip + road bank angle, tire modes C1 / C2 (secant of the tire curve) "

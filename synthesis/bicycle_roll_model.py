@@ -95,21 +95,23 @@ def model_error_coefficients(vehicle: Vehicle) -> list[np.ndarray]:
 
 
 RELAXED_STATES = STATES + ("front_axle_force", "rear_axle_force")
-RELAXED_STATE_UNITS = STATE_UNITS + ("N", "N")
+RELAXED_STATE_UNITS = STATE_UNITS + ("m*g", "m*g")
 RELAXED_REQUIRED = REQUIRED + ("sigma",)
 RELAXED_C = np.hstack([C, np.zeros((3, 2))])
 
 
 def relaxed_lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: float | None = None) -> dict:
-    """Paper 000's model (1) with its axle forces Ff, Fr (N, body y) as states relaxed as in paper
-    001's eq. (9): sigma / Vx F' + F = C alpha, alpha_f = delta - beta - lf r / Vx, alpha_r = -beta +
+    """Paper 000's model (1) with its axle forces Ff, Fr (body y, per unit of the vehicle's weight m g:
+    numbers near the angles', so that gains and Lyapunov matrices are not scaled by 1e4 N) as states
+    relaxed as in paper 001's eq. (9): sigma / Vx F' + F = C alpha, alpha_f = delta - beta - lf r / Vx, alpha_r = -beta +
     lr r / Vx (the slip angles of eq. 1), sigma the vehicle's relaxation length (m). States
     ``RELAXED_STATES``, measurements ``RELAXED_C`` (those of eq. 1). Not in the paper: its model has
     algebraic tire forces, which lag the slip angles by ~sigma / Vx on a car (CarPlant's too).
 
     Built from ``lpv_coefficients``, which is linear in Cf and Cr: delta reaches eq. (1) only through
     the front force, so B = Cf g_f with g_f the model's response to 1 N of front force; the rear
-    force's response g_r is minus the beta column of dA/dCr (alpha_r = -beta + ...). The forces
+    force's response g_r is minus the beta column of dA/dCr (alpha_r = -beta + ...), here
+    (A(2 Cr) - A(Cr)) / Cr. The forces
     taken out of A (A - Cf g_f alpha_f - Cr g_r alpha_r) return as the states' columns g_f, g_r.
 
     Returns {"first_power": -1, "A": [...], "B": [...], "F": [...]}: M(Vx) = sum_k M[k] Vx**-(k - 1)
@@ -122,15 +124,20 @@ def relaxed_lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: floa
     base = lpv_coefficients(vehicle, Cf, Cr)
     Cf = p["Cf"] if Cf is None else float(Cf)
     Cr = p["Cr"] if Cr is None else float(Cr)
-    unit_r = lpv_coefficients(vehicle, Cf, Cr + 1.0)
+    twice_r = lpv_coefficients(vehicle, Cf, 2.0 * Cr)          # (a difference as large as its terms)
     gf = [b[:, 0] / Cf for b in base["B"]]                                      # powers 0, 1 of 1/Vx
-    gr = [-(a1[:, 0] - a0[:, 0]) for a0, a1 in zip(base["A"], unit_r["A"])][:2]  # powers 0, 1
+    gr = [-(a1[:, 0] - a0[:, 0]) / Cr for a0, a1 in zip(base["A"], twice_r["A"])][:2]   # powers 0, 1
     af = [np.array([-1.0, 0.0, 0.0, 0.0]), np.array([0.0, -lf, 0.0, 0.0])]      # alpha_f's x row, powers 0, 1
     ar = [np.array([-1.0, 0.0, 0.0, 0.0]), np.array([0.0, lr, 0.0, 0.0])]
     body = [M.copy() for M in base["A"]]                                         # A without the tire forces
+    size = [np.abs(M) for M in base["A"]]
     for i in range(2):
         for j in range(2):
-            body[i + j] -= Cf * np.outer(gf[i], af[j]) + Cr * np.outer(gr[i], ar[j])
+            tires = Cf * np.outer(gf[i], af[j]) + Cr * np.outer(gr[i], ar[j])
+            body[i + j] -= tires
+            size[i + j] += np.abs(tires)
+    for M, mag in zip(body, size):    # what cancels exactly (beta's column: only the tires see beta) is 0
+        M[np.abs(M) <= 1e-12 * mag] = 0.0
     # the 1/Vx^2 term of eq. (1) is the forces' (g ~ 1/Vx times alpha ~ r/Vx): nothing of it is left
     assert np.max(np.abs(body[2])) <= 1e-9 * max(np.max(np.abs(base["A"][2])), 1e-300), body[2]
     A = [np.zeros((6, 6)) for _ in range(3)]                                     # powers -1, 0, 1
@@ -145,7 +152,10 @@ def relaxed_lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: floa
     B = [np.zeros((6, 1))]
     B[0][4, 0] = Cf / sigma
     F = [np.zeros((6, 1))] + [np.vstack([M, np.zeros((2, 1))]) for M in base["F"]]
-    return {"first_power": -1, "A": A, "B": B, "F": F}
+    # forces in N -> per m g: x_new = D x
+    D = np.diag([1.0, 1.0, 1.0, 1.0, 1.0 / (p["m"] * G), 1.0 / (p["m"] * G)])
+    Di = np.diag(1.0 / np.diag(D))
+    return {"first_power": -1, "A": [D @ M @ Di for M in A], "B": [D @ M for M in B], "F": [D @ M for M in F]}
 
 
 def evaluate(coeffs: dict, vx: float) -> LinearModel:

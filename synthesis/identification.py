@@ -35,7 +35,7 @@ from typing import Mapping
 import numpy as np
 
 from .lateral_interval_observer import ERROR_BOUND_PARAMETERS
-from .params import Vehicle
+from .params import G, Vehicle
 from .relaxation_model import coefficients
 from .sideslip_kalman_filter import model as bicycle
 from .sideslip_kalman_filter import vehicle_dict
@@ -170,7 +170,7 @@ def model_kind(vals: Mapping[str, float]) -> str:
 
 def _roll_model(vals: Mapping[str, float], vx: np.ndarray, relax: bool) -> tuple[np.ndarray, np.ndarray]:
     """(A, B) per sample of paper 000's model (states beta, r, phi, phi'; ``synthesis.bicycle_roll_model``),
-    with its axle forces Ff, Fr relaxed as states when ``relax`` (sigma/vx F' + F = C alpha:
+    with its axle forces Ff, Fr (per m g) relaxed as states when ``relax`` (sigma/vx F' + F = C alpha:
     ``bicycle_roll_model.relaxed_lpv_coefficients``)."""
     from .bicycle_roll_model import lpv_coefficients, relaxed_lpv_coefficients
     from .params import Parameter
@@ -244,7 +244,7 @@ def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tupl
     m, lf, lr, cf, cr = (float(vals[q]) for q in ("m", "lf", "lr", "Cf", "Cr"))
     if kind.startswith("roll"):      # paper 000's beta is the roll axis point's; the CG's: vy_cg = vy - hr phi'
         beta = x[:, 0] - float(vals["hr"]) * x[:, 3] / vx
-        ay = ((x[:, 4] + x[:, 5]) / m if kind == "roll+relaxation" else
+        ay = ((x[:, 4] + x[:, 5]) * G if kind == "roll+relaxation" else      # (axle forces per m g)
               (cf * (delta - x[:, 0] - lf * x[:, 1] / vx) + cr * (-x[:, 0] + lr * x[:, 1] / vx)) / m)
     elif kind == "relaxation":
         ay, beta = x[:, 2], np.arctan2(x[:, 0], vx)

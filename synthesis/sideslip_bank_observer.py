@@ -150,7 +150,7 @@ def augmented(A: np.ndarray, F: np.ndarray, C: np.ndarray, T: np.ndarray):
     Aa = np.block([[T @ A, T @ F], [np.zeros((nw, n)), np.zeros((nw, nw))]])
     Ca = np.hstack([C, np.zeros((C.shape[0], nw))])
     Fa = np.vstack([-T @ F, np.zeros((nw, nw))])
-    La = np.hstack([-L_BETA, np.zeros((1, nw))])
+    La = np.hstack([-L_BETA, np.zeros((1, n - L_BETA.shape[1] + nw))])     # (beta: the first state)
     return Aa, Ca, Fa, La
 
 
@@ -373,7 +373,7 @@ def _diagnose(base: list, families: dict, opts: DesignOptions) -> str:
 
 def closed_loop(coeffs: dict, K_P, K_I, T, C, vx: float):
     """A_a - K_a C_a, F_a, L_a for one mode at speed vx (m/s): eq. (19)."""
-    lm = brm.evaluate({k: [np.asarray(M) for M in v] for k, v in coeffs.items()}, vx)
+    lm = brm.evaluate({k: v if k == "first_power" else [np.asarray(M) for M in v] for k, v in coeffs.items()}, vx)
     Aa, Ca, Fa, La = augmented(lm.A, lm.F, np.asarray(C), np.asarray(T))
     Ka = np.vstack([np.asarray(K_P), np.asarray(K_I)])
     return Aa - Ka @ Ca, Fa, La

@@ -14,16 +14,22 @@ system are one linear system
            - ([T A N; 0] + K_a (I - C N)) n                 (eq. 19 + the stiffness error dA = A_t - A)
 
 with e_a = [T x - z; phi_r - w^] (eq. 19's error; x - x^ = T x - z - N n), omega the bank angle's
-rate and n the measurement noise (y = C x + n). Inputs [delta, omega, n] are white, weighted by
+rate and n the measurement noise (y = C x + n). The model, of the car and of the observer alike, is
+paper 000's with its axle forces as states relaxed as the tires' are (``tire_relaxation``, default:
+``bicycle_roll_model.relaxed_lpv_coefficients``; a departure: the paper's eq. (1) has algebraic
+forces, and on a level road the lag of the tires' forces it ignores, not the gains, decides how
+well it does: the paper-000 page of the documentation), or eq. (1) itself. Inputs [delta, omega, n] are white, weighted by
 ``h2_input_weights``; outputs [beta error, ``h2_bank_weight`` x bank error]. The LMIs, with a
 block-diagonal Lyapunov matrix diag(P1, P2) common to every mode, speed and stiffness vertex and
-Y_i = P2 K_a,i (mode i), are linear:
+Y_i = P2 K_a,i (mode i), are linear (with the relaxed forces P1 is one per mode: the car's model
+varies with Vx as Vx / sigma, and no P1 is common to the whole speed range; P1 only bounds the
+car's own response, the observer's error keeps one P2):
 
     He(diag(P1, P2) A_v) + C_z' C_z < 0,   [[W, (diag(P1, P2) B_v)'], [diag(P1, P2) B_v, diag(P1, P2)]] > 0
 
-at every vertex v (each mode's LPV vertices in (1/Vx, 1/Vx^2), ``sideslip_bank_observer.lpv_vertices``,
-times the corners of the stiffness box: the system is affine in each, so the LMIs hold on the whole
-product). Minimising trace(W) bounds the squared H2 norm (the RMS error under unit white inputs) of
+at every vertex v (each mode's LPV vertices: in (1/Vx, 1/Vx^2), ``sideslip_bank_observer.lpv_vertices``,
+or with the relaxed forces in (Vx, 1/Vx), ``relaxed_vertices``; times the corners of the stiffness
+box: the system is affine in each, so the LMIs hold on the whole product). Minimising trace(W) bounds the squared H2 norm (the RMS error under unit white inputs) of
 every frozen car and speed; the paper's pole region (alpha-stability, disk) is imposed on the
 nominal error system with P2, as in Theorem 2. After the solve, the gains fixed, the common P of
 LMI (20) and the pole region is solved again minimising gamma: that is the design file's P (the H2
@@ -31,13 +37,14 @@ matrices diag(P1, P2) and the bound go to its ``robust_h2`` section), so the cer
 paper's claims for these gains and, in addition, the H2 bound. Both gamma and the bound are
 evaluated on the returned numbers, not taken from the solver.
 
-Units: SI (rad, rad/s, m/s); the LMIs are posed in scaled coordinates (state scaling as the
-paper-000 design, time in units of 1/sqrt(alpha radius), the inputs divided by H2_SCALE).
+Units: SI (rad, rad/s, m/s; the relaxed axle forces per m g); the LMIs are posed in scaled
+coordinates (state scaling as the paper-000 design, time in units of 1/sqrt(alpha radius), the
+inputs divided by H2_SCALE).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
@@ -69,14 +76,18 @@ class H2Options(DesignOptions):
         roll-rate noise (rad/s, rad, rad/s)]: how much of each the observer should expect.
     h2_bank_weight
         Weight of the bank error against the beta error in the criterion.
+    tire_relaxation
+        The model (observer's and car's) with the axle forces relaxed (two more states; the vehicle's
+        relaxation length sigma), else paper 000's eq. (1).
 
     The defaults were chosen on the campaigns robustness-000 and robustness-000-flat (their own seeds)
     and are reported on other seeds (docs: the paper-000 page).
     """
 
-    stiffness_box: tuple[float, float] = (0.9, 1.1)
-    h2_input_weights: tuple[float, float, float, float, float] = (0.05, 1.0, 0.05, 0.03, 0.2)
+    stiffness_box: tuple[float, float] = (0.85, 1.15)
+    h2_input_weights: tuple[float, float, float, float, float] = (0.05, 3.0, 0.05, 0.03, 0.2)
     h2_bank_weight: float = 0.05
+    tire_relaxation: bool = True
     robust_weight: float = 0.0          # Theorem 2's model-error channel is not used: the box is in the model
     # `valid`: these gains follow the sideslip less far into the tires' saturation than Theorem 2's, so the
     # flag trips earlier (force 10 % below linear) and is released later (half of both limits): valid = 0
@@ -103,7 +114,8 @@ class H2Options(DesignOptions):
 
 @dataclass
 class H2Design(Design):
-    P_car: np.ndarray | None = None     # P1: the car's block of the H2 Lyapunov matrix diag(P1, P2)
+    P_car: np.ndarray | list | None = None   # P1: the car's block of the H2 Lyapunov matrix diag(P1, P2)
+                                        # (one per mode with the relaxed forces: a list)
     P_err: np.ndarray | None = None     # P2: its error block (``P`` is LMI (20)'s, solved for the gains)
     h2_bound: float = math.nan          # bound of the frozen H2 norm at every vertex (see robust_h2_bound)
 
@@ -114,23 +126,47 @@ def stiffness_corners(box: tuple[float, float]) -> list[tuple[float, float]]:
     return sorted({(a, b) for a in (lo, hi) for b in (lo, hi)})
 
 
-def _at(coeffs: dict, v: float, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A, B, F of a 1/Vx-polynomial model at (v, w) = (1/Vx, 1/Vx^2) (w off the curve at tangent corners)."""
-    A = coeffs["A"][0] + v * coeffs["A"][1] + w * coeffs["A"][2]
-    B = coeffs["B"][0] + v * coeffs["B"][1]
-    F = coeffs["F"][0] + v * coeffs["F"][1]
+def relaxed_vertices(lo: float, hi: float, pieces: int) -> list[tuple[str, tuple[float, float, float]]]:
+    """Points (label, (u, v, w)) whose convex hull in (u, v) contains the curve (Vx, 1/Vx) for Vx in
+    [lo, hi] (m/s), the variables of the model with relaxed forces (w = v^2, unused by it): [1/hi, 1/lo]
+    cut into ``pieces`` equal intervals in v; on each, the triangle of its end points on the curve
+    and the intersection (2 / (v1 + v2), 2 v1 v2 / (v1 + v2)) of the tangents there (u = 1/v is convex)."""
+    v_lo, v_hi = 1.0 / hi, 1.0 / lo
+    knots = [v_lo + (v_hi - v_lo) * k / pieces for k in range(pieces + 1)]
+    pts = [(f"{1.0 / v * 3.6:.4g} km/h", (1.0 / v, v, v * v)) for v in knots]
+    for v1, v2 in zip(knots, knots[1:]):
+        vc = 2.0 * v1 * v2 / (v1 + v2)
+        pts.append((f"tangent corner between {1.0 / v2 * 3.6:.4g} and {1.0 / v1 * 3.6:.4g} km/h",
+                    (2.0 / (v1 + v2), vc, vc * vc)))
+    return pts
+
+
+def mode_vertices(mm, pieces: int, relaxed: bool) -> list[tuple[str, tuple[float, float, float]]]:
+    """(label, (u, v, w)) of a mode's LPV vertices: ``relaxed_vertices``, or paper 000's
+    ``lpv_vertices`` in (v, w) = (1/Vx, 1/Vx^2) (u = 1/v, unused by eq. 1)."""
+    if relaxed:
+        return relaxed_vertices(*mm.model_range, pieces)
+    return [(label, (1.0 / v, v, w)) for label, v, w in lpv_vertices(*mm.model_range, pieces)]
+
+
+def _at(coeffs: dict, pt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A, B, F of a model in 1/Vx at the point pt = (u, v, w) standing for (Vx, 1/Vx, 1/Vx^2) (off the
+    curve at tangent corners): coefficient k multiplies the variable of the power k + first_power."""
+    basis = {-1: pt[0], 0: 1.0, 1: pt[1], 2: pt[2]}
+    p0 = int(coeffs.get("first_power", 0))
+    A, B, F = (sum(M * basis[k + p0] for k, M in enumerate(coeffs[key])) for key in ("A", "B", "F"))
     return A, B, F
 
 
-def robust_system(nominal: dict, car: dict, v: float, w: float, T: np.ndarray, N: np.ndarray, C: np.ndarray,
+def robust_system(nominal: dict, car: dict, pt, T: np.ndarray, N: np.ndarray, C: np.ndarray,
                   weights) -> tuple[np.ndarray, ...]:
-    """Blocks of the [x; e_a] system at (v, w) = (1/Vx, 1/Vx^2) for the observer's model ``nominal``
-    and the car ``car`` (1/Vx coefficient dicts, ``bicycle_roll_model.lpv_coefficients``), gains not
+    """Blocks of the [x; e_a] system at pt = (u, v, w) (``_at``) for the observer's model ``nominal``
+    and the car ``car`` (1/Vx coefficient dicts of ``bicycle_roll_model``), gains not
     applied: (A_t, B_x, A_a, C_a, dX, B_e0, B_en) with
         x' = A_t x + B_x u,  e_a' = (A_a - K_a C_a) e_a + dX x + (B_e0 - K_a B_en) u,
     u = [delta, omega, n] white, weighted by ``weights`` (module docstring)."""
-    A, B, F = _at(nominal, v, w)
-    At, Bt, _ = _at(car, v, w)
+    A, B, F = _at(nominal, pt)
+    At, Bt, _ = _at(car, pt)
     n, ny = A.shape[0], C.shape[0]
     Aa, Ca, _, _ = augmented(A, F, C, T)
     wd, wo, *wn = weights
@@ -155,10 +191,10 @@ def output_matrix(bank_weight: float, n: int = 4) -> np.ndarray:
     return Z
 
 
-def closed_loop(design: H2Design, i: int, car: dict, v: float, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(A, B, C_z) of the [x; e_a] system of mode i with its gains, at (v, w), for the car ``car``."""
+def closed_loop(design: H2Design, i: int, car: dict, pt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C_z) of the [x; e_a] system of mode i with its gains, at pt (``_at``), for the car ``car``."""
     o = design.options
-    At, Bx, Aa, Ca, dX, Be0, Ben = robust_system(design.modes[i].coeffs, car, v, w, design.T, design.N, design.C,
+    At, Bx, Aa, Ca, dX, Be0, Ben = robust_system(design.modes[i].coeffs, car, pt, design.T, design.N, design.C,
                                                  o.h2_input_weights)
     Ka = np.vstack([design.K_P[i], design.K_I[i]])
     n = At.shape[0]
@@ -175,16 +211,19 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
     import cvxpy as cp  # design time only
 
     opts.validate()
-    C = brm.C
+    relaxed = opts.tire_relaxation
+    C = brm.RELAXED_C if relaxed else brm.C
     T, N = t_n_matrices(C)
     n, ny = C.shape[1], C.shape[0]
     modes = mode_models(vehicle, opts)
+    model = brm.relaxed_lpv_coefficients if relaxed else brm.lpv_coefficients
+    if relaxed:
+        modes = [replace(mm, coeffs=model(vehicle, mm.Cf, mm.Cr)) for mm in modes]
     corners = stiffness_corners(opts.stiffness_box)
-    vertices = [(i, f"mode {i + 1} at {label}", v, w) for i, mm in enumerate(modes)
-                for label, v, w in lpv_vertices(*mm.model_range, opts.lpv_pieces)]
-    cars = {(i, c): brm.lpv_coefficients(vehicle, c[0] * mm.Cf, c[1] * mm.Cr)
-            for i, mm in enumerate(modes) for c in corners}
-    S = _balancing([augmented(*_at(modes[i].coeffs, v, w)[::2], C, T)[0] for i, _, v, w in vertices], n)
+    vertices = [(i, f"mode {i + 1} at {label}", pt) for i, mm in enumerate(modes)
+                for label, pt in mode_vertices(mm, opts.lpv_pieces, relaxed)]
+    cars = {(i, c): model(vehicle, c[0] * mm.Cf, c[1] * mm.Cr) for i, mm in enumerate(modes) for c in corners}
+    S = _balancing([augmented(*_at(modes[i].coeffs, pt)[::2], C, T)[0] for i, _, pt in vertices], n)
     Si = np.linalg.inv(S)
     Sx, Sxi = S[:n, :n], Si[:n, :n]
     tau = math.sqrt(max(opts.alpha, 1e-3) * opts.radius)      # 1/s, time scaling
@@ -194,7 +233,7 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
     Cz = np.hstack([np.zeros((2, n)), output_matrix(opts.h2_bank_weight, n) @ S])
     nu = len(INPUTS)
 
-    P1 = cp.Variable((n, n), symmetric=True)
+    P1s = [cp.Variable((n, n), symmetric=True) for _ in (modes if relaxed else modes[:1])]
     P2 = cp.Variable((n + 1, n + 1), symmetric=True)
     Y = [cp.Variable((n + 1, ny)) for _ in modes]
     W = cp.Variable((nu, nu), symmetric=True)
@@ -203,11 +242,12 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
            f"alpha-stability (Re < -{opts.alpha:g})": [], f"disk (|lambda| < {opts.radius:g})": []}
     k_lyap, k_bound, k_alpha, k_disk = list(fam)
     zx = np.zeros((n, n + 1))
-    Pbig = cp.bmat([[P1, zx], [zx.T, P2]])
-    for i, label, v, w in vertices:
+    for i, label, pt in vertices:
         nominal = modes[i].coeffs
+        P1 = P1s[i if relaxed else 0]
+        Pbig = cp.bmat([[P1, zx], [zx.T, P2]])
         for c in corners:
-            At, Bx, Aa, Ca, dX, Be0, Ben = robust_system(nominal, cars[(i, c)], v, w, T, N, C, opts.h2_input_weights)
+            At, Bx, Aa, Ca, dX, Be0, Ben = robust_system(nominal, cars[(i, c)], pt, T, N, C, opts.h2_input_weights)
             PA = cp.bmat([[P1 @ (Sxi @ At @ Sx / tau), zx],
                           [P2 @ (Si @ dX @ Sx / tau), P2 @ (Si @ Aa @ S / tau) - Y[i] @ (Ca @ S)]])
             M = PA + PA.T + Cz.T @ Cz
@@ -218,12 +258,12 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
             B2 = cp.bmat([[W, PB.T], [PB, Pbig]])
             fam[k_bound].append(B2 >> 0)
         # the paper's pole region on the nominal error system (Theorem 2's LMIs 21-22), with P2
-        A, _, F = _at(nominal, v, w)
+        A, _, F = _at(nominal, pt)
         Aa, Ca, _, _ = augmented(A, F, C, T)
         alpha_lmi, disk_lmi = _region(P2, P2 @ (Si @ Aa @ S / tau) - Y[i] @ (Ca @ S), a_s, R_s, eps)
         fam[k_alpha].append(alpha_lmi)
         fam[k_disk].append(disk_lmi)
-    base = [P1 >> eps * np.eye(n), P2 >> eps * np.eye(n + 1)]
+    base = [P1 >> eps * np.eye(n) for P1 in P1s] + [P2 >> eps * np.eye(n + 1)]
     prob = cp.Problem(cp.Minimize(cp.trace(W)), base + [c for cs in fam.values() for c in cs])
     status, seconds = lmi.solve(prob)
     if not lmi.solved(status) or P2.value is None:
@@ -232,11 +272,15 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
                           f"corners {opts.stiffness_box}; " + _diagnose(base, fam, opts))
     Ka = [tau * S @ np.linalg.solve(P2.value, Yi.value) for Yi in Y]      # K_a = tau S P2^-1 Y
     P_err = _sym(Si.T @ P2.value @ Si / tau)
-    P_car = _sym(Sxi.T @ P1.value @ Sxi / tau)
+    P_car = [_sym(Sxi.T @ P1.value @ Sxi / tau) for P1 in P1s]
+    P_car = P_car if relaxed else P_car[0]
     K_P, K_I = [K[:n, :] for K in Ka], [K[n:, :] for K in Ka]
     P20, gamma = _lmi20(modes, vertices, K_P, K_I, T, C, S, tau, opts)
     out = H2Design(options=opts, vehicle=vehicle, T=T, N=N, C=C, modes=modes, P=P20, K_P=K_P, K_I=K_I,
-                   gamma=gamma, gamma_robust=None, E=brm.model_error_coefficients(vehicle),
+                   gamma=gamma, gamma_robust=None,
+                   # model errors enter the body's rows (eq. 1's), not the relaxed forces'
+                   E=[np.vstack([Ek, np.zeros((n - Ek.shape[0], Ek.shape[1]))])
+                      for Ek in brm.model_error_coefficients(vehicle)],
                    solver={"name": lmi.current(), "status": str(status), "seconds": round(seconds, 4),
                            "lmis": len(base) + sum(len(c) for c in fam.values()), "time_scale_per_s": tau,
                            "state_scaling": np.diag(S).tolist(), "vertices": [v[1] for v in vertices],
@@ -260,15 +304,21 @@ def _sym(M: np.ndarray) -> np.ndarray:
     return (M + M.T) / 2
 
 
+def car_block(P_car, i: int) -> np.ndarray:
+    """Mode i's P1: the common one, or the mode's of a per-mode list (relaxed forces)."""
+    P = np.asarray(P_car[i] if isinstance(P_car, list) else P_car, dtype=float)
+    return P if P.ndim == 2 else P[i]
+
+
 def robust_h2_bound(design: H2Design, vertices, cars) -> float:
     """The H2 bound that diag(P_car, P_err) proves for the returned gains: sqrt(max over the vertices
     of trace(B' P B)), x 1.001 (the Lyapunov LMI He(P A) + C_z' C_z < 0 on these numbers is the
     certificate's to check)."""
-    Pbig = scipy.linalg.block_diag(design.P_car, design.P_err)
     worst = 0.0
-    for i, label, v, w in vertices:
+    for i, label, pt in vertices:
+        Pbig = scipy.linalg.block_diag(car_block(design.P_car, i), design.P_err)
         for c in stiffness_corners(design.options.stiffness_box):
-            _, B, _ = closed_loop(design, i, cars[(i, c)], v, w)
+            _, B, _ = closed_loop(design, i, cars[(i, c)], pt)
             worst = max(worst, float(np.trace(B.T @ Pbig @ B)))
     return 1.001 * math.sqrt(worst)
 
@@ -286,8 +336,8 @@ def _lmi20(modes, vertices, K_P, K_I, T, C, S, tau, opts: H2Options) -> tuple[np
     g = cp.Variable(nonneg=True)
     eps = opts.margin
     cons = [P >> eps * np.eye(na)]
-    for i, _label, v, w in vertices:
-        A, _, F = _at(modes[i].coeffs, v, w)
+    for i, _label, pt in vertices:
+        A, _, F = _at(modes[i].coeffs, pt)
         Aa, Ca, Fa, La = augmented(A, F, C, T)
         As = Si @ (Aa - np.vstack([K_P[i], K_I[i]]) @ Ca) @ S / tau
         Fs, Ls = Si @ Fa / tau, La @ S
@@ -309,8 +359,8 @@ def _lmi20_gamma(modes, vertices, K_P, K_I, T, C, P) -> float:
     and g^2 > F_a' P Q^-1 P F_a, with L = A_cl' P + P A_cl. Raises DesignError if Q is not positive
     definite at a vertex (P then proves no bank -> beta bound)."""
     worst = 0.0
-    for i, label, v, w in vertices:
-        A, _, F = _at(modes[i].coeffs, v, w)
+    for i, label, pt in vertices:
+        A, _, F = _at(modes[i].coeffs, pt)
         Aa, Ca, Fa, La = augmented(A, F, C, T)
         Acl = Aa - np.vstack([K_P[i], K_I[i]]) @ Ca
         Q = -(Acl.T @ P + P @ Acl + La.T @ La)
@@ -339,6 +389,18 @@ def to_design_dict(design: H2Design) -> dict:
     section ``robust_h2`` (everything its certificate re-evaluates) and objective."""
     o = design.options
     d = _hinf_design_dict(design)
+    if o.tire_relaxation:
+        # the model with relaxed axle forces: two more states, a term in Vx (first_power -1)
+        n = len(brm.RELAXED_STATES)
+        d["structure"].update(states=list(brm.RELAXED_STATES), state_units=list(brm.RELAXED_STATE_UNITS),
+                              L=np.eye(1, n), first_power=-1,
+                              tire_forces="relaxed as the tires' (sigma / Vx F' + F = C alpha, sigma the vehicle's)",
+                              model_form="M(Vx) = sum_k M[k] * Vx**-(k - 1) (M[0]: the term in Vx)")
+        for m in d["modes"]:
+            m["model"] = {k: v for k, v in m["model"].items() if k != "first_power"}
+        d["lmi_vertices"] = [{"mode": i + 1, "label": lab, "u": pt[0], "v": pt[1], "w": pt[2]}
+                             for i, mm in enumerate(design.modes)
+                             for lab, pt in relaxed_vertices(*mm.model_range, o.lpv_pieces)]
     d["objective"] = ("minimise the robust H2 bound sqrt(trace W) over the stiffness box (the gains), then gamma "
                       "of LMI (20) with the pole region over P for those gains")
     d["robust_h2"] = {
@@ -346,7 +408,7 @@ def to_design_dict(design: H2Design) -> dict:
         "stiffness_corners": [list(c) for c in stiffness_corners(o.stiffness_box)],
         "inputs": list(INPUTS), "input_weights": list(o.h2_input_weights),
         "outputs": list(OUTPUTS), "bank_weight": o.h2_bank_weight,
-        "P_car": design.P_car, "P_err": design.P_err,
+        "P_car": design.P_car, "P_err": design.P_err,      # P_car: one per mode with the relaxed forces
         "bound": design.h2_bound,
         "system": "x' = A_t x + B_t delta; e_a' = (A_a - K_a C_a) e_a + [T (A_t - A); 0] x + [T (B_t - B); 0] delta "
                   "+ [0; 1] omega - ([T A N; 0] + K_a (I - C N)) n; z = [e_a[0]; bank_weight e_a[4]]",

@@ -290,6 +290,17 @@ def design_speed(built_fmus) -> dict:
 
 
 @pytest.fixture(scope="session")
+def design_speed_eq1(built_fmus) -> dict:
+    """The speed-mode default on paper 000's own model, eq. (1) (``tire_relaxation=False``: static tire
+    forces, polynomials in 1/Vx): the design the runtime's Taylor tables and fixed-speed modes are
+    exercised on (the default's model, with a term in Vx, runs the RK4 substeps). Solved through the
+    run's cache."""
+    from latobs import pipeline
+
+    return pipeline.solve("SideslipBankObserver", None, quiet=True, tire_relaxation=False)
+
+
+@pytest.fixture(scope="session")
 def design_tire(built_fmus) -> dict:
     return built_fmus.design("SideslipBankObserverTire")
 

@@ -202,3 +202,42 @@ def simulate(params: Mapping[str, float], vx_of_t: Callable[[float], float], del
     x = np.column_stack([z[:, 0] / vx, z[:, 1], z[:, 2], z[:, 3]])
     return {"t": t_eval, "beta": x[:, 0], "yaw_rate": x[:, 1], "roll_angle": x[:, 2], "roll_rate": x[:, 3],
             "x": x, "y": x[:, 1:], "ay": ay, "vx": vx, "delta": delta, "bank_angle": bank}
+
+
+@functools.lru_cache(maxsize=1)
+def _relaxed_numeric():
+    """numpy function of (parameters..., sigma, g, vx): (A, B, F) of the car with relaxed axle forces.
+
+    The same balances (N), (Y), (R) with the axle forces Fyf, Fyr as states instead of C alpha, each
+    relaxed as a tire is, sigma / vx Fy' + Fy = C alpha (first-order lag over the relaxation length
+    sigma, m). States [beta, r, phi, phi', Fyf / (m g), Fyr / (m g)] at constant vx."""
+    m, Iz, Ix, lf, lr, hr, Kr, br, Cf, Cr, sigma, g, vx = sp.symbols(
+        "m I_z I_x l_f l_r h_r K_r b_r C_f C_r sigma g v_x", positive=True)
+    beta, r, phi, phid, ff, fr, delta, phir = sp.symbols("beta r phi phidot f_f f_r delta phi_r", real=True)
+    vd, rd, phidd = sp.symbols("vdot rdot phiddot", real=True)
+    Fyf, Fyr = m * g * ff, m * g * fr                       # the states are per m g
+    eq_N = sp.Eq(m * (vd + vx * r - hr * phidd), Fyf + Fyr - m * g * phir)
+    eq_Y = sp.Eq(Iz * rd, lf * Fyf - lr * Fyr)
+    eq_R = sp.Eq(Ix * phidd, hr * (Fyf + Fyr) + m * g * hr * phi - Kr * phi - br * phid)
+    acc = sp.solve([eq_N, eq_Y, eq_R], [vd, rd, phidd], dict=True)[0]
+    v = vx * beta
+    alpha_f = delta - (v + lf * r) / vx
+    alpha_r = -(v - lr * r) / vx
+    f = sp.Matrix([acc[vd] / vx, acc[rd], phid, acc[phidd],
+                   vx / sigma * (Cf * alpha_f / (m * g) - ff), vx / sigma * (Cr * alpha_r / (m * g) - fr)])
+    xs = sp.Matrix([beta, r, phi, phid, ff, fr])
+    args = [m, Iz, Ix, lf, lr, hr, Kr, br, Cf, Cr, sigma, g, vx]
+    mats = [sp.simplify(f.jacobian(xs)), sp.simplify(f.jacobian(sp.Matrix([delta]))),
+            sp.simplify(f.jacobian(sp.Matrix([phir])))]
+    return sp.lambdify(args, mats, "numpy")
+
+
+def relaxed_model(params: Mapping[str, float], vx: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A 6x6, B 6x1, F 6x1) of the car with relaxed axle forces (``_relaxed_numeric``), x = [beta, r,
+    phi, phi', Fyf / (m g), Fyr / (m g)], at the constant speed vx (m/s). ``params``: those of ``model``
+    and sigma (m)."""
+    if "sigma" not in params:
+        raise KeyError("the relaxed linear plant needs parameter sigma")
+    A, B, F = _relaxed_numeric()(*_args(params, vx)[:-2], float(params["sigma"]), G, float(vx))
+    return (np.array(A, dtype=float).reshape(6, 6), np.array(B, dtype=float).reshape(6, 1),
+            np.array(F, dtype=float).reshape(6, 1))

@@ -91,9 +91,10 @@
 #if EI_VALID + 2 * PI_VALIDITY != N_EVENT_INDICATORS || PI_NEI != N_EVENT_INDICATORS
 #error "sideslip_bank_observer.c: the event indicators do not match the emitter's count"
 #endif
-#if NZ != 4 || NY != 3 || N_STATES != NS
-#error "sideslip_bank_observer.c: 4 states z, 3 measurements"
+#if (NZ != 4 && NZ != 6) || NY != 3 || N_STATES != NS
+#error "sideslip_bank_observer.c: 4 states z (6 with the relaxed axle forces), 3 measurements"
 #endif
+#define NX_OUT 4                       /* x^'s estimated outputs: beta, r, phi, phidot (not the axle forces) */
 
 struct Model {
     double vx_hold;                    /* m/s */
@@ -119,7 +120,7 @@ struct Model {
     double map[PI_NMAP][NS][NCOL];     /* [Phi | Gam (| Gam_e)] */
 };
 
-static const int OUT_X[NZ] = {OUT_beta_hat, OUT_yaw_rate_hat, OUT_roll_angle_hat, OUT_roll_rate_hat};
+static const int OUT_X[NX_OUT] = {OUT_beta_hat, OUT_yaw_rate_hat, OUT_roll_angle_hat, OUT_roll_rate_hat};
 
 size_t model_size(void)
 {
@@ -261,13 +262,14 @@ static int check_hold(Model *m, double vx, const Log *log)
 }
 
 /* ------------------------------------------------------------------ the model and its step maps */
-/* M(v), G(v) of map index idx: sum_k PI_MC[idx][k] v**k */
+/* M(v), G(v) of map index idx: sum_k PI_MC[idx][k] v**(k + PI_P0) (v**-1 as 1 / v: a term in vx) */
 static void system_at(int idx, double v, double M[NS][NS], double G[NS][NW])
 {
     memset(M, 0, sizeof(double) * NS * NS);
     memset(G, 0, sizeof(double) * NS * NW);
     for (int k = 0; k < PI_NV; k++) {
-        double vk = k == 0 ? 1.0 : pow(v, (double)k);
+        int p = k + PI_P0;
+        double vk = p == 0 ? 1.0 : p == -1 ? 1.0 / v : pow(v, (double)p);
         for (int i = 0; i < NS; i++) {
             for (int j = 0; j < NS; j++) M[i][j] += PI_MC[idx][k][i][j] * vk;
             for (int j = 0; j < NW; j++) G[i][j] += PI_GC[idx][k][i][j] * vk;
@@ -460,20 +462,20 @@ int model_setup(Model *m, const double *p, const Log *log)
     return 0;
 }
 
-/* x^ = [0, y] (beta^ = 0, the measured r, phi, phidot), z = x^ - N y, the mode of the initial speed;
- * the first-order hold restarts */
+/* x^ = [0, y] (beta^ = 0, the measured r, phi, phidot; relaxed axle forces: [0, y, 0, 0]), z = x^ - N y,
+ * the mode of the initial speed; the first-order hold restarts */
 static void start(Model *m, const double *u)
 {
     double w[NW], ny[NZ];
     measurements(u, w);
     for (int i = 0; i < NZ; i++) {
         ny[i] = dot_from(0.0, PI_N[i], w, NY);
-        m->s[i] = (i == 0 ? 0.0 : w[i - 1]) - ny[i];
+        m->s[i] = (i == 0 || i > NY ? 0.0 : w[i - 1]) - ny[i];
     }
     m->started = 1;
     m->have_prev = 0;
     if (PI_SPEED_BANDS && u[IN_vx] >= m->vx_hold) m->mode = band(u[IN_vx]);
-    for (int i = 0; i < NZ; i++) m->y[OUT_X[i]] = m->s[i] + ny[i];
+    for (int i = 0; i < NX_OUT; i++) m->y[OUT_X[i]] = m->s[i] + ny[i];
     m->y[OUT_bank_angle_hat] = m->s[NZ];
 }
 
@@ -531,7 +533,7 @@ int model_do_step(Model *m, double h, const double *u, const Log *log)
     if (PI_FOH) hold_increment(m, h, x + NS, x + NCOL - NW);
     advance(m, idx, model_v(m->mode, vx), h, nsub, x, a);
     memcpy(m->s, a, sizeof m->s);
-    for (int i = 0; i < NZ; i++) {                 /* x^ = z+ + N y(t + h) */
+    for (int i = 0; i < NX_OUT; i++) {             /* x^ = z+ + N y(t + h), the outputs */
         double acc = a[i];
         for (int j = 0; j < NY; j++) acc += PI_N[i][j] * x[NS + j];
         for (int j = 0; PI_FOH && j < NY; j++) acc += PI_N[i][j] * x[NCOL - NW + j];
@@ -618,7 +620,7 @@ static void me_estimates(const Model *m, const double *u, double *y)
 {
     double w[NW];
     measurements(u, w);
-    for (int i = 0; i < NZ; i++) y[OUT_X[i]] = m->s[i] + dot_from(0.0, PI_N[i], w, NY);
+    for (int i = 0; i < NX_OUT; i++) y[OUT_X[i]] = m->s[i] + dot_from(0.0, PI_N[i], w, NY);
     y[OUT_bank_angle_hat] = m->s[NZ];
 }
 

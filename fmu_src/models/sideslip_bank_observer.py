@@ -27,6 +27,8 @@ def _variant(data: dict) -> str:
         text = f"speed modes: one gain pair per design speed {speeds} km/h, switched on vx (eq. 25)"
         if measured:
             text += "; each mode's model at the measured speed clamped to its band (LPV)"
+        if data.get("structure", {}).get("first_power") == -1:
+            text += "; the axle forces relaxed as the tires' (two more states)"
     else:
         star = sw.get("alpha_star")
         at = f" at alpha* = {star * 57.29577951308232:.2g} deg" if isinstance(star, (int, float)) else ""

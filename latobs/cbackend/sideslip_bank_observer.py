@@ -4,8 +4,9 @@ Writes the design's tables (``data["tables"]``, ``synthesis.tables.sideslip_bank
 data, nothing else computed here. With s = [z; w^] (eq. 5) and w = [y; delta], s' = M(v) s + G(v) w,
 v = 1/vx:
 
-    PI_MC[idx][k], PI_GC[idx][k]   the coefficient of v**k of M, G for map index idx (the mode; with
-                                   a frozen integral, idx = n_modes + mode: w^'s row zero)
+    PI_MC[idx][k], PI_GC[idx][k]   the coefficient of v**(k + PI_P0) of M, G for map index idx (the
+                                   mode; with a frozen integral, idx = n_modes + mode: w^'s row zero);
+                                   PI_P0 = -1 for the model with relaxed axle forces (a term in vx)
     PI_N                           x^ = z + N y
     PI_EDGES                       speed bands: the band edges (eq. 25); tire modes: the design grid
     PI_FIXED_V, PI_VX_LO/HI        per mode: v of a fixed model speed (0 if measured), the measured
@@ -29,7 +30,8 @@ from .emit import CModel, c_array, c_define, nonzero, structure
 
 SOURCE = "sideslip_bank_observer.c"
 
-#: ModelExchange states: s = [z (4); w^ (1)] (eq. 5), the order of the runtime's state vector
+#: ModelExchange states: s = [z (4, or 6 with the relaxed axle forces); w^ (1)] (eq. 5), the order of
+#: the runtime's state vector
 STATES = (
     Var("x_z_beta", "rad", "observer state z, sideslip row (x^ = z + N y)"),
     Var("x_z_yaw_rate", "rad/s", "observer state z, yaw rate row (x^ = z + N y)"),
@@ -37,6 +39,10 @@ STATES = (
     Var("x_z_roll_rate", "rad/s", "observer state z, roll rate row (x^ = z + N y)"),
     Var("x_bank_hat", "rad", "observer state w^: road bank angle estimate (integral action)"),
 )
+RELAXED_STATES = STATES[:4] + (
+    Var("x_z_front_axle_force", "N", "observer state z, front axle force row (relaxed tire force, x^ = z + N y)"),
+    Var("x_z_rear_axle_force", "N", "observer state z, rear axle force row (relaxed tire force, x^ = z + N y)"),
+) + STATES[4:]
 
 
 def _event_indicators(tab: dict) -> int:
@@ -64,9 +70,12 @@ def emit(data: dict) -> CModel:
     N, Mc, Gc, modes = tab["N"], tab["M"], tab["G"], tab["modes"]
     nm, foh, val = len(modes), tab["input_hold"] == "first_order", tab["validity"]
     n, ny = len(N), len(N[0]) if N else 0
-    if (n, ny) != (4, 3) or any(len(row) != 3 for row in N):
-        raise ValueError(f"paper-000 observer: the C model needs 4 states and 3 measurements (N 4 x 3), "
-                         f"got n = {n}, ny = {ny}")
+    p0 = int(tab.get("first_power", 0))
+    if (n, ny, p0) not in ((4, 3, 0), (6, 3, -1)) or any(len(row) != 3 for row in N):
+        raise ValueError(f"paper-000 observer: the C model needs 4 states and 3 measurements (N 4 x 3), or 6 "
+                         f"states with the relaxed axle forces and a term in vx (first_power -1), got n = {n}, "
+                         f"ny = {ny}, first_power = {p0}")
+    states = STATES if n == 4 else RELAXED_STATES
     ns, nw = n + 1, ny + 1
     ncol = ns + nw + (nw if foh else 0)
     nv = max(len(c) for c in Mc)
@@ -76,7 +85,8 @@ def emit(data: dict) -> CModel:
     for idx, (M, G) in enumerate(zip(mc, gc)):
         if any(len(P) != ns or any(len(row) != ns for row in P) for P in M) or \
                 any(len(P) != ns or any(len(row) != nw for row in P) for P in G):
-            raise ValueError(f"paper-000 observer: mode {idx % nm + 1}'s model A, B, F must be 4 x 4, 4 x 1, 4 x 1")
+            raise ValueError(f"paper-000 observer: mode {idx % nm + 1}'s model A, B, F must be {n} x {n}, {n} x 1, "
+                             f"{n} x 1")
     sw = tab["switching"]
     bands = sw["kind"] == "speed_bands"
     deg = max((len(iv["coef"]) - 1 for m in tab["maps"] for iv in m["intervals"] if iv["coef"] is not None),
@@ -100,7 +110,7 @@ def emit(data: dict) -> CModel:
     header = "".join([
         "/* paper 000, eq. (5): s' = M(v) s + G(v) w, s = [z; w^], w = [y; delta], v = 1/vx */\n",
         c_define("PI_N_MODES", nm), c_define("PI_NMAP", len(Mc)), c_define("PI_NS", ns),
-        c_define("PI_NY", ny), c_define("PI_NW", nw), c_define("PI_NV", nv),
+        c_define("PI_NY", ny), c_define("PI_NW", nw), c_define("PI_NV", nv), c_define("PI_P0", p0),
         c_define("PI_FOH", foh), c_define("PI_NCOL", ncol),
         c_define("PI_SPEED_BANDS", bands), c_define("PI_NEDGES", len(edges)),
         c_define("PI_VALIDITY", val is not None), c_define("PI_FREEZE", bool(val and val["freeze_integral"])),
@@ -125,8 +135,8 @@ def emit(data: dict) -> CModel:
         c_array("PI_TAB_RK4", rk4, "int"),
         c_array("PI_TAB_COEF", coef),
     ])
-    return CModel(header=header, states=STATES, n_event_indicators=_event_indicators(tab),
-                  dependencies=_dependencies(tab, mc, gc))
+    return CModel(header=header, states=states, n_event_indicators=_event_indicators(tab),
+                  dependencies=_dependencies(tab, mc, gc, states, p0))
 
 
 #: w = [y; delta] (measurements() in sideslip_bank_observer.c), y = the first three
@@ -135,16 +145,17 @@ MEASURED = ("yaw_rate", "roll_angle", "roll_rate", "delta")
 ESTIMATES = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat")
 
 
-def _dependencies(tab: dict, mc, gc) -> dict:
+def _dependencies(tab: dict, mc, gc, states, p0: int) -> dict:
     """ModelExchange (model_me_derivatives, me_estimates): s' = M(v) s + G(v) w with M(v) =
-    sum_k Mc_k v^k, v = 1/vx for the modes whose model speed follows vx (fixed-speed modes: k = 0
-    only), in every map (the modes, and the frozen maps when validity freezes); x^ = z + N y."""
-    names = [s.name for s in STATES]
+    sum_k Mc_k v^(k + p0), v = 1/vx for the modes whose model speed follows vx (fixed-speed modes: the
+    power 0 only), in every map (the modes, and the frozen maps when validity freezes); x^ = z + N y."""
+    names = [s.name for s in states]
     scheduled = [idx for idx in range(len(mc)) if tab["modes"][idx % len(tab["modes"])]["fixed_v"] is None]
     deps = {}
     for i, name in enumerate(names):
         d = nonzero(names, *(P[i] for c in mc for P in c)) | nonzero(MEASURED, *(P[i] for c in gc for P in c))
-        if any(float(x) != 0.0 for idx in scheduled for c in (mc[idx][1:], gc[idx][1:]) for P in c for x in P[i]):
+        if any(float(x) != 0.0 for idx in scheduled for c in (mc[idx], gc[idx]) for k, P in enumerate(c)
+               if k + p0 != 0 for x in P[i]):
             d.add("vx")
         deps[f"der({name})"] = d
     for i, out in enumerate(ESTIMATES):

@@ -74,10 +74,12 @@ def _hull_2d(points) -> list[tuple[float, float]]:
     return lower[:-1] + upper[:-1]
 
 
-def _curve_outside_hull(points, v_lo: float, v_hi: float) -> float:
+def _curve_outside_hull(points, v_lo: float, v_hi: float, reciprocal: bool = False) -> float:
     """max over v in [v_lo, v_hi] of the distance of (v, v^2) outside the convex hull of ``points``
     (<= 0: the whole arc is inside), exactly: for each hull edge with outward unit normal (a, b)
     through p, a (v - p_v) + b (v^2 - p_w) is a quadratic in v maximised at an end or its vertex.
+    ``reciprocal``: the curve (1/v, v) instead (points (u, v)), where a (1/v - p_u) + b (v - p_v) is
+    maximised at an end or where its derivative -a/v^2 + b vanishes, v = sqrt(a/b).
     A degenerate hull (fewer than 3 points not on a line) holds no arc: inf."""
     hull = _hull_2d([(float(p[0]), float(p[1])) for p in points])
     if len(hull) < 3:
@@ -88,6 +90,11 @@ def _curve_outside_hull(points, v_lo: float, v_hi: float) -> float:
         nrm = math.hypot(a, b)
         a, b = a / nrm, b / nrm
         cand = [v_lo, v_hi]
+        if reciprocal:
+            if b != 0 and a / b > 0 and v_lo < math.sqrt(a / b) < v_hi:
+                cand.append(math.sqrt(a / b))
+            worst = max(worst, max(a * (1.0 / v - p[0]) + b * (v - p[1]) for v in cand))
+            continue
         if b < 0:                                    # concave quadratic: interior maximum
             vs = -a / (2 * b)
             if v_lo < vs < v_hi:

@@ -45,16 +45,21 @@ def _model_error_000(vehicle) -> list[np.ndarray]:
     return [E0, E1]
 
 
-def _model_at(coeffs, v: float, w: float) -> np.ndarray:
-    """sum_k M_k basis_k with basis (1, v, w) (w stands for 1/Vx^2, off the curve at tangent corners);
-    degrees > 2 (never in a valid file) as v**k."""
-    basis = [1.0, v, w]
-    return sum(np.asarray(M, float) * (basis[k] if k < 3 else v**k) for k, M in enumerate(coeffs))
+def _model_at(coeffs, v: float, w: float, u: float | None = None, p0: int = 0) -> np.ndarray:
+    """sum_k M_k basis_(k + p0) with basis (u, 1, v, w) for the powers -1, 0, 1, 2 of 1/Vx (u stands for
+    Vx, default 1/v; w for 1/Vx^2; off the curve at tangent corners); degrees > 2 (never in a valid
+    file) as v**k. p0 = structure.first_power (-1: the model with relaxed axle forces, a term in Vx)."""
+    basis = {-1: 1.0 / v if u is None else u, 0: 1.0, 1: v, 2: w}
+    return sum(np.asarray(M, float) * (basis[k + p0] if k + p0 < 3 else v**(k + p0)) for k, M in enumerate(coeffs))
 
 
-def closed_loop_000(d: dict, mode: dict, v: float, w: float | None = None) -> dict:
+def _first_power(d: dict) -> int:
+    return int(d["structure"].get("first_power", 0))
+
+
+def closed_loop_000(d: dict, mode: dict, v: float, w: float | None = None, u: float | None = None) -> dict:
     """The certificate's own closed loop of eq. (19) for ``mode`` (an entry of d["modes"]) with its
-    model at (v, w) = (1/Vx, 1/Vx^2) (w given: a polytope vertex), from the design file's numbers
+    model at (u, v, w) = (Vx, 1/Vx, 1/Vx^2) (w or u given: a polytope vertex), from the design file's numbers
     only (T, C, the mode's model coefficients and gains, model_error.E):
         A_cl = [[T A - K_P C, T F], [-K_I C, 0]]   (= A_a - K_a C_a, A_a = [[T A, T F], [0, 0]])
         F_a = [-T F; 0], L_a = [-L, 0], L = [1 0 0 0]          channel 1: bank -> beta error
@@ -64,8 +69,9 @@ def closed_loop_000(d: dict, mode: dict, v: float, w: float | None = None) -> di
     w = v * v if w is None else w
     T, C = (np.asarray(d["structure"][k], float) for k in ("T", "C"))
     K_P, K_I = (np.asarray(mode["gains"][k], float) for k in ("K_P", "K_I"))
-    A = _model_at(mode["model"]["A"], v, w)
-    F = _model_at(mode["model"]["F"], v, w)
+    p0 = _first_power(d)
+    A = _model_at(mode["model"]["A"], v, w, u, p0)
+    F = _model_at(mode["model"]["F"], v, w, u, p0)
     E = _model_at(d["model_error"]["E"], v, w)
     n, nw = A.shape[0], F.shape[1]
     Acl = np.block([[T @ A - K_P @ C, T @ F], [-K_I @ C, np.zeros((nw, nw))]])
@@ -117,12 +123,16 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
     checks.append(_le("C measures [r, phi, phidot] (y = x[1:]): max |C - selection|",
                       float(np.max(np.abs(C - sel))) if C.shape == sel.shape else math.inf, 0.0))
     vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
-    model_err = 0.0
+    relaxed = _first_power(d) == -1          # the model with relaxed axle forces (else eq. 1)
+    model_of = brm.relaxed_lpv_coefficients if relaxed else brm.lpv_coefficients
+    model_err = 0.0 if _first_power(d) in (0, -1) else math.inf
     for mode in d["modes"]:
         kf, kr = (float(k) for k in mode["stiffness_scale"])
-        ref = brm.lpv_coefficients(vehicle, kf * vehicle.Cf, kr * vehicle.Cr)
+        ref = model_of(vehicle, kf * vehicle.Cf, kr * vehicle.Cr)
         model_err = max(model_err, _rel_err(mode["Cf"], kf * vehicle.Cf), _rel_err(mode["Cr"], kr * vehicle.Cr))
         for key, mats in ref.items():
+            if key == "first_power":
+                continue
             stored = mode["model"][key]
             if len(stored) != len(mats):
                 model_err = math.inf
@@ -130,7 +140,7 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
             for S, M in zip(stored, mats):
                 model_err = max(model_err, _rel_err(S, M))
     checks.append(_le("model equals the model re-derived from the vehicle parameters", model_err, 1e-12))
-    E_ref = _model_error_000(vehicle)
+    E_ref = [np.vstack([E, np.zeros((n - E.shape[0], E.shape[1]))]) for E in _model_error_000(vehicle)]
     E_st = me["E"]
     e_err = max(_rel_err(s, r) for s, r in zip(E_st, E_ref)) if len(E_st) == 2 else math.inf
     checks.append(_le("model-error input E equals the certificate's own re-derivation from the vehicle parameters",
@@ -139,9 +149,11 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
     # -- LMI vertices: well formed, covering each mode's model speeds -----------------------------
     modes = {int(m["index"]): m for m in d["modes"]}
     verts = d["lmi_vertices"]
+    coords = ("u", "v", "w") if relaxed else ("v", "w")
     bad = [x for x in verts if int(x["mode"]) not in modes
-           or not (math.isfinite(float(x["v"])) and math.isfinite(float(x["w"])) and float(x["v"]) > 0 and float(x["w"]) > 0)]
-    checks.append(_le("LMI vertices well formed: count naming no mode or with v, w not finite > 0", len(bad), 0))
+           or not all(math.isfinite(float(x.get(k, math.nan))) and float(x.get(k, math.nan)) > 0 for k in coords)]
+    checks.append(_le(f"LMI vertices well formed: count naming no mode or with {', '.join(coords)} not finite > 0",
+                      len(bad), 0))
     verts = [x for x in verts if x not in bad]
     for i, mode in modes.items():
         kind, lo, hi, ok = _mode_ranges_000(mode)
@@ -160,6 +172,12 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
                        for v0 in (1.0 / hi, 1.0 / lo))
             checks.append(_le(f"LMI vertices at both ends {kmh(lo)}, {kmh(hi)} of the model-speed range (faithful "
                               f"tire mode: grid speeds only, in between see the dense grid), {where}", dist, 1e-12))
+        elif relaxed:
+            uv = [(float(x["u"]), float(x["v"])) for x in verts if int(x["mode"]) == i]
+            out = _curve_outside_hull(uv, 1.0 / hi, 1.0 / lo, reciprocal=True)
+            checks.append(_le(f"LMI vertices cover the model speeds: (Vx, 1/Vx) over {kmh(lo)}..{kmh(hi)} inside "
+                              f"their convex hull (max distance outside), {where}", out, 1e-12,
+                              f"{len(uv)} vertices; exact test per hull edge"))
         else:
             out = _curve_outside_hull(pts, 1.0 / hi, 1.0 / lo) * lo
             checks.append(_le(f"LMI vertices cover the model speeds: (1/Vx, 1/Vx^2) over {kmh(lo)}..{kmh(hi)} inside "
@@ -184,7 +202,7 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
         for x in verts:
             if int(x["mode"]) != i:
                 continue
-            cl = closed_loop_000(d, mode, float(x["v"]), float(x["w"]))
+            cl = closed_loop_000(d, mode, float(x["v"]), float(x["w"]), float(x["u"]) if relaxed else None)
             A, Fa, La = cl["Acl"], cl["Fa"], cl["La"]
             lyap = A.T @ P + P @ A
             nw = Fa.shape[1]
@@ -335,9 +353,9 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
     return checks, figures
 
 
-def robust_system_000(d: dict, mode: dict, car: dict, v: float, w: float | None = None):
+def robust_system_000(d: dict, mode: dict, car: dict, v: float, w: float | None = None, u: float | None = None):
     """The certificate's own [x; e_a] system of the robust-H2 criterion for ``mode`` (its gains) and the
-    car ``car`` (1/Vx coefficients at the car's stiffnesses), at (v, w) = (1/Vx, 1/Vx^2), from the
+    car ``car`` (1/Vx coefficients at the car's stiffnesses), at (u, v, w) = (Vx, 1/Vx, 1/Vx^2), from the
     design file's numbers: the car x' = A_t x + B_t delta; the observer's error e_a = [T x - z; phi_r - w^]
     (eq. 19) with y = C x + n and the bank's rate omega:
         e_a' = A_cl e_a + [T (A_t - A); 0] x + [T (B_t - B); 0] delta + [0; 1] omega
@@ -350,9 +368,10 @@ def robust_system_000(d: dict, mode: dict, car: dict, v: float, w: float | None 
     T, N, C = (np.asarray(d["structure"][k], float) for k in ("T", "N", "C"))
     wd, wo, *wn = (float(x) for x in h["input_weights"])
     Wn = np.diag(wn)
-    A, B = _model_at(mode["model"]["A"], v, w), _model_at(mode["model"]["B"], v, w)
-    At, Bt = _model_at(car["A"], v, w), _model_at(car["B"], v, w)
-    Acl = closed_loop_000(d, mode, v, w)["Acl"]
+    p0 = _first_power(d)
+    A, B = _model_at(mode["model"]["A"], v, w, u, p0), _model_at(mode["model"]["B"], v, w, u, p0)
+    At, Bt = _model_at(car["A"], v, w, u, p0), _model_at(car["B"], v, w, u, p0)
+    Acl = closed_loop_000(d, mode, v, w, u)["Acl"]
     Ka = np.vstack([np.asarray(mode["gains"]["K_P"], float), np.asarray(mode["gains"]["K_I"], float)])
     n, ny = At.shape[0], C.shape[0]
     e_top = lambda M: np.vstack([M, np.zeros((1, M.shape[1]))])
@@ -393,20 +412,31 @@ def _robust_h2_000(d: dict, vehicle, modes: dict, verts: list) -> tuple[list[Che
     stored = sorted(tuple(float(x) for x in c) for c in h["stiffness_corners"])
     checks.append(_le("robust H2: stored stiffness corners are the corners of the box (count differing)",
                       len(set(stored) ^ set(corners)) if box_ok else math.inf, 0, f"box {h['stiffness_box']}"))
-    P_car, P_err = (_sym(np.asarray(h[k], float)) for k in ("P_car", "P_err"))
-    n = P_car.shape[0]
-    Pbig = np.block([[P_car, np.zeros((n, P_err.shape[0]))], [np.zeros((P_err.shape[0], n)), P_err]])
-    ev = np.linalg.eigvalsh(Pbig)
-    checks.append(_ge("robust H2: diag(P_car, P_err) positive definite (min eig / max eig)", float(ev[0] / ev[-1]), 1e-12))
+    # P_car: common to the modes, or one per mode (the model with relaxed forces: its rate Vx / sigma)
+    P_cars, P_err = np.asarray(h["P_car"], float), _sym(np.asarray(h["P_err"], float))
+    P_cars = P_cars[None] if P_cars.ndim == 2 else P_cars
+    relaxed = _first_power(d) == -1
+    model_of = brm.relaxed_lpv_coefficients if relaxed else brm.lpv_coefficients
+
+    def pbig(i: int) -> np.ndarray:
+        P_car = _sym(P_cars[min(i - 1, len(P_cars) - 1)])
+        n = P_car.shape[0]
+        return np.block([[P_car, np.zeros((n, P_err.shape[0]))], [np.zeros((P_err.shape[0], n)), P_err]])
+    per_mode = len(P_cars) == len(modes) or len(P_cars) == 1
+    ratio = min(float(e[0] / e[-1]) for e in (np.linalg.eigvalsh(pbig(i)) for i in modes)) if per_mode else -math.inf
+    checks.append(_ge("robust H2: diag(P_car, P_err) positive definite (min eig / max eig)", ratio, 1e-12,
+                      f"{len(P_cars)} P_car" + ("" if per_mode else f" for {len(modes)} modes: neither one nor one per mode")))
     worst = (0.0, "")                      # the largest frozen H2 norm over the modes, and where
     for i, mode in modes.items():
-        cars = {c: brm.lpv_coefficients(vehicle, c[0] * vehicle.Cf * float(mode["stiffness_scale"][0]),
-                                        c[1] * vehicle.Cr * float(mode["stiffness_scale"][1]))
+        Pbig = pbig(i)
+        cars = {c: model_of(vehicle, c[0] * vehicle.Cf * float(mode["stiffness_scale"][0]),
+                            c[1] * vehicle.Cr * float(mode["stiffness_scale"][1]))
                 for c in corners + [(1.0, 1.0)]}
         lyap, trace = (-math.inf, ""), (-math.inf, "")
         for x in (x for x in verts if int(x["mode"]) == i):
             for c in corners:
-                A, B, Cz = robust_system_000(d, mode, cars[c], float(x["v"]), float(x["w"]))
+                A, B, Cz = robust_system_000(d, mode, cars[c], float(x["v"]), float(x["w"]),
+                                             float(x["u"]) if relaxed else None)
                 where = f"{x['label']}, stiffness x {c}"
                 val = _neg_margin(Pbig @ A + A.T @ Pbig + Cz.T @ Cz)
                 if not val <= lyap[0]:
@@ -448,6 +478,35 @@ def _fingerprint_000(d: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def _size_errors(d: dict) -> list[str]:
+    """What does not have the size of the file's model (eq. 1, or with relaxed axle forces when
+    structure.first_power is -1), re-derived from its vehicle: each mode's coefficient lists, gains,
+    P; an empty list when all fit."""
+    p0 = d["structure"].get("first_power", 0)
+    if p0 not in (0, -1) or isinstance(p0, bool):
+        return [f"structure.first_power {p0!r} is neither 0 nor -1"]
+    try:
+        vehicle = parse_vehicle(d["vehicle"], f"design file {d.get('name')}")
+        ref = (brm.relaxed_lpv_coefficients if p0 == -1 else brm.lpv_coefficients)(vehicle)
+    except ValueError as exc:
+        return [str(exc)]
+    n = ref["A"][0].shape[0]
+    wrong = []
+    for m in d["modes"]:
+        for key in ("A", "B", "F"):
+            got, want = [np.shape(M) for M in m["model"][key]], [M.shape for M in ref[key]]
+            if got != want:
+                wrong.append(f"mode {m.get('index')} model {key}: {got}, the model's {want}")
+        for key, shape in (("K_P", (n, 3)), ("K_I", (1, 3))):
+            if np.shape(m["gains"][key]) != shape:
+                wrong.append(f"mode {m.get('index')} {key}: {np.shape(m['gains'][key])}, not {shape}")
+    for what, got, shape in (("T", d["structure"]["T"], (n, n)), ("C", d["structure"]["C"], (3, n)),
+                             ("P", d["P"], (n + 1, n + 1))):
+        if np.shape(got) != shape:
+            wrong.append(f"{what}: {np.shape(got)}, not {shape}")
+    return wrong
+
+
 def certify(d: dict) -> list[Check]:
     """Always computed afresh; the result is remembered for ``summary`` of the same numbers (the
     pipeline summarises right after certifying: the analysis takes ~1 s)."""
@@ -456,6 +515,10 @@ def certify(d: dict) -> list[Check]:
     if missing:                         # e.g. an old file without model_error and lmi_vertices
         return [_le("design file has every section the certificate reads (count missing)", len(missing), 0,
                     "missing: " + ", ".join(missing))]
+    wrong = _size_errors(d)
+    if wrong:                           # e.g. a model of one kind read as the other's (first_power)
+        return [_le("design file's matrices have the sizes of its model (count wrong)", len(wrong), 0,
+                    "; ".join(wrong[:5]))]
     checks, figures = _analysis_000(d)
     if len(_ANALYSES_000) >= 16:
         _ANALYSES_000.clear()

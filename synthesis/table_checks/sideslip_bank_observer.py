@@ -23,7 +23,9 @@ def _model(d: dict, i: int, v: float, frozen: bool):
     z' = T A x^ + T B delta + T F w^ + K_P (y - C x^), w^' = K_I (y - C x^) (0 if frozen)."""
     st, mode = d["structure"], d["modes"][i]
     T, N, C = (np.asarray(st[k], dtype=float) for k in ("T", "N", "C"))
-    A, B, F = (sum(np.asarray(P, dtype=float) * v**k for k, P in enumerate(mode["model"][key])) for key in "ABF")
+    p0 = int(st.get("first_power", 0))          # the model's powers of v start at p0 (-1: a term in vx)
+    A, B, F = (sum(np.asarray(P, dtype=float) * v**(k + p0) for k, P in enumerate(mode["model"][key]))
+               for key in "ABF")
     KP, KI = (np.asarray(mode["gains"][k], dtype=float) for k in ("K_P", "K_I"))
     n, ny = N.shape
     Pi = T @ A - KP @ C
@@ -57,10 +59,12 @@ def _norm(P: np.ndarray) -> float:
 
 
 def _constants_mismatch(d: dict, tab: dict, foh: bool) -> float:
-    """Sum of |table - design| over the runtime's constants (0: all equal)."""
+    """Sum of |table - design| over the runtime's constants (0: all equal; the model's first power of v
+    among them)."""
     sw, val, rt = d["switching"], d.get("validity"), d["runtime"]
-    want = [np.asarray(d["structure"]["N"], dtype=float), float(rt["max_step"]), float(rt.get("vx_hold", 1.0))]
-    got = [np.asarray(tab["N"], dtype=float), tab["max_step"], tab["vx_hold"]]
+    want = [np.asarray(d["structure"]["N"], dtype=float), float(rt["max_step"]), float(rt.get("vx_hold", 1.0)),
+            float(d["structure"].get("first_power", 0))]
+    got = [np.asarray(tab["N"], dtype=float), tab["max_step"], tab["vx_hold"], float(tab.get("first_power", 0))]
     if sw["kind"] == "speed_bands":
         want += [np.asarray(sw["edges"], dtype=float), sw["edges"][0], sw["edges"][-1]]
         got += [np.asarray(tab["switching"].get("edges", np.nan)), *tab["grid"]]
@@ -97,8 +101,9 @@ def checks(data: dict) -> list:
     nmap = nm * (2 if freeze else 1)
     out = [le("tables: map indices (modes, frozen-integral maps)", abs(len(tab["maps"]) - nmap)
               + abs(len(tab["M"]) - nmap) + abs(len(tab["G"]) - nmap), 0.0),
-           le("tables: N, switching, grid, validity, vx_hold, max_step and input hold are the design's",
+           le("tables: N, switching, grid, validity, vx_hold, max_step, input hold and first power of v are the design's",
               _constants_mismatch(data, tab, foh), 0.0)]
+    p0 = int(tab.get("first_power", 0))
     if len(tab["maps"]) != nmap:
         return out
     for idx in range(nmap):
@@ -116,8 +121,8 @@ def checks(data: dict) -> list:
         model_err = 0.0
         for vx in speeds:
             M, G = _model(data, i, 1.0 / vx, idx >= nm)
-            Mt = sum(np.asarray(P) * (1.0 / vx) ** k for k, P in enumerate(tab["M"][idx]))
-            Gt = sum(np.asarray(P) * (1.0 / vx) ** k for k, P in enumerate(tab["G"][idx]))
+            Mt = sum(np.asarray(P) * (1.0 / vx) ** (k + p0) for k, P in enumerate(tab["M"][idx]))
+            Gt = sum(np.asarray(P) * (1.0 / vx) ** (k + p0) for k, P in enumerate(tab["G"][idx]))
             model_err = max(model_err, _norm(np.hstack([Mt - M, Gt - G])) / _norm(np.hstack([M, G])))
         out.append(le(f"tables: M(v), G(v) of eq. (5) from the design's model and gains, {what}", model_err,
                       MODEL_LIMIT, f"at {len(speeds)} model speed(s)"))

@@ -1,11 +1,13 @@
 """What paper 000's switched PI observer evaluates (eq. 5), computed once from its design file.
 
-With s = [z; w^] and w = [y; delta], s' = M(v) s + G(v) w, M and G polynomials in v = 1/vx.
+With s = [z; w^] and w = [y; delta], s' = M(v) s + G(v) w, M and G polynomials in v = 1/vx (with the
+model's relaxed axle forces, Laurent polynomials from v**-1: ``first_power``).
 ``compute`` returns the coefficient matrices of M, G per map index (the mode; with a frozen integral
 n_modes + mode, w^'s rows zero), N, the switching, clamp and validity constants, and the step maps
 over the FMU's default step ``STEP``: per map index the exact composite map of the RK4 substeps
 (fixed model speed) or a table of Taylor polynomials in v - center on equal intervals of the mode's
-clamped range of v (measured model speed; ``series.interval_coefficients``). Plain JSON data; the
+clamped range of v (measured model speed; ``series.interval_coefficients``; a model with a term in vx
+has no table: the runtimes take the RK4 substeps at every step). Plain JSON data; the
 behaviour the runtimes give these numbers: ``docs/runtime/sideslip_bank_observer.md``.
 """
 from __future__ import annotations
@@ -85,10 +87,11 @@ def _validity(val, sw: dict):
             "freeze_integral": bool(val.get("freeze_integral", False))}
 
 
-def coefficients(mode: dict, T, N, C):
+def coefficients(mode: dict, T, N, C, first_power: int = 0):
     """Coefficient matrices (in v = 1/vx) of M(v), G(v) with s' = M s + G [y; u] for one mode: eq. (5)
     in the form z' = T A x^ + T B u + T F w^ + K_P (y - C x^), w^' = K_I (y - C x^), x^ = z + N y
-    (= eq. (5) with Pi = T A - K_P C, K_p = K_P + Pi N)."""
+    (= eq. (5) with Pi = T A - K_P C, K_p = K_P + Pi N). Coefficient k multiplies v**(k + first_power)
+    (-1 for the model with relaxed axle forces: a term in vx)."""
     model = {k: [floats(P) for P in mode["model"][k]] for k in ("A", "B", "F")}
     KP, KI = floats(mode["gains"]["K_P"]), floats(mode["gains"]["K_I"])
     n, ny = len(T), len(C)
@@ -101,7 +104,7 @@ def coefficients(mode: dict, T, N, C):
         F = model["F"][k] if k < len(model["F"]) else zeros(n, 1)
         TA, TB, TF = matmul(T, A), matmul(T, B), matmul(T, F)
         TAN = matmul(TA, N)
-        if k == 0:
+        if k + first_power == 0:
             # y enters through T A N y + K_P (I - C N) y (z rows) and K_I (I - C N) y (w row)
             TA, TAN = add(TA, scale(matmul(KP, C), -1.0)), add(TAN, matmul(KP, I_CN))
             w_M, w_G = [-x for x in matmul(KI, C)[0]] + [0.0], matmul(KI, I_CN)[0] + [0.0]
@@ -118,12 +121,23 @@ def substeps(h: float, max_step: float) -> tuple[int, float]:
     return nsub, h / nsub
 
 
-def step_map(Mc, Gc, mode: dict, nrow: int, max_step: float, h: float, foh: bool) -> dict:
+def step_map(Mc, Gc, mode: dict, nrow: int, max_step: float, h: float, foh: bool, first_power: int = 0) -> dict:
     """The step map of one map index over h: {"v_lo", "scale", "intervals": [{"center", "coef"}]};
     coef[j][r][c] the coefficient of (v - center)**j in row r (of s), column c (of [s; w], first-order
-    hold [s; w; e]), None where the RK4 substeps run. Fixed model speed: one interval, degree 0."""
+    hold [s; w; e]), None where the RK4 substeps run. Fixed model speed: one interval, degree 0.
+    A model with a term in vx (``first_power`` < 0): one interval, the RK4 substeps (the series
+    arithmetic and its truncation bound are for polynomials in v)."""
     nsub, hs = substeps(h, max_step)
     hold = h if foh else None
+    if first_power < 0:
+        if mode["fixed_v"] is not None or mode["vx_range"] is None:
+            raise ValueError("design: a model with a term in vx needs modes with a measured model speed")
+        lo, hi = mode["vx_range"]
+        v_lo, v_hi = 1.0 / hi, 1.0 / lo
+        return {"v_lo": v_lo, "scale": 1.0 / (v_hi - v_lo) if v_hi > v_lo else 0.0,
+                "intervals": [{"center": 0.5 * (v_lo + v_hi), "coef": None}]}
+    if first_power != 0:
+        raise ValueError(f"design structure.first_power must be 0 or -1, got {first_power}")
     if mode["fixed_v"] is not None:
         v = mode["fixed_v"]
         M, G = series.shift(Mc, v)[0], series.shift(Gc, v)[0]
@@ -154,7 +168,10 @@ def compute(data: dict) -> dict:
         speeds = [_model_speed(i, m["model_speed"]) for i, m in enumerate(modes)]
         grid = _grid(switching, speeds)
         validity = _validity(data.get("validity"), data["switching"])
-        Mc, Gc = map(list, zip(*(coefficients(m, T, N, C) for m in modes)))
+        first_power = st.get("first_power", 0)
+        if isinstance(first_power, bool) or first_power not in (0, -1):
+            raise ValueError(f"design structure.first_power must be 0 or -1, got {first_power!r}")
+        Mc, Gc = map(list, zip(*(coefficients(m, T, N, C, first_power) for m in modes)))
     except (KeyError, TypeError) as exc:
         raise ValueError(f"design file lacks {exc} needed by the paper-000 observer runtime") from exc
     if input_hold not in INPUT_HOLDS:
@@ -174,7 +191,9 @@ def compute(data: dict) -> dict:
         Gc += [[P[:-1] + [[0.0] * len(P[-1])] for P in c] for c in Gc[: len(modes)]]
     foh = input_hold == "first_order"
     nrow = len(T) + 1
-    maps = [step_map(Mc[idx], Gc[idx], speeds[idx % len(modes)], nrow, max_step, STEP, foh) for idx in range(len(Mc))]
-    return {"step": STEP, "max_step": max_step, "vx_hold": vx_hold, "input_hold": input_hold, "N": N,
+    maps = [step_map(Mc[idx], Gc[idx], speeds[idx % len(modes)], nrow, max_step, STEP, foh, first_power)
+            for idx in range(len(Mc))]
+    extra = {"first_power": first_power} if first_power else {}      # (absent: 0, the files before it)
+    return {**extra, "step": STEP, "max_step": max_step, "vx_hold": vx_hold, "input_hold": input_hold, "N": N,
             "M": Mc, "G": Gc, "modes": speeds, "switching": switching, "grid": grid, "validity": validity,
             "maps": maps}

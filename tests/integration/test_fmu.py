@@ -96,7 +96,7 @@ def test_car_plant_fmu_equals_runtime(fmu_dir):
 
 def test_two_fmus_with_different_gains_in_one_process(tmp_path, design_speed):
     """Two FMUs named SideslipBankObserver with different gains, loaded together: each runs its own."""
-    other = designs.run("SideslipBankObserver", alpha=1.0, radius=60.0)
+    other = designs.run("SideslipBankObserver", alpha=1.0, radius=90.0)
     gains_a = np.asarray(design_speed["modes"][0]["gains"]["K_P"])
     gains_b = np.asarray(other["modes"][0]["gains"]["K_P"])
     assert np.max(np.abs(gains_a - gains_b)) > 1.0

@@ -42,7 +42,7 @@ def fmus(fmu_dir, tmp_path_factory, design_speed, built_fmus):
     version' (same class name, same gains, other runtime package and guid), and the native C
     builds of the three (same model identifiers and file names as the pythonfmu ones)."""
     other_dir = tmp_path_factory.mktemp("other_gains")
-    other = designs.run("SideslipBankObserver", alpha=1.0, radius=60.0)
+    other = designs.run("SideslipBankObserver", alpha=1.0, radius=90.0)
     other_fmu = packaging.package_design(design_file.write(other, other_dir), other_dir)
     old_dir = tmp_path_factory.mktemp("other_version")
     mp = pytest.MonkeyPatch()

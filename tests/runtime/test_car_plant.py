@@ -131,14 +131,14 @@ def test_linearisation_with_relaxation_reduces_to_design_model():
                                                        (35.0, 1.1, 0.9, 0.3)])
 def test_linearisation_with_relaxation_equals_the_relaxed_design_model(vx, scale_f, scale_r, sigma):
     """CarPlant's 8 states (four relaxed wheel forces) at straight driving, aggregated to the axles
-    (beta = vy / vx, Ff = Fy_fl + Fy_fr, Fr = Fy_rl + Fy_rr), are paper 000's model with relaxed axle
+    (beta = vy / vx, Ff = (Fy_fl + Fy_fr) / (m g), Fr = (Fy_rl + Fy_rr) / (m g)), are paper 000's model with relaxed axle
     forces (``relaxed_lpv_coefficients``): the aggregation is exact (the two wheels of an axle obey
     the same equation there), so Pi J = A Pi, Pi b = B for the Jacobians J, b of the plant."""
     J, *cols = linearise_relaxed(plant(sigma=sigma, scale_f=scale_f, scale_r=scale_r), vx)
     Pi = np.zeros((6, 8))
     Pi[0, 0] = 1.0 / vx
     Pi[1, 1] = Pi[2, 2] = Pi[3, 3] = 1.0
-    Pi[4, 4] = Pi[4, 5] = Pi[5, 6] = Pi[5, 7] = 1.0
+    Pi[4, 4] = Pi[4, 5] = Pi[5, 6] = Pi[5, 7] = 1.0 / (P["m"] * G)    # the model's forces per m g
     ref = evaluate(relaxed_lpv_coefficients(VEH.with_values(sigma=sigma), scale_f * P["Cf"], scale_r * P["Cr"]), vx)
     R = np.linalg.pinv(Pi)                       # x_plant = R x_model on the aggregated subspace
     assert_close(Pi @ J @ R, ref.A, rtol=1e-6)

@@ -5,7 +5,8 @@ Exactness is checked against the independent numpy RK4 reference of ``test_fast_
 (``ReferenceObserver``: model per mode at its fixed speed or at the measured speed clamped to the
 mode's range, the hold's input at the RK4 stage times, the validity rule); the hold error
 against an exact solution of the same linear ODE (scipy, rtol 1e-12). Every design dict here
-sets the issue-9 keys explicitly (``variant``), whatever the design side emits by default.
+sets the issue-9 keys explicitly (``variant``), whatever the design side emits by default; the
+speed-mode design is the default's on eq. (1) (``design_speed_eq1``: fixed model speeds need it).
 """
 from __future__ import annotations
 
@@ -45,10 +46,10 @@ def _speeds_at_and_around_edges(edges):
 
 
 @pytest.mark.parametrize("ranges", ["bands", "narrower"])
-def test_lpv_speed_modes_equal_rk4_at_the_clamped_measured_speed(design_speed, ranges):
+def test_lpv_speed_modes_equal_rk4_at_the_clamped_measured_speed(design_speed_eq1, ranges):
     """Speed bands select the mode; its model is at the measured speed clamped to ITS OWN range
     (the band, or here also narrower ranges that are not the band), at 5 and 2 ms."""
-    d = variant(legacy(design_speed), speeds="measured")
+    d = variant(legacy(design_speed_eq1), speeds="measured")
     edges = d["switching"]["edges"]
     if ranges == "narrower":
         for m, (a, b) in zip(d["modes"], zip(edges, edges[1:])):
@@ -67,36 +68,36 @@ def test_lpv_speed_modes_equal_rk4_at_the_clamped_measured_speed(design_speed, r
     assert observer(d).model_v(1, edges[1] - 1.0) == 1.0 / d["modes"][1]["model_speed"]["range"][0]
 
 
-def test_lpv_speed_modes_on_continuous_sweeps(design_speed):
-    worst, modes, speeds = compare(variant(legacy(design_speed), speeds="measured"), speed_run()[:3600])
+def test_lpv_speed_modes_on_continuous_sweeps(design_speed_eq1):
+    worst, modes, speeds = compare(variant(legacy(design_speed_eq1), speeds="measured"), speed_run()[:3600])
     assert modes == {1, 2, 3} and worst <= 1e-12
 
 
-def test_fixed_and_measured_modes_mix(design_speed):
+def test_fixed_and_measured_modes_mix(design_speed_eq1):
     """A speed design may keep eq. (25) literally for some modes and the measured speed for others."""
-    d = variant(legacy(design_speed), speeds="measured")
+    d = variant(legacy(design_speed_eq1), speeds="measured")
     d["modes"][1]["model_speed"] = {"kind": "fixed", "value": d["modes"][1]["scheduling"]["value"]}
     worst, modes, _ = compare(d, speed_run()[:1600])
     assert modes == {1, 2, 3} and worst <= 1e-12
 
 
-def test_bad_model_speed_and_keys_are_refused(design_speed):
-    d = variant(legacy(design_speed), speeds="measured")
+def test_bad_model_speed_and_keys_are_refused(design_speed_eq1):
+    d = variant(legacy(design_speed_eq1), speeds="measured")
     d["modes"][0]["model_speed"]["range"] = [13.0, 6.0]
     with pytest.raises(ValueError, match="range"):
         observer(d)
-    d = variant(legacy(design_speed), speeds="measured")
+    d = variant(legacy(design_speed_eq1), speeds="measured")
     d["modes"][0]["model_speed"] = {"kind": "scheduled"}
     with pytest.raises(ValueError, match="fixed' or 'measured"):
         observer(d)
     with pytest.raises(ValueError, match="input_hold"):
-        observer(variant(design_speed, hold="second_order"))
+        observer(variant(design_speed_eq1, hold="second_order"))
     with pytest.raises(ValueError, match="release"):
-        observer(variant(design_speed, validity=dict(VALIDITY, release=1.0)))
+        observer(variant(design_speed_eq1, validity=dict(VALIDITY, release=1.0)))
 
 
 # -- 2. first-order hold --------------------------------------------------------------------------
-def test_first_order_hold_equals_rk4_with_the_ramp_at_the_stage_times(design_speed, design_tire):
+def test_first_order_hold_equals_rk4_with_the_ramp_at_the_stage_times(design_speed_eq1, design_tire):
     """Fixed-speed maps, LPV tables and tire tables with the first-order hold: the tables at the
     default step, the maps built for other steps and the RK4 substeps; h changes (5, 2, 10 ms and
     random sizes), and the vx dip below vx_hold restarts the slope."""
@@ -106,18 +107,18 @@ def test_first_order_hold_equals_rk4_with_the_ramp_at_the_stage_times(design_spe
     for k, h in enumerate(sizes):
         random_h.append((h, dict(measurements(t, 0.02), vx=17.0 + 9.0 * math.sin(k / 40))))
         t += h
-    for d, run in ((variant(legacy(design_speed), hold="first_order"), speed_run()[:3100] + random_h),
-                   (variant(legacy(design_speed), hold="first_order", speeds="measured"), random_h),
+    for d, run in ((variant(legacy(design_speed_eq1), hold="first_order"), speed_run()[:3100] + random_h),
+                   (variant(legacy(design_speed_eq1), hold="first_order", speeds="measured"), random_h),
                    (variant(legacy(design_tire), hold="first_order"),
                     tire_run(*design_tire["modes"][0]["model_speed"]["range"])[:2600] + random_h)):
         assert lockstep(d, run) <= 1e-12
 
 
-def test_first_order_hold_slope_restarts(design_speed):
+def test_first_order_hold_slope_restarts(design_speed_eq1):
     """Slope 0 at the first step, after a frozen period and after initialize(): those steps equal
     the zero-order hold's from the same state; otherwise the slope is (w_k - w_{k-1}) / h_{k-1}."""
-    foh = observer(variant(legacy(design_speed), hold="first_order"))
-    zoh = observer(variant(legacy(design_speed), hold="zero_order"))
+    foh = observer(variant(legacy(design_speed_eq1), hold="first_order"))
+    zoh = observer(variant(legacy(design_speed_eq1), hold="zero_order"))
     u = [dict(measurements(0.005 * k, 0.02), vx=17.0) for k in range(40)]
     foh.step(0.005, u[0])
     zoh.step(0.005, u[0])
@@ -179,10 +180,10 @@ def _hold_errors(design: dict, h: float, t_end: float = 3.0, settle: float = 1.0
     return worst
 
 
-def test_first_order_hold_error_is_second_order(design_speed):
+def test_first_order_hold_error_is_second_order(design_speed_eq1):
     """Against the exact solution: the zero-order hold's error halves with h (O(h)), the
     first-order hold's quarters (O(h^2)) and is far smaller (see the runtime's docstring)."""
-    base = variant(legacy(design_speed), validity=None)
+    base = variant(legacy(design_speed_eq1), validity=None)
     zoh = [_hold_errors(variant(base, hold="zero_order"), h) for h in (0.005, 0.0025)]
     foh = [_hold_errors(variant(base, hold="first_order"), h) for h in (0.005, 0.0025)]
     assert 1.7 < zoh[0] / zoh[1] < 2.4, zoh
@@ -219,8 +220,8 @@ class ValidityRule:
 
 
 @pytest.mark.parametrize("hold", ["zero_order", "first_order"])
-def test_valid_switches_with_hysteresis_and_freezes_the_bank_estimate(design_speed, hold):
-    d = variant(legacy(design_speed), hold=hold, validity=VALIDITY)
+def test_valid_switches_with_hysteresis_and_freezes_the_bank_estimate(design_speed_eq1, hold):
+    d = variant(legacy(design_speed_eq1), hold=hold, validity=VALIDITY)
     rt, rule = observer(d), ValidityRule(d)
     a_max, ay_max, rel = VALIDITY["alpha_max"], VALIDITY["ay_max"], VALIDITY["release"]
     vx = 17.0
@@ -271,10 +272,10 @@ def test_valid_switches_with_hysteresis_and_freezes_the_bank_estimate(design_spe
     assert len(msgs) == 2 and all("bank estimate held" in m for m in msgs)
 
 
-def test_frozen_maps_equal_rk4_with_validity_chattering(design_speed, design_tire):
+def test_frozen_maps_equal_rk4_with_validity_chattering(design_speed_eq1, design_tire):
     """Against the reference (w^' = 0 while invalid), through the frozen maps of every kind."""
-    for d in (variant(legacy(design_speed), hold="first_order", speeds="measured", validity=VALIDITY),
-              variant(legacy(design_speed), hold="zero_order", validity=VALIDITY),
+    for d in (variant(legacy(design_speed_eq1), hold="first_order", speeds="measured", validity=VALIDITY),
+              variant(legacy(design_speed_eq1), hold="zero_order", validity=VALIDITY),
               variant(legacy(design_tire), hold="first_order", validity=VALIDITY)):
         run, t = [], 0.0
         for k in range(1500):
@@ -292,8 +293,8 @@ def test_frozen_maps_equal_rk4_with_validity_chattering(design_speed, design_tir
         assert max(used) >= len(d["modes"])                                       # frozen maps in use
 
 
-def test_invalid_messages_are_rate_limited(design_speed):
-    d = variant(legacy(design_speed), validity=VALIDITY)
+def test_invalid_messages_are_rate_limited(design_speed_eq1):
+    d = variant(legacy(design_speed_eq1), validity=VALIDITY)
     rt = observer(d)
     vx, ay_max = 17.0, VALIDITY["ay_max"]
     for k in range(600):                                   # 3 s, ay above / far below every 2 steps
@@ -305,8 +306,8 @@ def test_invalid_messages_are_rate_limited(design_speed):
     assert "(entry 1)" in msgs[0] and "more entries since the last message not logged" in msgs[1]
 
 
-def test_valid_is_held_below_vx_hold_and_always_1_without_validity(design_speed):
-    d = variant(legacy(design_speed), validity=VALIDITY)
+def test_valid_is_held_below_vx_hold_and_always_1_without_validity(design_speed_eq1):
+    d = variant(legacy(design_speed_eq1), validity=VALIDITY)
     rt = observer(d)
     u = dict(measurements(0.0, 0.0), delta=0.0, yaw_rate=0.4, vx=17.0)      # ay = 6.8 m/s^2
     rt.step(0.005, u)
@@ -323,8 +324,8 @@ def test_valid_is_held_below_vx_hold_and_always_1_without_validity(design_speed)
     assert not rt.events
 
 
-def test_no_freeze_keeps_integrating(design_speed):
-    d = variant(legacy(design_speed), validity=dict(VALIDITY, freeze_integral=False))
+def test_no_freeze_keeps_integrating(design_speed_eq1):
+    d = variant(legacy(design_speed_eq1), validity=dict(VALIDITY, freeze_integral=False))
     rt = observer(d)
     bank = []
     for k in range(50):
@@ -336,7 +337,7 @@ def test_no_freeze_keeps_integrating(design_speed):
 
 # -- 4. the FMU -------------------------------------------------------------------------------------
 @pytest.mark.slow
-def test_fmu_exposes_valid(tmp_path, design_speed):
+def test_fmu_exposes_valid(tmp_path, design_speed_eq1):
     """An FMU built from a design dict with the issue-9 keys has the Integer output ``valid`` and
     equals its runtime; a refused (NaN) step changes nothing, the first-order hold included."""
     from fmpy import read_model_description
@@ -345,7 +346,7 @@ def test_fmu_exposes_valid(tmp_path, design_speed):
     from latobs.synthesis import design_file
     from latobs.validation.harness import FmuInstance
 
-    d = with_tables(variant(design_speed, hold="first_order", speeds="measured", validity=VALIDITY))
+    d = with_tables(variant(design_speed_eq1, hold="first_order", speeds="measured", validity=VALIDITY))
     path = packaging.package_design(design_file.write(d, tmp_path), tmp_path)
     md = read_model_description(str(path))
     var = {v.name: v for v in md.modelVariables}

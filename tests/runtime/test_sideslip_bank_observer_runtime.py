@@ -21,18 +21,26 @@ def _inputs(t):
     return delta, vx
 
 
-def _true_states(vehicle, T_end):
+def _plant(vehicle, relaxed: bool):
+    """The design model (eq. 1, or with relaxed axle forces) of the vehicle as a function of vx."""
+    coeffs = brm.relaxed_lpv_coefficients(vehicle) if relaxed else brm.lpv_coefficients(vehicle)
+    return lambda vx: brm.evaluate(coeffs, vx)
+
+
+def _true_states(vehicle, T_end, relaxed: bool = False):
     """Truth for the test: the design model itself at the current speed, bank ramp (rad)."""
+    model = _plant(vehicle, relaxed)
+
     def bank(t):
         return 0.06 * min(max(t - 1.0, 0.0) / 3.0, 1.0)
 
     def f(t, x):
         delta, vx = _inputs(t)
-        M = brm.model(vehicle, vx)
+        M = model(vx)
         return M.A @ x + M.B[:, 0] * delta + M.F[:, 0] * bank(t)
 
     ts = np.arange(0.0, T_end + 1e-12, H)
-    sol = solve_ivp(f, (0, T_end), np.zeros(4), t_eval=ts, rtol=1e-10, atol=1e-12, max_step=H)
+    sol = solve_ivp(f, (0, T_end), np.zeros(6 if relaxed else 4), t_eval=ts, rtol=1e-10, atol=1e-12, max_step=H)
     return ts, sol.y.T, np.array([bank(t) for t in ts])
 
 
@@ -43,12 +51,13 @@ def _reference_observer(design, ts, X):
     speed or at the measured speed clamped to its range. Inputs [y; u] held over the step, or
     (runtime.input_hold = first_order) w(t + tau) = w_k + tau (w_k - w_{k-1}) / h (slope 0 first)."""
     T, N, C = (np.asarray(design["structure"][k]) for k in ("T", "N", "C"))
+    n, p0 = T.shape[0], design["structure"].get("first_power", 0)
     edges = design["switching"]["edges"]
     foh = design["runtime"].get("input_hold") == "first_order"
     w = 0.0
     out_beta, out_w, modes = [], [], []
     y0 = C @ X[0]
-    z = np.concatenate([[0.0], y0]) - N @ y0
+    z = np.concatenate([[0.0], y0, np.zeros(n - 4)]) - N @ y0
     prev = None
     for k in range(len(ts) - 1):
         delta, vx = _inputs(ts[k])
@@ -61,7 +70,8 @@ def _reference_observer(design, ts, X):
         mode = design["modes"][i]
         ms = mode["model_speed"]
         speed = ms["value"] if ms["kind"] == "fixed" else min(max(vx, ms["range"][0]), ms["range"][1])
-        M = brm.evaluate({kk: [np.asarray(m) for m in v] for kk, v in mode["model"].items()}, speed)
+        M = brm.evaluate({**{kk: [np.asarray(m) for m in v] for kk, v in mode["model"].items()}, "first_power": p0},
+                         speed)
         K, KI = np.asarray(mode["gains"]["K_P"]), np.asarray(mode["gains"]["K_I"])
         Pi = T @ M.A - K @ C
         Kp = K + Pi @ N
@@ -69,14 +79,14 @@ def _reference_observer(design, ts, X):
         def rhs(t, s):
             ww = wk + t * slope
             yy, dd = ww[:3], ww[3]
-            zz, wb = s[:4], s[4]
+            zz, wb = s[:n], s[n]
             xh = zz + N @ yy
             dz = Pi @ zz + Kp @ yy + (T @ M.F)[:, 0] * wb + (T @ M.B)[:, 0] * dd
             dw = KI @ (yy - C @ xh)
             return np.concatenate([dz, dw])
 
         sol = solve_ivp(rhs, (0, H), np.concatenate([z, [w]]), method="DOP853", rtol=1e-12, atol=1e-14)
-        z, w = sol.y[:4, -1], sol.y[4, -1]
+        z, w = sol.y[:n, -1], sol.y[n, -1]
         out_beta.append((z + N @ (y + H * slope[:3]))[0])
         out_w.append(w)
         modes.append(i + 1)
@@ -97,13 +107,16 @@ def _run_runtime(design, ts, X):
     return np.array(beta), np.array(w), np.array(modes)
 
 
-@pytest.mark.parametrize("speeds, hold", [("fixed", None), ("measured", "first_order")])
-def test_runtime_matches_solve_ivp_of_paper_form(design_speed, speeds, hold):
+@pytest.mark.parametrize("which, speeds, hold", [("design_speed_eq1", "fixed", None),
+                                                 ("design_speed_eq1", "measured", "first_order"),
+                                                 ("design_speed", "measured", "first_order")])
+def test_runtime_matches_solve_ivp_of_paper_form(which, speeds, hold, request):
     """The paper's form (grid-speed models, inputs held) and the issue-9 one (each mode's model at
-    the measured speed clamped to its band, first-order hold); validity is tested elsewhere."""
-    design = variant(design_speed, speeds=speeds, hold=hold, validity=None)
+    the measured speed clamped to its band, first-order hold), on eq. (1) and on the default's model
+    with relaxed axle forces (its own model as the truth); validity is tested elsewhere."""
+    design = variant(request.getfixturevalue(which), speeds=speeds, hold=hold, validity=None)
     vehicle = load_vehicle("sedan")
-    ts, X, _ = _true_states(vehicle, 8.0)
+    ts, X, _ = _true_states(vehicle, 8.0, relaxed=design["structure"].get("first_power") == -1)
     b_ref, w_ref, m_ref = _reference_observer(design, ts, X)
     b_rt, w_rt, m_rt = _run_runtime(design, ts, X)
     assert set(m_ref) == {1, 2, 3}                 # the trajectory crosses every speed mode
@@ -114,15 +127,18 @@ def test_runtime_matches_solve_ivp_of_paper_form(design_speed, speeds, hold):
     assert np.max(np.abs(w_rt - w_ref)) < 1e-8
 
 
-def test_observer_converges_on_its_own_model(design_speed):
-    """S1 of the paper: with the plant equal to the mode's model (fixed speed), beta^ -> beta and
-    w^ -> phi_r for a constant bank."""
+@pytest.mark.parametrize("which", ["design_speed", "design_speed_eq1"])
+def test_observer_converges_on_its_own_model(which, request):
+    """S1 of the paper: with the plant equal to the mode's model (at its grid speed), beta^ -> beta
+    and w^ -> phi_r for a constant bank."""
+    design = request.getfixturevalue(which)
     vehicle = load_vehicle("sedan")
-    mode = design_speed["modes"][1]
+    mode = design["modes"][1]
     vx = mode["scheduling"]["value"]                 # the mode's grid speed
-    M = brm.model(vehicle, vx)
-    obs = observer(design_speed)
-    x = np.zeros(4)
+    relaxed = design["structure"].get("first_power") == -1
+    M = _plant(vehicle, relaxed)(vx)
+    obs = observer(design)
+    x = np.zeros(M.A.shape[0])
     bank = 0.05
     for k in range(int(20.0 / H)):
         t = k * H

@@ -96,15 +96,17 @@ class ReferenceObserver:
         self.vx_hold = float(design["runtime"]["vx_hold"])
         self.foh = design["runtime"].get("input_hold", "zero_order") == "first_order"
         self.validity = design.get("validity")
-        self.z, self.w, self.mode, self.started = np.zeros(4), 0.0, 0, False
+        self.n = self.T.shape[0]          # 4, or 6 with the relaxed axle forces
+        self.p0 = int(st.get("first_power", 0))     # the coefficient lists start at vx**-p0
+        self.z, self.w, self.mode, self.started = np.zeros(self.n), 0.0, 0, False
         self.prev = None               # first-order hold: (w_{k-1}, h_{k-1})
         self.valid = 1
         self.y = {}
 
     def model(self, i: int, vx: float):
-        """A, B, F of mode i at speed vx from the stored coefficient lists (sum_k M_k vx**-k)."""
+        """A, B, F of mode i at speed vx from the stored coefficient lists (sum_k M_k vx**-(k + p0))."""
         coeffs = self.design["modes"][i]["model"]
-        return tuple(sum(np.asarray(Mk, dtype=float) * vx**-k for k, Mk in enumerate(coeffs[key]))
+        return tuple(sum(np.asarray(Mk, dtype=float) * vx ** -(k + self.p0) for k, Mk in enumerate(coeffs[key]))
                      for key in ("A", "B", "F"))
 
     def model_speed(self, i: int, vx: float) -> float:
@@ -143,7 +145,7 @@ class ReferenceObserver:
         vx, delta = u["vx"], u["delta"]
         y = np.array([u["yaw_rate"], u["roll_angle"], u["roll_rate"]])
         if not self.started:           # initialize: x^ = [0, y], mode of the initial speed
-            self.z = np.concatenate([[0.0], y]) - self.N @ y
+            self.z = np.concatenate([[0.0], y, np.zeros(self.n - 4)]) - self.N @ y
             self.started = True
             if self.sw["kind"] == "speed_bands" and vx >= self.vx_hold:
                 self.mode = self.band(vx)
@@ -261,11 +263,13 @@ def compare(design: dict, run) -> tuple[float, set, list]:
     return worst, modes, speeds
 
 
-@pytest.mark.parametrize("form", ["legacy", "as designed"])
-def test_speed_modes_equal_rk4_substeps(design_speed, form):
-    """legacy: grid-speed models, inputs held, no validity; as designed: whatever the design emits
-    (issue 9: models at the measured speed per band, first-order hold, validity with freeze)."""
-    design = legacy(design_speed) if form == "legacy" else design_speed
+@pytest.mark.parametrize("form", ["legacy", "eq. 1 as designed", "as designed"])
+def test_speed_modes_equal_rk4_substeps(design_speed, design_speed_eq1, form):
+    """legacy: grid-speed models (eq. 1), inputs held, no validity; as designed: whatever the design
+    emits (issue 9: models at the measured speed per band, first-order hold, validity with freeze;
+    the default's model with relaxed axle forces, or eq. 1)."""
+    design = {"legacy": legacy(design_speed_eq1), "eq. 1 as designed": design_speed_eq1,
+              "as designed": design_speed}[form]
     worst, modes, speeds = compare(design, speed_run())
     assert modes == {1, 2, 3}
     edges = design_speed["switching"]["edges"]
@@ -289,13 +293,13 @@ def test_tire_modes_equal_rk4_substeps(design_tire, form):
     assert all(c is not None and len(c) <= tables_000.TAYLOR_DEGREE + 2 for c in coefs)
 
 
-def test_each_step_map_is_built_once(design_speed, monkeypatch):
+def test_each_step_map_is_built_once(design_speed_eq1, monkeypatch):
     """Fixed model speeds: the default step evaluates the tables (nothing built); another step
     builds each mode's composite map once, in the instance, one step size at a time."""
     calls = []
     real = SwitchedPIObserver.fixed_map
     monkeypatch.setattr(SwitchedPIObserver, "fixed_map", lambda self, *a: calls.append(a) or real(self, *a))
-    rt = observer(legacy(design_speed))                                 # grid-speed models: one map per mode
+    rt = observer(legacy(design_speed_eq1))                             # grid-speed models: one map per mode
     for k in range(3000):
         rt.step(0.005, dict(measurements(k * 0.005, 0.02), vx=18.0 + 13.0 * math.cos(k / 300)))
     assert calls == []
@@ -306,11 +310,13 @@ def test_each_step_map_is_built_once(design_speed, monkeypatch):
     assert [a[1] for a in calls] == [0.002] * 3 + [0.003] * 3 + [0.002] * 3
 
 
-def test_many_step_sizes_equal_rk4_substeps(design_speed, design_tire):
+def test_many_step_sizes_equal_rk4_substeps(design_speed, design_speed_eq1, design_tire):
     """Random step sizes, each used twice: composite maps (fixed speeds) and RK4 substeps (measured
-    speeds) against the reference; the instance keeps the maps of one step size."""
+    speeds; the default's relaxed model at every step) against the reference; the instance keeps the
+    maps of one step size."""
     rng = np.random.default_rng(0)
-    for design, n, lo, hi in ((legacy(design_speed), 400, 3.0, 32.0), (design_tire, 72, 8.0, 27.0)):
+    for design, n, lo, hi in ((legacy(design_speed_eq1), 400, 3.0, 32.0), (design_tire, 72, 8.0, 27.0),
+                              (design_speed, 72, 3.0, 32.0)):
         rt, ref = observer(design), ReferenceObserver(design)
         worst = 0.0
         for i in range(n):

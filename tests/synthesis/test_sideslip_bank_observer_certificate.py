@@ -182,21 +182,23 @@ def test_faithful_tire_range_must_start_and_end_at_a_grid_speed(faithful_tire):
 
 # -- the certificate's closed loop against an independent plant ---------------------------------------
 def _independent_closed_loop(d, mode, vx):
-    """A_cl, F_a, E_a from tests/linear_plant_000.py (sympy, first principles), [T N] = pinv([I; C]),
-    E from the formulas of bicycle_roll_model.model_error_coefficients' docstring, typed here."""
+    """A_cl, F_a, E_a from tests/linear_plant_000.py (sympy, first principles; its car with relaxed axle
+    forces for a design whose model has them), [T N] = pinv([I; C]), E from the formulas of
+    bicycle_roll_model.model_error_coefficients' docstring, typed here (0 on the relaxed forces' rows)."""
     veh = parse_vehicle(d["vehicle"], "test")
     p = {k: veh.value(k) for k in lp.PARAMETERS}
     kf, kr = mode["stiffness_scale"]
     p["Cf"], p["Cr"] = kf * p["Cf"], kr * p["Cr"]
-    A, B, F = lp.model(p, vx)
-    C = np.eye(4)[1:]
-    TN = np.linalg.pinv(np.vstack([np.eye(4), C]))
-    T = TN[:, :4]
+    n = len(d["structure"]["states"])
+    A, B, F = lp.relaxed_model({**p, "sigma": veh.value("sigma")}, vx) if n == 6 else lp.model(p, vx)
+    C = np.eye(n)[1:4]
+    TN = np.linalg.pinv(np.vstack([np.eye(n), C]))
+    T = TN[:, :n]
     K_P, K_I = np.asarray(mode["gains"]["K_P"]), np.asarray(mode["gains"]["K_I"])
     m, Ix, Iz, hr, lf, lr = (p[k] for k in ("m", "Ix", "Iz", "hr", "lf", "lr"))
     g = lp.G
     Ieq = Ix + m * hr**2
-    E = np.zeros((4, 3))             # columns: lateral force / (m g), yaw moment / (m g L), roll moment / (m g hr)
+    E = np.zeros((n, 3))             # columns: lateral force / (m g), yaw moment / (m g L), roll moment / (m g hr)
     E[0, 0], E[3, 0] = Ieq / (Ix * m * vx) * m * g, hr / Ix * m * g
     E[1, 1] = m * g * (lf + lr) / Iz
     E[0, 2], E[3, 2] = hr / (Ix * vx) * m * g * hr, m * g * hr / Ix
@@ -214,24 +216,31 @@ def test_closed_loop_equals_an_independent_construction(which, request):
             cl = certificate.closed_loop_000(d, mode, 1.0 / vx)
             for mine, theirs in zip((cl["Acl"], cl["Fa"], cl["Ea"]), _independent_closed_loop(d, mode, vx)):
                 worst = max(worst, float(np.max(np.abs(mine - theirs)) / np.max(np.abs(theirs))))
-            assert np.array_equal(cl["Afr"][:4], cl["Acl"][:4]) and not np.any(cl["Afr"][4])
+            n = len(d["structure"]["states"])
+            assert np.array_equal(cl["Afr"][:n], cl["Acl"][:n]) and not np.any(cl["Afr"][n])
     assert worst <= 1e-12
 
 
 def test_vertex_models_are_the_affine_extension(design_speed):
-    """At a tangent corner (off the curve w = v^2) the model is A0 + v A1 + w A2: the coefficients
-    recovered from the independent plant at three speeds give the same closed loop."""
+    """At a tangent corner (off the curve w = v^2, or u = 1/v with the relaxed forces) the model is
+    A0 + v A1 + w A2 (or u A_-1 + A0 + v A1): the coefficients recovered from the independent plant at
+    three speeds give the same closed loop."""
     d = design_speed
     mode = d["modes"][1]
+    relaxed = d["structure"].get("first_power") == -1
+    na = len(d["structure"]["states"]) + 1
     speeds = np.array([12.0, 17.5, 24.0])
     mats = [_independent_closed_loop(d, mode, vx)[0] for vx in speeds]
     V = np.vander(1.0 / speeds, 3, increasing=True)               # rows [1, v, v^2]
+    if relaxed:
+        V = np.column_stack([speeds, np.ones(3), 1.0 / speeds])   # rows [u, 1, v]
     coef = np.linalg.solve(V, np.stack([M.ravel() for M in mats]))
     for x in d["lmi_vertices"]:
         if x["mode"] != 2:
             continue
-        theirs = (coef[0] + x["v"] * coef[1] + x["w"] * coef[2]).reshape(5, 5)
-        mine = certificate.closed_loop_000(d, mode, x["v"], x["w"])["Acl"]
+        basis = (x["u"], 1.0, x["v"]) if relaxed else (1.0, x["v"], x["w"])
+        theirs = sum(b * c for b, c in zip(basis, coef)).reshape(na, na)
+        mine = certificate.closed_loop_000(d, mode, x["v"], x["w"], x.get("u"))["Acl"]
         assert np.max(np.abs(mine - theirs)) <= 1e-9 * np.max(np.abs(theirs))
 
 
@@ -259,7 +268,7 @@ def test_frozen_integral_growth_is_bounded_by_mu(which, request):
             # random errors, and the direction that the certificate's mu is attained from at t*
             M = Ph @ scipy.linalg.expm(cl["Afr"] * max(fr["t_peak_s"], dt)) @ Phi
             worst_dir = Phi @ np.linalg.svd(M)[2][0]
-            E0 = np.column_stack([rng.standard_normal((5, 30)), worst_dir])
+            E0 = np.column_stack([rng.standard_normal((len(P), 30)), worst_dir])
             V0 = np.einsum("ij,ik,kj->j", E0, P, E0)
             E, ratio = E0.copy(), np.ones(E0.shape[1])
             for k in range(steps):
@@ -299,5 +308,5 @@ def test_a_certificate_is_made_again_only_for_other_content(design_speed, monkey
     ok_bad, _ = certificate.certify(bad)
     assert not ok_bad and len(evaluated) == 2
     tab = copy.deepcopy(d)
-    tab["tables"]["maps"][0]["intervals"][0]["coef"][0][0][0] += 1e-6
+    tab["tables"]["M"][0][0][0][1] += 1e-6       # (the model's coefficients: every design has them)
     assert not certificate.certify(tab)[0] and len(evaluated) == 3

@@ -46,7 +46,8 @@ def test_detectability_assumption_a2(design_speed):
 def test_lmi_solution_checked_independently(which, request):
     """The LMIs of the returned (P, gains) hold when re-evaluated with numpy, and gamma bounds the
     H-infinity norm computed by Hamiltonian bisection (no P) at every LMI vertex of the file
-    (d["lmi_vertices"]: (v, w) = (1/Vx, 1/Vx^2) or a tangent corner off that curve)."""
+    (d["lmi_vertices"]: (v, w) = (1/Vx, 1/Vx^2), or (u, v) = (Vx, 1/Vx) for the model with relaxed
+    axle forces, or a tangent corner off that curve)."""
     d = request.getfixturevalue(which)
     assert d["certified"]
     P = np.asarray(d["P"])
@@ -57,8 +58,12 @@ def test_lmi_solution_checked_independently(which, request):
     for vertex in d["lmi_vertices"]:
         mode = modes[vertex["mode"]]
         c = {k: [np.asarray(M) for M in mats] for k, mats in mode["model"].items()}
-        A = c["A"][0] + vertex["v"] * c["A"][1] + vertex["w"] * c["A"][2]
-        F = c["F"][0] + vertex["v"] * c["F"][1]
+        if d["structure"].get("first_power") == -1:      # relaxed axle forces: A = u A_-1 + A_0 + v A_1
+            A = vertex["u"] * c["A"][0] + c["A"][1] + vertex["v"] * c["A"][2]
+            F = c["F"][1] + vertex["v"] * c["F"][2]
+        else:
+            A = c["A"][0] + vertex["v"] * c["A"][1] + vertex["w"] * c["A"][2]
+            F = c["F"][0] + vertex["v"] * c["F"][1]
         Aa, Ca, Fa, La = sideslip_bank_observer.augmented(A, F, C, T)
         Acl = Aa - np.vstack([mode["gains"]["K_P"], mode["gains"]["K_I"]]) @ Ca
         lmi20 = np.block([[Acl.T @ P + P @ Acl, P @ Fa, La.T],

@@ -74,6 +74,24 @@ def test_derivation_equals_design_model(vehicle):
     assert not diffs, f"{vehicle}: the design model differs from the derivation:\n" + "\n".join(diffs)
 
 
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_relaxed_derivation_equals_the_relaxed_design_model(vehicle):
+    """The derivation with the axle forces as relaxed states (``lp.relaxed_model``: the same balances,
+    sigma / vx F' + F = C alpha) equals ``brm.relaxed_lpv_coefficients`` at the same speeds, entry by
+    entry to 1e-11 relative of each matrix's largest entry (the relaxation rows are ~1e4 x the others)."""
+    v = load_vehicle(vehicle)
+    p = {**_params(vehicle), "sigma": 0.5}
+    veh = v.with_values(sigma=0.5)
+    for vx in SPEEDS:
+        A, B, F = lp.relaxed_model(p, vx)
+        M = brm.evaluate(brm.relaxed_lpv_coefficients(veh), vx)
+        for mine, theirs in ((A, M.A), (B, M.B), (F, M.F)):
+            assert mine.shape == theirs.shape
+            assert np.max(np.abs(mine - theirs)) <= 1e-11 * np.max(np.abs(mine)), (vx, mine, theirs)
+            assert np.array_equal(mine == 0, theirs == 0)       # the zeros exactly where the derivation's
+        assert np.array_equal(M.C, np.eye(6)[1:4]), "measurements y = [r, phi, phi']"
+
+
 def test_hand_entries_of_the_derivation():
     """A few entries written out by hand from (N), (Y), (R) (the three ERRATA corrections among them)."""
     p = _params("sedan")

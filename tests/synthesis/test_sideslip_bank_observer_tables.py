@@ -21,12 +21,16 @@ def _failed(data: dict) -> list[str]:
     return [c.name for c in checks_000.checks(data) if not c.passed]
 
 
-def test_tables_are_plain_data_for_the_default_step(design_speed, design_tire):
-    for design in (design_speed, design_tire):
+def test_tables_are_plain_data_for_the_default_step(design_speed, design_speed_eq1, design_tire):
+    for design in (design_speed, design_speed_eq1, design_tire):
         tab = design["tables"]
         assert json.loads(json.dumps(tab)) == tab                 # JSON round trip, bit for bit
         assert tab["step"] == DEFAULT_STEP                        # the model description's step
-        assert tab["maps"] and all(iv["coef"] is not None for m in tab["maps"] for iv in m["intervals"])
+        coefs = [iv["coef"] for m in tab["maps"] for iv in m["intervals"]]
+        if design is design_speed:    # relaxed axle forces: a term in vx, the RK4 substeps at every step
+            assert tab["first_power"] == -1 and coefs == [None] * len(tab["maps"])
+        else:
+            assert "first_power" not in tab and coefs and all(c is not None for c in coefs)
 
 
 def test_the_stored_maps_are_the_rk4_substeps(design_speed, design_tire, built_fmus):
@@ -47,8 +51,9 @@ def _coef_norm(iv) -> float:
 
 @pytest.mark.parametrize("corrupt", ["taylor coefficient", "fixed map", "model", "interval layout", "missing",
                                      "stale"])
-def test_a_corrupted_table_fails_the_certificate(design_speed, built_fmus, corrupt):
-    d = copy.deepcopy(design_speed if corrupt != "fixed map" else built_fmus.design("SideslipBankObserverPaper"))
+def test_a_corrupted_table_fails_the_certificate(design_speed, design_speed_eq1, built_fmus, corrupt):
+    d = copy.deepcopy({"fixed map": built_fmus.design("SideslipBankObserverPaper"), "taylor coefficient": design_speed_eq1,
+                       "model": design_speed_eq1}.get(corrupt, design_speed))
     tab = d["tables"]
     assert not _failed(d)
     if corrupt in ("taylor coefficient", "fixed map"):
@@ -82,6 +87,20 @@ def test_design_errors_name_the_culprit(design_speed):
     d["runtime"]["max_step"] = 0.05
     with pytest.raises(ValueError, match="max_step"):
         tables_000.compute(d)
+
+
+def test_a_term_in_vx_needs_measured_speeds_and_a_known_first_power(design_speed):
+    """The model with relaxed axle forces (structure.first_power -1): its tables run the RK4 substeps,
+    which needs every mode's model at the measured speed; a first power other than 0 or -1 is named."""
+    d = copy.deepcopy(design_speed)
+    d["modes"][1]["model_speed"] = {"kind": "fixed", "value": d["modes"][1]["scheduling"]["value"]}
+    with pytest.raises(ValueError, match="term in vx needs modes with a measured model speed"):
+        tables_000.compute(d)
+    for bad in (1, -2, True, "x"):
+        d = copy.deepcopy(design_speed)
+        d["structure"]["first_power"] = bad
+        with pytest.raises(ValueError, match="structure.first_power"):
+            tables_000.compute(d)
 
 
 def test_runtime_refuses_a_design_without_tables(design_speed):
