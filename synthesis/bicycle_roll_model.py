@@ -111,8 +111,8 @@ def relaxed_lpv_coefficients(vehicle: Vehicle, Cf: float | None = None, Cr: floa
     Built from ``lpv_coefficients``, which is linear in Cf and Cr: delta reaches eq. (1) only through
     the front force, so B = Cf g_f with g_f the model's response to 1 N of front force; the rear
     force's response g_r is minus the beta column of dA/dCr (alpha_r = -beta + ...), here
-    (A(2 Cr) - A(Cr)) / Cr. The forces
-    taken out of A (A - Cf g_f alpha_f - Cr g_r alpha_r) return as the states' columns g_f, g_r.
+    (A(2 Cr) - A(Cr)) / Cr. The forces taken out of A (A - Cf g_f alpha_f - Cr g_r alpha_r) return
+    as the states' columns g_f, g_r; what cancels exactly there (beta's column) is set to 0.
 
     Returns {"first_power": -1, "A": [...], "B": [...], "F": [...]}: M(Vx) = sum_k M[k] Vx**-(k - 1)
     (a term in Vx: the relaxation rate Vx / sigma). ``evaluate`` takes it.

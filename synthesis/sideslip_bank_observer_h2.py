@@ -242,10 +242,10 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
            f"alpha-stability (Re < -{opts.alpha:g})": [], f"disk (|lambda| < {opts.radius:g})": []}
     k_lyap, k_bound, k_alpha, k_disk = list(fam)
     zx = np.zeros((n, n + 1))
+    Pbigs = [cp.bmat([[P1, zx], [zx.T, P2]]) for P1 in P1s]
     for i, label, pt in vertices:
         nominal = modes[i].coeffs
-        P1 = P1s[i if relaxed else 0]
-        Pbig = cp.bmat([[P1, zx], [zx.T, P2]])
+        P1, Pbig = P1s[i if relaxed else 0], Pbigs[i if relaxed else 0]
         for c in corners:
             At, Bx, Aa, Ca, dX, Be0, Ben = robust_system(nominal, cars[(i, c)], pt, T, N, C, opts.h2_input_weights)
             PA = cp.bmat([[P1 @ (Sxi @ At @ Sx / tau), zx],
@@ -305,8 +305,8 @@ def _sym(M: np.ndarray) -> np.ndarray:
 
 
 def car_block(P_car, i: int) -> np.ndarray:
-    """Mode i's P1: the common one, or the mode's of a per-mode list (relaxed forces)."""
-    P = np.asarray(P_car[i] if isinstance(P_car, list) else P_car, dtype=float)
+    """Mode i's P1: the common one, or the mode's of one per mode (relaxed forces)."""
+    P = np.asarray(P_car, dtype=float)
     return P if P.ndim == 2 else P[i]
 
 

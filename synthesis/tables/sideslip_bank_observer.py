@@ -136,8 +136,6 @@ def step_map(Mc, Gc, mode: dict, nrow: int, max_step: float, h: float, foh: bool
         v_lo, v_hi = 1.0 / hi, 1.0 / lo
         return {"v_lo": v_lo, "scale": 1.0 / (v_hi - v_lo) if v_hi > v_lo else 0.0,
                 "intervals": [{"center": 0.5 * (v_lo + v_hi), "coef": None}]}
-    if first_power != 0:
-        raise ValueError(f"design structure.first_power must be 0 or -1, got {first_power}")
     if mode["fixed_v"] is not None:
         v = mode["fixed_v"]
         M, G = series.shift(Mc, v)[0], series.shift(Gc, v)[0]
