@@ -44,11 +44,19 @@ import hashlib
 import json
 import math
 import os
+import pickle
 import sys
 import traceback
 from xml.etree.ElementTree import Element, SubElement, tostring
 
 from .spec import DEFAULT_STEP, ModelSpec, input_starts, max_step, refused_above, var_bounds
+
+#: sha256 of a data file -> its parsed content, pickled: an instance of an FMU whose data file this
+#: process has read before gets a fresh copy in ~1/4 of the time of parsing the JSON again (a paper-000
+#: tire-mode design file with its tables is 2.7 MB: 19 ms to parse, 4 ms to unpickle). The last
+#: _PARSED_KEEP files are kept (a process loading many designs holds a few MB, not one copy each).
+_PARSED: dict[str, bytes] = {}
+_PARSED_KEEP = 8
 
 # FMI 2.0 status codes (fmi2Status)
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
@@ -236,11 +244,18 @@ class Fmi2Slave:
             self._fault = (f"data file {self.data_file!r} (sha256 {digest[:12]}) is not the one this FMU "
                            f"was built with ({self.data_sha256[:12]}): refusing to run other gains")
             return {}
+        kept = _PARSED.get(digest)
+        if kept is not None:
+            return pickle.loads(kept)          # a copy of its own: no instance sees another's changes
         try:
-            return json.loads(raw.decode("utf-8"))
+            data = json.loads(raw.decode("utf-8"))
         except ValueError as exc:
             self._fault = f"data file {self.data_file!r} is not valid JSON: {exc}"
             return {}
+        _PARSED[digest] = pickle.dumps(data, protocol=pickle.HIGHEST_PROTOCOL)
+        while len(_PARSED) > _PARSED_KEEP:
+            del _PARSED[next(iter(_PARSED))]   # the oldest first
+        return data
 
     # -- variables (never raise: see the module docstring) -------------------------------------
     def _bad_ref(self, what: str, vr, typ: str) -> None:

@@ -13,9 +13,6 @@ from __future__ import annotations
 import os
 import re
 import shlex
-import shutil
-import subprocess
-import tempfile
 from pathlib import Path
 
 from .atomic import atomic_path
@@ -117,29 +114,27 @@ def build_guard(model_identifier: str, guid: str, real_library: str,
 
     ``variables``: (valueReference, "Real" | "Integer" | "Boolean" | "String", settable), settable
     meaning causality input or parameter. Raises GuardBuildError (with the compiler's stderr) if
-    the compiler is missing or fails.
+    the compiler is missing or fails. The compilation is the native backend's
+    (``latobs.cbackend.toolchain``): its command, the compilers and the sources' bytes (the guard,
+    its header, the FMI 2.0 headers) decide the library, so a guard compiled before from the same
+    ones is taken from latobs's cache (kind "compile"; not when the cache is off).
     """
+    from .cbackend import toolchain
+
     header = guard_header(model_identifier, guid, real_library, variables)
     cc = find_compiler()
     if cc is None:
         raise GuardBuildError("no C compiler found (pip install ziglang, set CC, or install cc/gcc)")
     include = fmi2_headers()
+    sources = {"fmi2_guard.c": GUARD_SOURCE.read_bytes(), "guard_config.h": header.encode("ascii"),
+               **{p.name: p.read_bytes() for p in sorted(include.glob("fmi2*.h"))}}
+    args = [*CFLAGS, "-I.", "-include", "guard_config.h", "-o", "guard.so", "fmi2_guard.c", *LIBS]
+    try:
+        raw = toolchain.cached_run(shlex.split(cc), args, sources, "guard.so")
+    except toolchain.ToolchainError as e:
+        raise GuardBuildError(str(e).replace("C build failed", "guard build failed", 1)) from e
     out_path = Path(out_path)
-    with tempfile.TemporaryDirectory(prefix="latobs-guard-") as tmp:
-        work = Path(tmp)
-        shutil.copyfile(GUARD_SOURCE, work / "fmi2_guard.c")
-        (work / "guard_config.h").write_text(header, encoding="ascii")
-        cmd = [*shlex.split(cc), *CFLAGS, f"-I{include}", "-include", "guard_config.h",
-               "-o", "guard.so", "fmi2_guard.c", *LIBS]
-        env = dict(os.environ, LC_ALL="C")
-        try:
-            proc = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True)
-        except OSError as e:
-            raise GuardBuildError(f"cannot run {cmd[0]}: {e}") from e
-        if proc.returncode != 0:
-            raise GuardBuildError(
-                f"guard build failed ({shlex.join(cmd)}, exit {proc.returncode}):\n{proc.stderr}")
-        with atomic_path(out_path) as dst:
-            shutil.copyfile(work / "guard.so", dst)
+    with atomic_path(out_path) as dst:
+        Path(dst).write_bytes(raw)
     os.chmod(out_path, 0o755)
     return out_path

@@ -288,9 +288,17 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
             v["Iz"] = vals0["Iz"] * s[2]
         return v
 
+    # the fit simulates the record up to its last fitted sample only: a sample depends on those
+    # before it alone (each step's map is its own), so the fitted samples are the same numbers as a
+    # simulation of the whole record's; the held-out part (t >= tune_until) is not computed at every
+    # evaluation of the search (on the mbds record: 61 % of the samples simulated)
+    head = max(int(np.flatnonzero(fit)[-1]) + 1, 2)
+    head_cols = {k: np.asarray(v)[:head] for k, v in cols.items()}
+    head_fit, head_meas = fit[:head], {k: v[:head] for k, v in meas.items()}
+
     def residual_parts(s: np.ndarray) -> dict[str, np.ndarray]:
-        sim = simulate(cols, values(s), x0)
-        return {k: (sim[k][fit] - meas[k][fit]) / spread[k] for k in signals}
+        sim = simulate(head_cols, values(s), x0)
+        return {k: (sim[k][head_fit] - head_meas[k][head_fit]) / spread[k] for k in signals}
 
     def residuals(s: np.ndarray) -> np.ndarray:
         r = np.concatenate(list(residual_parts(s).values()))

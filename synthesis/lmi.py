@@ -102,17 +102,21 @@ def _attempt(prob, settings: dict) -> str:
         return "solver_error"
 
 
-def solve(prob, info: dict | None = None) -> tuple[str, float]:
+def solve(prob, info: dict | None = None, clarabel: dict | None = None) -> tuple[str, float]:
     """Solve a cvxpy problem with the current solver (:func:`using`; Clarabel by default):
     (status, seconds); a solver failure is a status.
 
-    With Clarabel, if the default settings end in a numerical failure (``_RETRY``), the problem is
+    ``clarabel``: Clarabel settings of this problem's first attempt (a design module's choice for
+    its LMIs, e.g. ``{"iterative_refinement_enable": False}``); ignored with another solver.
+    With Clarabel, if the first attempt ends in a numerical failure (``_RETRY``), the problem is
     solved again with :data:`FALLBACK_SETTINGS`; the returned status is that of the fallback.
     ``info`` (optional dict) receives ``solver`` (the name) and ``attempts``:
-    [(settings, status), ...] (settings: those overriding the solver's own, {} for the first).
+    [(settings, status), ...] (settings: those overriding the solver's own, {} for the first
+    without ``clarabel``).
     """
     t0 = time.perf_counter()
-    attempts = [({}, _attempt(prob, {}))]
+    first = dict(clarabel or {}) if current() == "CLARABEL" else {}
+    attempts = [(first, _attempt(prob, first))]
     if current() == "CLARABEL" and attempts[-1][1] in _RETRY:
         attempts.append((dict(FALLBACK_SETTINGS), _attempt(prob, FALLBACK_SETTINGS)))
     seconds = time.perf_counter() - t0

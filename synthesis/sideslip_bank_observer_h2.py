@@ -62,6 +62,13 @@ INPUTS = ("steering angle (rad)", "bank rate (rad/s)", "yaw-rate noise (rad/s)",
           "roll-rate noise (rad/s)")
 OUTPUTS = ("beta error (rad)", "bank error (rad) x h2_bank_weight")
 H2_SCALE = 0.1      # rad: the H2 bound's typical size; the LMIs see the inputs divided by it (trace W ~ 1)
+#: Clarabel settings of the robust-H2 solve (``lmi.solve``): without the iterative refinement of each
+#: KKT solve. On these LMIs (~150 blocks of up to 15 x 15) Clarabel takes the same ~40 iterations to
+#: the same optimum (trace W within 1e-6 relative) in ~30 % less time (sedan: 3.2 s -> 2.2 s; every
+#: shipped car certifies either way). Round-off does not decide the design: the H2 bound and LMI (20)
+#: are evaluated again on the returned numbers and the certificate checks them; a numerical failure
+#: falls back to ``lmi.FALLBACK_SETTINGS`` (refinement on).
+H2_CLARABEL = {"iterative_refinement_enable": False}
 
 
 @dataclass(frozen=True)
@@ -265,7 +272,7 @@ def design(vehicle: Vehicle, opts: H2Options) -> H2Design:
         fam[k_disk].append(disk_lmi)
     base = [P1 >> eps * np.eye(n) for P1 in P1s] + [P2 >> eps * np.eye(n + 1)]
     prob = cp.Problem(cp.Minimize(cp.trace(W)), base + [c for cs in fam.values() for c in cs])
-    status, seconds = lmi.solve(prob)
+    status, seconds = lmi.solve(prob, clarabel=H2_CLARABEL)
     if not lmi.solved(status) or P2.value is None:
         raise DesignError(f"design {opts.name}: no solution ({lmi.label()}: {status}) of the robust-H2 LMIs "
                           f"({', '.join(fam)}) over {len(vertices)} mode/speed vertices x {len(corners)} stiffness "

@@ -301,6 +301,15 @@ def design_speed_eq1(built_fmus) -> dict:
 
 
 @pytest.fixture(scope="session")
+def design_speed_other_gains(built_fmus) -> dict:
+    """The speed-mode default with another pole region (alpha = 1 /s, radius 90 rad/s): the same
+    model and name, other gains. Solved once per run (the run's cache), with its runtime facts."""
+    from latobs import pipeline
+
+    return pipeline.solve("SideslipBankObserver", None, quiet=True, alpha=1.0, radius=90.0)
+
+
+@pytest.fixture(scope="session")
 def design_tire(built_fmus) -> dict:
     return built_fmus.design("SideslipBankObserverTire")
 

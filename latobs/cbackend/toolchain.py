@@ -176,7 +176,7 @@ def _command(platform: str, target: str, zig: bool) -> list[str]:
     return shlex.split(system_compiler())
 
 
-def _cached_run(cmd: list[str], args: list[str], sources: dict[str, bytes], out_name: str, cached: bool,
+def cached_run(cmd: list[str], args: list[str], sources: dict[str, bytes], out_name: str, cached: bool = True,
                 objects: dict[str, bytes] | None = None) -> bytes:
     """``cmd + args`` run in a scratch folder holding ``sources`` (and ``objects``: compiled files
     the command links) under their relative names; the bytes of ``out_name`` it writes. A
@@ -220,12 +220,12 @@ def _compile_target(platform: str, target: str, sources: dict[str, bytes], c_fil
     for c_file in (common or {}):
         reads = {name: sources[name] for name in (c_file, *common[c_file])}
         obj = Path(c_file).stem + ".o"
-        objects[obj] = _cached_run(cmd, [*_compile_flags(target, reads), "-I.", "-c", "-o", obj, c_file], reads,
+        objects[obj] = cached_run(cmd, [*_compile_flags(target, reads), "-I.", "-c", "-o", obj, c_file], reads,
                                    obj, cached)
     rest = [c for c in c_files if c not in (common or {})]
     args = [*_target_flags(target, out_name, shared, sources), "-I.", "-o", out_name, *rest, *objects,
             *(libs if "windows" not in target else ())]
-    return _cached_run(cmd, args, sources, out_name, cached, objects)
+    return cached_run(cmd, args, sources, out_name, cached, objects)
 
 
 def compile_platforms(out_names: dict[str, str], sources: dict[str, bytes], c_files: list[str], *,

@@ -57,7 +57,8 @@ REPLAYS = [pytest.param(name, vehicle, id=designs.artefact_name(name, vehicle),
 
 class Pairs:
     """(pythonfmu FMU, C FMU) of an artefact NAME or NAME_VEHICLE: the session build's for a
-    default vehicle, else designed (and certified) once here and packaged by both backends."""
+    default vehicle, else designed (and certified) once per test run (``built_fmus.design``: the
+    run's cache, which the demo's runs share) and packaged here by both backends."""
 
     def __init__(self, built_fmus, out):
         self.built, self.out, self._made = built_fmus, out, {}
@@ -67,7 +68,7 @@ class Pairs:
         if vehicle is None:
             return self.built.path(name), self.built.c_path(name)
         if artefact not in self._made:
-            path = design_file.write(designs.run(name, vehicle), self.out)
+            path = design_file.write(self.built.design(name, vehicle), self.out)
             self._made[artefact] = (packaging.package_design(path, self.out / "py"),
                                     packaging.package_design(path, self.out / "c", backend="c", platforms=HOST_ONLY))
         return self._made[artefact]

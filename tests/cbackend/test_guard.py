@@ -93,10 +93,21 @@ VARS = [(0, "Real", True), (1, "Real", True), (2, "Real", False), (3, "Integer",
 
 
 @needs_cc
-def test_build_is_reproducible(tmp_path):
-    a = build_guard("M", "guid-1", "M_pythonfmu.so", VARS, tmp_path / "a" / "M.so")
+def test_build_is_reproducible_and_kept_by_content(tmp_path, monkeypatch):
+    """Two compilations of the same inputs give the same bytes (the first without latobs's cache);
+    the same inputs once more are the cached library, with no compiler run; another GUID is
+    another library."""
+    from latobs import cache
+    from latobs.cbackend import toolchain
+
+    with cache.turned_off():
+        a = build_guard("M", "guid-1", "M_pythonfmu.so", VARS, tmp_path / "a" / "M.so")
     b = build_guard("M", "guid-1", "M_pythonfmu.so", list(reversed(VARS)), tmp_path / "b" / "M.so")
     assert a.read_bytes() == b.read_bytes()
+    with monkeypatch.context() as m:
+        m.setattr(toolchain, "_run", lambda *args: pytest.fail(f"compiled again: {args}"))
+        again = build_guard("M", "guid-1", "M_pythonfmu.so", VARS, tmp_path / "again" / "M.so")
+    assert again.read_bytes() == a.read_bytes() and os.access(again, os.X_OK)
     assert b"latobs-guard-" not in a.read_bytes() and b"/tmp" not in a.read_bytes()
     c = build_guard("M", "guid-2", "M_pythonfmu.so", VARS, tmp_path / "c" / "M.so")
     assert c.read_bytes() != a.read_bytes()

@@ -12,7 +12,7 @@ from fmpy.validation import validate_fmu
 from latobs import packaging
 from latobs.fmu_src.car_plant import CarPlantModel
 from latobs.fmu_src.sideslip_bank_observer import SwitchedPIObserver
-from latobs.synthesis import design_file, designs
+from latobs.synthesis import design_file
 from latobs.validation.harness import FmuInstance
 
 pytestmark = pytest.mark.slow
@@ -94,9 +94,9 @@ def test_car_plant_fmu_equals_runtime(fmu_dir):
     assert worst <= 1e-9
 
 
-def test_two_fmus_with_different_gains_in_one_process(tmp_path, design_speed):
+def test_two_fmus_with_different_gains_in_one_process(tmp_path, design_speed, design_speed_other_gains):
     """Two FMUs named SideslipBankObserver with different gains, loaded together: each runs its own."""
-    other = designs.run("SideslipBankObserver", alpha=1.0, radius=90.0)
+    other = design_speed_other_gains
     gains_a = np.asarray(design_speed["modes"][0]["gains"]["K_P"])
     gains_b = np.asarray(other["modes"][0]["gains"]["K_P"])
     assert np.max(np.abs(gains_a - gains_b)) > 1.0
@@ -198,3 +198,36 @@ def test_uncertified_design_is_never_packaged(tmp_path, design_speed):
     with pytest.raises(packaging.PackagingError, match="not certified"):
         packaging.package_design(path, tmp_path)
     assert not list(tmp_path.glob("*.fmu"))
+
+
+def test_a_data_file_read_again_is_a_fresh_copy_of_the_same_content(tmp_path):
+    """The framework keeps the data files it parsed (by sha256, the last few): a second instance gets
+    its own copy of the same content (a change made by one is not seen by the other), a file of other
+    content is parsed again, and the kept files stay bounded."""
+    import hashlib
+    import json
+
+    from latobs.fmu_src import framework
+
+    framework._PARSED.clear()
+
+    def instance(content: dict, pinned: bool = True):
+        """An instance's data as the constructor loads it (the data read alone: no model spec)."""
+        raw = json.dumps(content).encode()
+        (tmp_path / "d.json").write_bytes(raw)
+        probe = framework.Fmi2Slave.__new__(framework.Fmi2Slave)
+        probe.data_file, probe.resources, probe._fault = "d.json", str(tmp_path), ""
+        probe.data_sha256 = hashlib.sha256(raw).hexdigest() if pinned else ""
+        probe._data = probe._load_data()
+        assert not probe._fault
+        return probe
+
+    content = {"a": [1.0, 0.1, -2.5e-300], "b": {"c": [[1, 2], [3.0, float("1e308")]]}, "n": 3}
+    first, second = instance(content), instance(content)
+    assert first._data == second._data == content and first._data is not second._data
+    first._data["b"]["c"][0][0] = 99
+    assert second._data == content and instance(content)._data == content
+    assert instance({**content, "n": 4}, pinned=False)._data["n"] == 4
+    for k in range(framework._PARSED_KEEP + 3):
+        instance({"k": k})
+    assert len(framework._PARSED) == framework._PARSED_KEEP

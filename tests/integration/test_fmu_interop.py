@@ -20,7 +20,7 @@ import pytest
 from fmpy import extract, read_model_description
 
 from latobs import native_guard, packaging
-from latobs.synthesis import design_file, designs
+from latobs.synthesis import design_file
 from latobs.validation.harness import FmuInstance
 
 pytestmark = pytest.mark.slow
@@ -37,12 +37,12 @@ def _runs(importer: str, paths: list[Path]) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def fmus(fmu_dir, tmp_path_factory, design_speed, built_fmus):
+def fmus(fmu_dir, tmp_path_factory, design_speed, design_speed_other_gains, built_fmus):
     """The three FMUs, plus a SideslipBankObserver with other gains and one 'from another latobs
     version' (same class name, same gains, other runtime package and guid), and the native C
     builds of the three (same model identifiers and file names as the pythonfmu ones)."""
     other_dir = tmp_path_factory.mktemp("other_gains")
-    other = designs.run("SideslipBankObserver", alpha=1.0, radius=90.0)
+    other = design_speed_other_gains
     other_fmu = packaging.package_design(design_file.write(other, other_dir), other_dir)
     old_dir = tmp_path_factory.mktemp("other_version")
     mp = pytest.MonkeyPatch()

@@ -13,7 +13,7 @@ from scipy.optimize import fsolve
 
 from latobs.fmu_src.motorcycle_plant import MotorcyclePlantModel
 from latobs.packaging import plant_data
-from latobs.synthesis import certificate, designs
+from latobs.synthesis import certificate
 from latobs.synthesis import motorcycle_fault_observer_lpv as lpv
 from latobs.synthesis.motorcycle_model import reduced_model
 from latobs.synthesis.params import load_vehicle
@@ -22,8 +22,9 @@ VEHICLE = load_vehicle("sharp_motorcycle")
 
 
 @pytest.fixture(scope="module")
-def d() -> dict:
-    return designs.run("MotorcycleFaultObserver")
+def d(built_fmus) -> dict:
+    """The catalogue's design, as ``designs.run`` makes it (solved once per test run: the session's)."""
+    return built_fmus.design("MotorcycleFaultObserver", runtime_facts=False)
 
 
 def _coef(d, key):

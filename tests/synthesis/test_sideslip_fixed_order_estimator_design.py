@@ -296,3 +296,25 @@ def test_clarabel_fallback_settings_solve_after_a_numerical_failure(monkeypatch)
     v = cp.Variable()
     lmi.solve(cp.Problem(cp.Minimize(v), [v >= 1]), info)
     assert info["attempts"][0][1] == "solver_error" and info["attempts"][-1][1] == "optimal"
+
+
+def test_a_problems_own_clarabel_settings_are_its_first_attempt_and_only_clarabels(monkeypatch):
+    """``lmi.solve(prob, clarabel=...)``: those settings make the first attempt with Clarabel (the
+    fallback after a numerical failure is still FALLBACK_SETTINGS); with SCS they are not passed."""
+    import cvxpy as cp
+
+    from latobs.synthesis import lmi
+    v = cp.Variable()
+    prob = cp.Problem(cp.Minimize(v), [v >= 1])
+    own = {"iterative_refinement_enable": False}
+    info = {}
+    assert lmi.solve(prob, info, clarabel=own)[0] == "optimal" and info["attempts"] == [(own, "optimal")]
+    calls = []
+    real = lmi._attempt
+    monkeypatch.setattr(lmi, "_attempt", lambda p, s: calls.append(dict(s)) or ("solver_error" if s == own
+                                                                               else real(p, s)))
+    assert lmi.solved(lmi.solve(prob, clarabel=own)[0]) and calls == [own, lmi.FALLBACK_SETTINGS]
+    calls.clear()
+    with lmi.using("SCS"):
+        lmi.solve(prob, clarabel=own)
+    assert calls == [{}]
