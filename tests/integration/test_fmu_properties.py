@@ -33,6 +33,7 @@ works as usual across the worker boundary.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -140,39 +141,63 @@ REALISTIC = {"vx": (0.0, 70.0), "delta": (-0.5, 0.5), "steer_angle": (-0.5, 0.5)
              "rider_torque": (-100.0, 100.0), "stiffness_scale_f": (0.5, 2.0), "stiffness_scale_r": (0.5, 2.0)}
 
 
+# The strategies are made once per input name (and per input list, parameter table): a strategy
+# made anew at every draw (inside a flatmap) has its properties worked out again by hypothesis every
+# time, ~half of the cost of drawing a program. The same strategies, so the same programs.
+@functools.lru_cache(maxsize=None)
 def finite_value(name: str):
     lo, hi = REALISTIC.get(name, (-1.0, 1.0))
     return st.one_of(st.floats(lo, hi), st.floats(lo, hi), st.sampled_from(EXTREMES),
                      st.floats(-1e6, 1e6, allow_nan=False), st.floats(-1e300, 1e300))
 
 
+@functools.lru_cache(maxsize=None)
 def any_value(name: str):
     """A finite value, or one time in 20 a non-finite one (it sticks until that input is set again)."""
-    return st.integers(0, 19).flatmap(lambda i: st.sampled_from(NON_FINITE) if i == 0 else finite_value(name))
+    return st.integers(0, 19).flatmap(lambda i: NON_FINITE_VALUES if i == 0 else finite_value(name))
 
 
+NON_FINITE_VALUES = st.sampled_from(NON_FINITE)
 STEP_SIZES = st.one_of(st.sampled_from([1e-4, 0.005, 0.01, 0.1]), st.floats(1e-4, 0.1),
                        st.sampled_from([1e-9, 1e-6, 0.5, 1.0, 2.0, 1e4, 1e300]), st.floats(1e-9, 1e300))
 BAD_STEP_SIZES = st.sampled_from([0.0, -0.005, math.nan, math.inf])
 
 
 def input_sets(names: list[str], finite: bool = False):
+    return _input_sets(tuple(names), finite)
+
+
+@functools.lru_cache(maxsize=None)
+def _input_sets(names: tuple[str, ...], finite: bool):
     value = finite_value if finite else any_value
     return st.lists(st.sampled_from(names), min_size=1, max_size=len(names), unique=True).flatmap(
-        lambda chosen: st.fixed_dictionaries({n: value(n) for n in chosen}))
+        lambda chosen: _values(tuple(chosen), value))
+
+
+@functools.lru_cache(maxsize=None)
+def _values(chosen: tuple[str, ...], value):
+    return st.fixed_dictionaries({n: value(n) for n in chosen})
 
 
 def full_inputs(names: list[str]):
-    return st.fixed_dictionaries({n: finite_value(n) for n in names})
+    return _values(tuple(names), finite_value)
 
 
 def parameter_sets(params: dict):
+    return _parameter_sets(tuple(sorted((k, tuple(v)) for k, v in params.items())))
+
+
+@functools.lru_cache(maxsize=None)
+def _parameter_sets(params: tuple):
+    ranges = dict(params)
+
+    @functools.lru_cache(maxsize=None)
     def one(name):
-        lo, hi = params[name]
+        lo, hi = ranges[name]
         lo = float(lo) if lo is not None else -1e3
         hi = float(hi) if hi is not None else 1e3
         return st.fixed_dictionaries({name: st.one_of(st.floats(lo, hi), st.sampled_from([lo - 1.0, hi + 1.0]))})
-    return st.sampled_from(sorted(params)).flatmap(one)
+    return st.sampled_from(sorted(ranges)).flatmap(one)
 
 
 @st.composite

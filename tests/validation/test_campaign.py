@@ -592,7 +592,10 @@ def test_a_campaign_on_a_dask_scheduler_completes_when_a_worker_is_killed(built_
     by_run = {r["run"]: r for r in lines}
     # run 0 runs first in the campaign's own process (a wiring check); the rest on the workers
     assert len({r["worker"] for r in lines[:done_at_kill] if r["run"] != 0}) == 2
-    assert len({r["worker"] for r in lines[done_at_kill + 5:]}) == 1     # the survivor finished it
+    # the survivor finished it: the results the killed worker had sent before the kill still land
+    # after done_at_kill (how many depends on the machine's load: 5 was once too few), but from
+    # midway between the kill and the end (at least 75 runs later) every row is the survivor's
+    assert len({r["worker"] for r in lines[(done_at_kill + runs) // 2:]}) == 1
 
     from latobs.campaign_runner import fmu_refs, resolve
 
