@@ -132,7 +132,7 @@ def build_guard(model_identifier: str, guid: str, real_library: str,
     try:
         raw = toolchain.cached_run(shlex.split(cc), args, sources, "guard.so")
     except toolchain.ToolchainError as e:
-        raise GuardBuildError(str(e).replace("C build failed", "guard build failed", 1)) from e
+        raise GuardBuildError(f"the native guard: {e}") from e
     out_path = Path(out_path)
     with atomic_path(out_path) as dst:
         Path(dst).write_bytes(raw)
