@@ -13,13 +13,16 @@ An entry's key is the SHA-256 of everything its value is made from (the identiti
 ``latobs.identity``: design inputs, design-time code, solver versions, runtime and packaging code,
 toolchain, platforms); a changed input is another key, so a stale value is never reused. An entry
 is checked again where it is used (an FMU's identity is read back; a design is certified again
-when packaged). The folder is :func:`folder` (``$LATOBS_CACHE_DIR``, else the platform's user
+when packaged), and against its own content when it is read: a value entry holds the SHA-256 of its
+value, a files entry the SHA-256 of each file; an entry that does not match (damaged, truncated,
+patched by hand) is removed and made again. The folder is :func:`folder` (``$LATOBS_CACHE_DIR``, else the platform's user
 cache folder); ``LATOBS_NO_CACHE=1`` (``latobs build --no-cache``) turns it off. Entries are written
 atomically (a file, or a folder renamed into place); an unreadable one is made again; the least
 recently used entries are removed when the folder grows past ``$LATOBS_CACHE_MAX_MB`` (default
 :data:`MAX_MB`)."""
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -34,7 +37,7 @@ from .atomic import atomic_write_text
 from .synthesis.identity import sha256_json
 
 ENV_DIR, ENV_OFF, ENV_MAX = "LATOBS_CACHE_DIR", "LATOBS_NO_CACHE", "LATOBS_CACHE_MAX_MB"
-VERSION = 1                      # of the entries' layout
+VERSION = 2                      # of the entries' layout (2: entries hold their content's hashes)
 MAX_MB = 2000.0                  # the folder's default size bound (one full native build: ~60 MB)
 
 
@@ -81,41 +84,76 @@ def key(kind: str, parts: dict) -> str:
     return sha256_json({"cache": VERSION, "kind": kind, "parts": parts})
 
 
+def _value_sha256(value) -> str:
+    """The hash a value entry holds of its value (of the text it is stored as)."""
+    return hashlib.sha256(json.dumps(value).encode()).hexdigest()
+
+
+def _read_value(path: Path) -> tuple[bool, Any]:
+    """(True, value) of the value entry ``path`` if it is whole (its value matches the hash it
+    holds); else (False, None), the entry removed when it exists (damaged: made again)."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if _value_sha256(doc["value"]) == doc["sha256"]:
+            os.utime(path)                             # recently used (pruning goes by age)
+            return True, doc["value"]
+    except FileNotFoundError:
+        return False, None
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    _remove(path)
+    return False, None
+
+
 def remember(kind: str, parts: dict, compute: Callable[[], Any]) -> Any:
     """The cached value of ``kind`` for ``parts``, else ``compute()`` stored under its key. The
     value must be JSON (what it round-trips to is what every later call gets: also the first)."""
     if not enabled():
         return compute()
     path = folder() / kind / f"{key(kind, parts)}.json"
-    try:
-        value = json.loads(path.read_text(encoding="utf-8"))["value"]
-        os.utime(path)                                 # recently used (pruning goes by age)
+    hit, value = _read_value(path)
+    if hit:
         return value
-    except (OSError, ValueError, KeyError, TypeError):
-        pass                                           # a miss, or an entry that cannot be read
     # (the value's key order kept: what is packaged from it is written in that order)
-    text = json.dumps({"kind": kind, "value": compute()})
+    value = json.loads(json.dumps(compute()))
+    text = json.dumps({"kind": kind, "sha256": _value_sha256(value), "value": value})
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, text)
         prune()
     except OSError:                                    # a read-only or full disk: computed, not kept
         pass
-    return json.loads(text)["value"]
+    return value
+
+
+def peek(kind: str, parts: dict) -> Any:
+    """The cached value of ``kind`` for ``parts`` (:func:`remember`), None on a miss: nothing is
+    computed or written (a damaged entry is removed)."""
+    if not enabled():
+        return None
+    return _read_value(folder() / kind / f"{key(kind, parts)}.json")[1]
 
 
 def files(kind: str, parts: dict) -> dict[str, bytes] | None:
     """The files stored under ``kind`` for ``parts`` ({file name: bytes}), None on a miss (or with
-    the cache off). A hit marks the entry as recently used."""
+    the cache off). Every file is checked against the hash its entry holds: an entry that does not
+    match (a file damaged, truncated, patched or missing) is removed, a miss. A hit marks the entry
+    as recently used."""
     if not enabled():
         return None
     entry = folder() / kind / key(kind, parts)
-    try:
-        names = json.loads((entry / _INDEX).read_text(encoding="utf-8"))
-        found = {str(n): (entry / str(n)).read_bytes() for n in names}
-        os.utime(entry)
-    except (OSError, ValueError, TypeError):
+    if not entry.is_dir():
         return None
+    try:
+        index = json.loads((entry / _INDEX).read_text(encoding="utf-8"))
+        found = {str(n): (entry / str(n)).read_bytes() for n in index}
+        whole = isinstance(index, dict) and all(hashlib.sha256(raw).hexdigest() == index[n] for n, raw in found.items())
+    except (OSError, ValueError, TypeError, AttributeError):
+        whole = False
+    if not whole:
+        _remove(entry)                                 # made again by the caller, stored anew
+        return None
+    os.utime(entry)
     return found
 
 
@@ -123,25 +161,26 @@ _INDEX = ".files.json"
 
 
 def store_files(kind: str, parts: dict, content: dict[str, bytes]) -> None:
-    """Store ``content`` ({plain file name: bytes}) under ``kind`` for ``parts``: written into a
-    temporary folder, then renamed into place (a reader sees all of it or nothing); an entry already
-    there is kept. Then the folder is pruned to its size bound. A full or read-only disk is not an
-    error: nothing is kept."""
+    """Store ``content`` ({plain file name: bytes}) under ``kind`` for ``parts``, with the hash of
+    each file: written into a temporary folder, then renamed into place (a reader sees all of it
+    or nothing); a whole entry already there is kept, a damaged one replaced. Then the folder is
+    pruned to its size bound. A full or read-only disk is not an error: nothing is kept."""
     if not enabled():
-        return
-    entry = folder() / kind / key(kind, parts)
-    if entry.exists():
         return
     for name in content:
         if not name or "/" in name or "\\" in name or name.startswith(".") or name in (".", ".."):
             raise ValueError(f"cache entry {kind}: {name!r} is not a plain file name")
+    if files(kind, parts) is not None:                 # (a damaged entry is removed by the check)
+        return
+    entry = folder() / kind / key(kind, parts)
     try:
         entry.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{entry.name}.", dir=entry.parent))
         try:
             for name, raw in content.items():
                 (tmp / name).write_bytes(raw)
-            (tmp / _INDEX).write_text(json.dumps(sorted(content)), encoding="utf-8")
+            index = {name: hashlib.sha256(raw).hexdigest() for name, raw in sorted(content.items())}
+            (tmp / _INDEX).write_text(json.dumps(index), encoding="utf-8")
             os.chmod(tmp, 0o755)
             os.rename(tmp, entry)                     # atomic; fails if another writer was first
         finally:

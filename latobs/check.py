@@ -1,9 +1,13 @@
-"""``latobs check``: run an FMU's own reference experiments (FMI-LS-REF, inside the FMU) and
-compare its outputs with the references (:mod:`latobs.reference`).
+"""``latobs check``: verify an FMU's seal (every member against the SHA-256 its manifest holds,
+``packaging.MANIFEST_MEMBER``: a model description, design data or binary changed after the build
+fails), then run its own reference experiments (FMI-LS-REF, inside the FMU) and compare its outputs
+with the references (:mod:`latobs.reference`).
 
 The host platform runs the FMU with fmpy (:func:`run_host`, the same run that made the
-references at build time); another platform folder of the FMU runs in the cross-platform runner
-(``latobs.cbackend.runner``: a small C host under Wine or qemu) where that is available here.
+references at build time) in a child process of its own (:func:`run_isolated`: a binary that
+crashes or hangs is a FAIL line, not the end of the command); another platform folder of the FMU
+runs in the cross-platform runner (``latobs.cbackend.runner``: a small C host under Wine or qemu)
+where that is available here.
 """
 from __future__ import annotations
 
@@ -28,20 +32,22 @@ class Result:
     fmu: str
     experiment: str
     platform: str
-    comparison: reference.Comparison
+    comparison: reference.Comparison | None      # None: the seal's line (no experiment run)
     rows: int
     outputs: int
     failure: str = ""           # the run itself failed (a call's error status, the host's crash)
 
     @property
     def passed(self) -> bool:
-        return not self.failure and self.comparison.passed
+        return not self.failure and (self.comparison is None or self.comparison.passed)
 
     def line(self) -> str:
         c = self.comparison
         head = f"{'PASS' if self.passed else 'FAIL'}  {self.fmu}  {self.experiment}  {self.platform}: "
         if self.failure:
             return head + self.failure
+        if c is None:
+            return head + f"every member ({self.rows}) matches the SHA-256 of its manifest"
         if c.exact:
             return head + f"bit for bit ({self.rows} rows x {self.outputs} outputs)"
         name, t, y, ref, dev, allowed = c.worst
@@ -79,6 +85,56 @@ def run_host(fmu: str | Path, e: reference.Experiment) -> dict[str, np.ndarray]:
         return out
     finally:
         f.close()
+
+
+#: how long a host run of one reference experiment may take in its child process (s)
+HOST_TIMEOUT = 600.0
+
+
+def run_isolated(fmu: Path, e: reference.Experiment, timeout: float = HOST_TIMEOUT) -> dict[str, np.ndarray]:
+    """:func:`run_host` of ``e`` in a child process (this interpreter): the outputs, or
+    RuntimeError saying how the run failed: an error status, a crash (the signal that ended the
+    child), no answer within ``timeout`` s."""
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="latobs-check-") as tmp:
+        out = Path(tmp) / "outputs.npz"
+        cmd = [sys.executable, "-c", "import sys; from latobs.check import _child; sys.exit(_child(sys.argv[1:]))",
+               str(Path(fmu).resolve()), e.name, str(out)]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=tmp,
+                                  stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            raise RuntimeError(f"no answer within {timeout:g} s (the FMU hangs)") from None
+        if proc.returncode < 0:
+            try:
+                name = signal.Signals(-proc.returncode).name
+            except ValueError:
+                name = f"signal {-proc.returncode}"
+            raise RuntimeError(f"the FMU crashed the host process ({name})")
+        if proc.returncode != 0 or not out.is_file():
+            said = [line for line in proc.stderr.splitlines() if line.strip()]
+            raise RuntimeError(said[-1] if said else f"the host process exited {proc.returncode}")
+        with np.load(out) as z:
+            return {name: z[name] for name in z.files}
+
+
+def _child(argv: list[str]) -> int:
+    """The child process of :func:`run_isolated`: FMU, experiment name, output file (.npz)."""
+    import sys
+
+    fmu, name, out = argv
+    e = next(x for x in reference.read(Path(fmu)) if x.name == name)
+    try:
+        got = run_host(fmu, e)
+    except Exception as exc:              # its message, the parent's FAIL line
+        print(f"{type(exc).__name__}: {exc}", file=sys.stderr)
+        return 3
+    np.savez(out, **got)
+    return 0
 
 
 def _runner():
@@ -161,7 +217,7 @@ def run_on(fmu: Path, e: reference.Experiment, platform: str, host: str | None) 
     else in the cross-platform runner with the experiment's fixed step. RuntimeError saying why
     when the run fails."""
     if platform == host:
-        return run_host(fmu, e)
+        return run_isolated(fmu, e)
     runner = _runner()
     try:
         r = runner.run(fmu, _vocabulary(fmu)[2][platform], e.time, e.inputs, list(e.outputs), {}, step=e.step)
@@ -184,13 +240,18 @@ def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[t
     with zipfile.ZipFile(fmu) as z:
         if "modelDescription.xml" not in z.namelist():
             raise CheckError(f"{fmu}: not an FMU (no modelDescription.xml)")
+    from .packaging import manifest_problems
+
+    damaged = manifest_problems(fmu)
     try:
         experiments = reference.read(fmu)
     except reference.ReferenceResultsError as exc:
-        raise CheckError(str(exc)) from None
+        raise CheckError(str(exc) + (f" (and its seal: {'; '.join(damaged)})" if damaged else "")) from None
     run, skipped = platforms(fmu, platform)
     host = _vocabulary(fmu)[1]
-    results = []
+    with zipfile.ZipFile(fmu) as z:
+        members = len([n for n in z.namelist() if not n.endswith("/")]) - 1
+    results = [Result(fmu.stem, "seal", "all", None, members, 0, "; ".join(damaged))]
     for p in run:
         for e in experiments:
             try:

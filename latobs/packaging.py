@@ -7,6 +7,7 @@ before packaging and the FMU installed atomically (:func:`install`). See the doc
 from __future__ import annotations
 
 import hashlib
+import json
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -240,8 +241,7 @@ def install(out_dir: Path, class_name: str, seal: Callable[[Path], list[str]],
         problems = seal(tmps[-1])
         if problems:
             raise PackagingError(f"{class_name}: fmpy validate found {len(problems)} problem(s): {problems}")
-        if finish is not None:
-            add_members(tmps[-1], finish(tmps[-1]))
+        add_members(tmps[-1], finish(tmps[-1]) if finish is not None else {}, manifest=True)
     return final
 
 
@@ -249,17 +249,56 @@ def install(out_dir: Path, class_name: str, seal: Callable[[Path], list[str]],
 Finish = Callable[[Path], Mapping[str, bytes]]
 
 
-def add_members(path: Path, extra: Mapping[str, bytes]) -> None:
+def add_members(path: Path, extra: Mapping[str, bytes], manifest: bool = False) -> None:
     """Rewrite the reproducible zip ``path`` (:func:`write_zip`) with the members ``extra`` added
-    (none may exist already)."""
-    if not extra:
+    (none may exist already); with ``manifest``, and its manifest (:data:`MANIFEST_MEMBER`) last."""
+    if not extra and not manifest:
         return
     with zipfile.ZipFile(path) as z:
         files = {n: z.read(n) for n in z.namelist()}
-    clash = sorted(set(files) & set(extra))
+    clash = sorted(set(files) & {*extra, *([MANIFEST_MEMBER] if manifest else [])})
     if clash:
         raise PackagingError(f"{path.name}: already holds {', '.join(clash)}")
-    write_zip(path, {**files, **extra})
+    files.update(extra)
+    if manifest:
+        files[MANIFEST_MEMBER] = manifest_bytes(files)
+    write_zip(path, files)
+
+
+#: the member of an FMU listing the SHA-256 of every other member (``latobs check`` and every
+#: build that would reuse the FMU verify it: an FMU damaged or edited after it was built is not reused)
+MANIFEST_MEMBER = "resources/latobs-manifest.json"
+MANIFEST_SCHEMA = "latobs.manifest/1"
+
+
+def manifest_bytes(files: Mapping[str, bytes]) -> bytes:
+    """The content of :data:`MANIFEST_MEMBER` for an FMU of ``files`` ({member: bytes}, itself
+    excluded)."""
+    sums = {n: hashlib.sha256(raw).hexdigest() for n, raw in sorted(files.items()) if n != MANIFEST_MEMBER}
+    return (json.dumps({"schema": MANIFEST_SCHEMA, "sha256": sums}, indent=1) + "\n").encode()
+
+
+def manifest_problems(path: Path) -> list[str]:
+    """What in the FMU ``path`` does not match its manifest (:data:`MANIFEST_MEMBER`): a member
+    changed, missing or added; no manifest; not a readable zip. Empty: every member is what was
+    built."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = [n for n in z.namelist() if not n.endswith("/")]
+            if MANIFEST_MEMBER not in names:
+                return [f"no {MANIFEST_MEMBER} (not built by this latobs, or stripped)"]
+            doc = json.loads(z.read(MANIFEST_MEMBER))
+            sums = doc.get("sha256") if isinstance(doc, dict) and doc.get("schema") == MANIFEST_SCHEMA else None
+            if not isinstance(sums, dict):
+                return [f"{MANIFEST_MEMBER} is not a {MANIFEST_SCHEMA} manifest"]
+            problems = [f"{n}: changed since it was built (its SHA-256 is not the manifest's)"
+                        for n in names if n in sums and hashlib.sha256(z.read(n)).hexdigest() != sums[n]]
+    except (OSError, ValueError, zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+        return [f"not a readable FMU archive: {exc}"]
+    problems += [f"{n}: in the manifest, not in the FMU" for n in sorted(set(sums) - set(names))]
+    problems += [f"{n}: in the FMU, not in the manifest (added after it was built)"
+                 for n in sorted(set(names) - set(sums) - {MANIFEST_MEMBER})]
+    return problems
 
 
 def build_fmu(kind: FmuKind, class_name: str, data: dict, out_dir: Path, *,
@@ -414,6 +453,11 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
     from .synthesis import certificate, tables  # scipy: only when packaging a design
 
     origin = origin or f"design {data.get('name')!r}"
+    # a design whose seal its content does not match was edited by hand: the inputs its identity
+    # names are not what it was made from, so it is packaged as a new design, by its content
+    # (``identity.of_data``), and certified again below like every other
+    edited = design_file.seal_state(data) == "broken"
+    data = {k: v for k, v in data.items() if k != design_file.SEAL_KEY and not (edited and k == "identity")}
     tables.attach(data)   # a design file written without its runtime's tables gets them here
     complete_runtime_data(data)
     ok, checks = certificate.certify(data)
@@ -425,8 +469,8 @@ def package_design_data(data: dict, out_dir: Path, backend: str = "python", writ
     if kind is None:
         raise PackagingError(f"{origin}: no FMU model for design {data.get('design')!r} "
                              f"(known: {', '.join(OBSERVERS)})")
-    beside = {design_file.path_of(data, out_dir).name: design_file.dumps(data).encode("utf-8")} if write_design \
-        else None
+    beside = {design_file.path_of(data, out_dir).name: design_file.dumps(design_file.sealed(data)).encode("utf-8")} \
+        if write_design else None
     return _build(kind, data["name"], data, out_dir, backend, beside=beside, platforms=platforms, finish=finish,
                   fmi=fmi)
 

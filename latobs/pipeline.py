@@ -116,6 +116,9 @@ class _Artefact:
         if reference.identity_of(self.fmu) != self.reference:
             return False, (f"rebuilding {self.fmu.name}: its reference results are missing or were made from another "
                            "plant, scenario or code")
+        damaged = _manifest_problems(str(self.fmu), _file_key(self.fmu))
+        if damaged:
+            return False, f"rebuilding {self.fmu.name}: it is not what was built ({damaged[0]})"
         if self.design_path is not None and (design_file_needed or self.design_path.exists()):
             try:
                 same = _design_inside(str(self.fmu), _file_key(self.fmu), str(self.design_path),
@@ -136,6 +139,14 @@ def _file_key(path: Path) -> tuple[int, int, int]:
 
 
 @lru_cache(maxsize=256)
+def _manifest_problems(fmu: str, fmu_key: tuple) -> tuple[str, ...]:
+    """``packaging.manifest_problems`` of an FMU, once per version of the file (:func:`_file_key`)."""
+    from .packaging import manifest_problems
+
+    return tuple(manifest_problems(Path(fmu)))
+
+
+@lru_cache(maxsize=256)
 def _design_inside(fmu: str, fmu_key: tuple, design: str, design_key: tuple, name: str) -> bool:
     """Whether the design file ``design`` is the design inside the FMU ``fmu`` (its reproducible
     part), once per version of the two files (the keys of :func:`_file_key`) in a process: a design
@@ -151,7 +162,7 @@ def _design_inside(fmu: str, fmu_key: tuple, design: str, design_key: tuple, nam
         beside = json.loads(Path(design).read_text(encoding="utf-8"))
     except (OSError, KeyError, ValueError, zipfile.BadZipFile):
         return False
-    return design_file.reproducible(beside) == inner
+    return design_file.seal_state(beside) == "sealed" and design_file.reproducible(beside) == inner
 
 
 def _plan(names: list[str], vehicle, out: Path, backend: str, platforms: list[str] | None = None,
@@ -300,9 +311,11 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
         for p in plans:
             print(f"reusing {p.fmu.name} (identical inputs)")
         return [p.fmu for p in plans]
+    _refuse_edited(plans)                                     # before anything is made or written
     built = {}
     with locked_folder(out, "build"), _ReferencePlants(out, reference_plants) as plants:
         plans = _plan(names, vehicle, out, backend, platforms, host_suffices, fmi)   # again: another build may have written
+        _refuse_edited(plans)
         made = _make_in_parallel(plans, design_files)
         # plants first: an observer's reference experiment runs beside the plant built here
         for p in sorted(plans, key=lambda p: p.design_path is not None):
@@ -317,17 +330,18 @@ def _build(names: list[str] | None, vehicle: str | None, out: Path, backend: str
             if p.why:
                 print(f"{p.name}: pythonfmu backend ({p.why})")
             print(what)
-            if _from_cache(p):
+            # an observer's FMU is keyed by its design's content too: known before the cache is read
+            data = None if p.design_path is None else (_current_design(p) or solve(p.model, p.vehicle))
+            if _from_cache(p, data):
                 print(f"installed {p.fmu} from the cache (identical inputs)")
                 built[p.name] = p.fmu
                 continue
-            if p.design_path is None:
+            if data is None:
                 path = package_plant(p.model, p.vehicle, out, p.backend, plants, platforms=p.platforms, fmi=fmi)
             else:
-                data = _current_design(p) or solve(p.model, p.vehicle)
                 path = package_design_data(data, out, p.backend, p.vehicle, write_design=True,
                                            origin=str(p.design_path), plants=plants, platforms=p.platforms, fmi=fmi)
-            _to_cache(p)
+            _to_cache(p, data)
             folders = (p.platforms if fmi == 2 else fmi3_folders(p.platforms)) if p.platforms else []
             print(f"built {path} ({BACKEND_LABEL[p.backend]}{', FMI 3.0' if fmi == 3 else ''}"
                   f"{': ' + ', '.join(folders) if folders else ''})")
@@ -361,7 +375,7 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
     from .synthesis import lmi
 
     states = {p.name: p.current(design_files) for p in plans}
-    todo = [p for p in plans if not states[p.name][0] and cache.files("fmu", _cache_parts(p)) is None]
+    todo = [p for p in plans if not states[p.name][0] and not _in_cache(p)]
     todo.sort(key=lambda p: -build_seconds(p.model))        # the longest first (a stable sort)
     n = lmi.jobs(len(todo))
     if len(todo) < 2 or n < 2:
@@ -435,31 +449,53 @@ def _design_cache_parts(ident: Identity) -> dict:
     return {"identity": ident.sha256, "solvers": cache.solver_versions()}
 
 
-def _cache_parts(p: _Artefact) -> dict:
+def _cache_parts(p: _Artefact, design: dict | None) -> dict:
     """What an FMU of the cache is made from: its identity (design or plant inputs, backend, code,
-    toolchain, platforms, FMI version) and that of its reference results."""
+    toolchain, platforms, FMI version), that of its reference results, and an observer's
+    ``design`` content (every figure the FMU is made from, not only the inputs the design was
+    solved from: ``design_file.reproducible`` without its runtime tables, which are computed from
+    it by code its identity holds)."""
     from . import identity
+    from .synthesis import design_file, tables
 
-    return {"fmu": identity.of_fmu(p.base, p.backend, p.platforms, p.fmi).sha256, "reference": p.reference,
-            "name": p.name}
+    parts = {"fmu": identity.of_fmu(p.base, p.backend, p.platforms, p.fmi).sha256, "reference": p.reference,
+             "name": p.name}
+    if design is not None:
+        parts["design"] = identity.sha256_json(
+            design_file.reproducible({k: v for k, v in design.items() if k != tables.TABLES_KEY}))
+    return parts
 
 
 def _cache_files(p: _Artefact) -> list[Path]:
     return [*([p.design_path] if p.design_path is not None else []), p.fmu]
 
 
-def _from_cache(p: _Artefact) -> bool:
-    """Install ``p``'s FMU (and its design file) from the cache (under the folder's lock, as one
-    unit, the FMU last); True if it is then current, else (a miss, or an entry that is not what its
-    key says) False and the caller builds it."""
+def _in_cache(p: _Artefact) -> bool:
+    """Whether the cache holds ``p``'s FMU, as far as can be told without solving: a plant's by its
+    identity; an observer's when its design is known (the sealed design file of the same inputs
+    beside it, or the cached design of its inputs) and the FMU of that design content is held."""
     from . import cache
 
-    found = cache.files("fmu", _cache_parts(p))
+    if p.design_path is None:
+        return cache.files("fmu", _cache_parts(p, None)) is not None
+    design = _current_design(p, quiet=True)
+    if design is None and cache.peek("design", _design_cache_parts(p.base)) is not None:
+        design = solve(p.model, p.vehicle, quiet=True)   # the cached design, completed as a build completes it
+    return design is not None and cache.files("fmu", _cache_parts(p, design)) is not None
+
+
+def _from_cache(p: _Artefact, design: dict | None) -> bool:
+    """Install ``p``'s FMU (and its design file) made from ``design`` (None: a plant) from the
+    cache (under the folder's lock, as one unit, the FMU last); True if it is then current, else (a
+    miss, or an entry that is not what its key says) False and the caller builds it."""
+    from . import cache
+
+    found = cache.files("fmu", _cache_parts(p, design))
     return found is not None and _install(p, found)
 
 
-def _to_cache(p: _Artefact) -> None:
-    """Store the FMU just built for ``p`` (and its design file) in the cache."""
+def _to_cache(p: _Artefact, design: dict | None) -> None:
+    """Store the FMU just built for ``p`` from ``design`` (and its design file) in the cache."""
     from . import cache
 
     if not cache.enabled() or not p.current(True)[0]:
@@ -468,7 +504,7 @@ def _to_cache(p: _Artefact) -> None:
         content = {path.name: path.read_bytes() for path in _cache_files(p)}
     except OSError:
         return
-    cache.store_files("fmu", _cache_parts(p), content)
+    cache.store_files("fmu", _cache_parts(p, design), content)
 
 
 #: The reference experiment an FMU carries: the first ``seconds`` of its own validation
@@ -666,22 +702,45 @@ def model_identifier(path: Path) -> str:
     return read_model_description(str(path)).coSimulation.modelIdentifier
 
 
-def _current_design(p: _Artefact) -> dict | None:
-    """The design file beside ``p``'s FMU if it was made from the same inputs (not solved again);
-    for an FMI 3.0 FMU, else the one beside its FMI 2.0 twin (the same design either way)."""
+def _design_paths(p: _Artefact) -> list[Path]:
+    """Where a design file of ``p`` may stand: beside its FMU; for an FMI 3.0 FMU also beside its
+    FMI 2.0 twin (the same design either way)."""
+    return [p.design_path, *([p.fmu.parent.parent / p.design_path.name] if p.fmi != 2 else [])]
+
+
+def _refuse_edited(plans: list[_Artefact]) -> None:
+    """PipelineError if a design file a build would read or replace was edited by hand (its content
+    does not match its seal, ``design_file.seal_state``): it is neither packaged nor silently
+    overwritten, and nothing is stored in the cache from it."""
     from .synthesis import design_file
 
-    paths = [p.design_path]
-    if p.fmi != 2:
-        paths.append(p.fmu.parent.parent / p.design_path.name)
-    for path in paths:
+    for p in plans:
+        for path in (_design_paths(p) if p.design_path is not None else []):
+            try:
+                data = design_file.read(path)
+            except ValueError:
+                continue                                  # missing or not a design file: made anew
+            if design_file.seal_state(data) == "broken":
+                raise PipelineError(design_file.edited_message(path))
+
+
+def _current_design(p: _Artefact, quiet: bool = False) -> dict | None:
+    """The design file beside ``p``'s FMU (:func:`_design_paths`) if it was made from the same
+    inputs, certified and sealed (not solved again); PipelineError if it names the same inputs
+    but its content is not what latobs wrote (:func:`_refuse_edited`)."""
+    from .synthesis import design_file
+
+    for path in _design_paths(p):
         try:
             data = design_file.read(path)
         except ValueError:
             continue
         if (data.get("identity") or {}).get("sha256") != p.base.sha256 or not data.get("certified"):
             continue
-        print(f"{p.name}: {path} was made from the same inputs: packaged without solving again")
+        if design_file.seal_state(data) != "sealed":      # the same inputs named, another content
+            raise PipelineError(design_file.edited_message(path))
+        if not quiet:
+            print(f"{p.name}: {path} was made from the same inputs: packaged without solving again")
         return data
     return None
 

@@ -43,13 +43,52 @@ def is_wall_time(key: str) -> bool:
 
 
 def reproducible(data):
-    """``data`` without its wall-clock figures (:func:`is_wall_time`), at any depth: what an FMU
-    carries of its design."""
+    """``data`` without its wall-clock figures (:func:`is_wall_time`), at any depth, and without
+    its seal (:data:`SEAL_KEY`): what an FMU carries of its design."""
     if isinstance(data, dict):
-        return {k: reproducible(v) for k, v in data.items() if not is_wall_time(str(k))}
+        data = {k: v for k, v in data.items() if k != SEAL_KEY}
+    return _without_wall_time(data)
+
+
+def _without_wall_time(data):
+    if isinstance(data, dict):
+        return {k: _without_wall_time(v) for k, v in data.items() if not is_wall_time(str(k))}
     if isinstance(data, (list, tuple)):
-        return [reproducible(v) for v in data]
+        return [_without_wall_time(v) for v in data]
     return data
+
+
+#: the key of a written design file holding the SHA-256 of the rest of it (canonical JSON,
+#: ``synthesis.identity.sha256_json``): a file whose content no longer matches was edited by hand
+SEAL_KEY = "content_sha256"
+
+
+def sealed(data: dict) -> dict:
+    """``data`` with its seal (:data:`SEAL_KEY`, last): what :func:`write` writes."""
+    from .identity import sha256_json
+
+    body = {k: v for k, v in data.items() if k != SEAL_KEY}
+    return {**body, SEAL_KEY: sha256_json(_plain(body))}
+
+
+def seal_state(data: dict) -> str:
+    """"sealed" (the content is what latobs wrote), "broken" (it carries a seal its content does
+    not match: edited by hand) or "missing" (no seal: a design in memory, or a file written by
+    another version or by hand)."""
+    from .identity import sha256_json
+
+    seal = data.get(SEAL_KEY)
+    if seal is None:
+        return "missing"
+    body = {k: v for k, v in data.items() if k != SEAL_KEY}
+    return "sealed" if seal == sha256_json(_plain(body)) else "broken"
+
+
+def edited_message(path: Path) -> str:
+    """What to tell a user whose design file does not match its seal."""
+    return (f"{path}: edited by hand (its content no longer matches its {SEAL_KEY}): run `latobs design` "
+            "to make it again, or remove it; a design is changed through its vehicle file or design options, "
+            "then designed and certified again")
 
 
 def path_of(data: dict, out_dir: Path) -> Path:
@@ -65,9 +104,10 @@ def path_of(data: dict, out_dir: Path) -> Path:
 
 
 def write(data: dict, out_dir: Path) -> Path:
+    """Write ``out_dir/NAME.design.json`` (:func:`path_of`), sealed (:func:`sealed`)."""
     path = path_of(data, out_dir)
     with locked_folder(out_dir, "design"):
-        return atomic_write_text(path, dumps(data))
+        return atomic_write_text(path, dumps(sealed(data)))
 
 
 def read(path: Path) -> dict:

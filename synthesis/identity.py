@@ -111,11 +111,15 @@ def of_plant(plant: str, artefact: str, vehicle) -> Identity:
 
 def of_data(data: dict) -> Identity:
     """The identity of a design or plant data dict: the identity it carries (``identity``, see
-    :func:`of_design`), else its content (a design made or edited outside the catalogue)."""
-    carried = data.get("identity")
-    if isinstance(carried, dict) and isinstance(carried.get("parts"), dict):
-        return Identity(dict(carried["parts"]))
+    :func:`of_design`), else its content (a design made or edited outside the catalogue: also one
+    whose seal its content does not match, ``design_file.seal_state``: the inputs it names are not
+    what it was made from)."""
     from . import design_file
+
+    carried = data.get("identity")
+    if (isinstance(carried, dict) and isinstance(carried.get("parts"), dict)
+            and design_file.seal_state(data) != "broken"):
+        return Identity(dict(carried["parts"]))
 
     content = design_file.dumps(design_file.reproducible(data)).encode()
     return Identity({"kind": "data", "data": hashlib.sha256(content).hexdigest(), "latobs": __version__})

@@ -142,7 +142,7 @@ def test_a_design_file_of_the_same_inputs_is_packaged_without_solving_again(tmp_
     """A design is solved only when its inputs change: the FMU missing beside a current design
     file (e.g. a build killed after the design) is packaged from it."""
     out = tmp_path / "fmus"
-    monkeypatch.setattr(pipeline, "_from_cache", lambda p: False)    # packaged here, not from the cache
+    monkeypatch.setattr(pipeline, "_from_cache", lambda p, design: False)    # packaged here, not from the cache
     data = complete_runtime_data(designs.run("LateralIntervalObserver"))   # as `latobs design` writes it
     design_file.write(data, out)
 
@@ -343,7 +343,7 @@ def _wait_line(proc, text: str) -> bool:
 
 def test_a_failed_packaging_writes_neither_file(tmp_path, monkeypatch):
     out = tmp_path / "fmus"
-    monkeypatch.setattr(pipeline, "_from_cache", lambda p: False)    # packaged here, not from the cache
+    monkeypatch.setattr(pipeline, "_from_cache", lambda p, design: False)    # packaged here, not from the cache
     monkeypatch.setattr(packaging, "seal_fmu", lambda *a, **k: ["an invented problem"])
     with pytest.raises(packaging.PackagingError, match="an invented problem"):
         build(["LateralIntervalObserver"], None, out, backend="python")

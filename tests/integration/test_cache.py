@@ -259,3 +259,131 @@ def test_a_common_object_is_compiled_once_for_every_library_and_only_from_what_i
     sneaky = {**src, "layer.c": b'#include "other.h"\n' + src["layer.c"], "other.h": b"/* not declared */\n"}
     with pytest.raises(toolchain.ToolchainError, match="other.h"):
         build("a", sneaky)
+
+
+# ---------------------------------------------------------------------------------------------
+# content-addressed means content (issue 47, item 1)
+# ---------------------------------------------------------------------------------------------
+def _edit_noise(path, value=0.1):
+    """Edit the Kalman peer's design file by hand: its first measurement-noise variance (10 -> 0.1)."""
+    import json
+
+    data = json.loads(path.read_text())
+    data["noise"]["r"][0][0] = value
+    path.write_text(json.dumps(data, indent=1) + "\n")
+
+
+@pytest.mark.slow
+def test_a_design_file_edited_beside_its_fmu_is_refused_and_never_cached(tmp_path, monkeypatch, capsys):
+    """The issue's reproduction: R[0][0] of SideslipKalmanFilter.design.json edited beside its FMU
+    (10 -> 0.1), built again. The build refuses (exit 2, naming the file and what to do) whether or
+    not the cache holds the unedited FMU; the user's file is left as they wrote it, the FMU beside it
+    untouched; nothing is stored in the cache from it; a build into a fresh folder installs the
+    unedited FMU, whose design file is sealed. Packaged on purpose (``packaging.package_design``),
+    the edited design is a new design: identified by its content, certified again."""
+    from latobs import identity
+    from latobs.cli import main
+    from latobs.pipeline import PipelineError, build
+    from latobs.synthesis import design_file
+
+    root = tmp_path / "cache"
+    monkeypatch.setenv(cache.ENV_DIR, str(root))
+    name = "SideslipKalmanFilter"
+    fmu, = build([name], None, tmp_path / "a", backend="python")
+    design = fmu.with_name(f"{name}.design.json")
+    assert design_file.seal_state(design_file.read(design)) == "sealed"
+    original_fmu, original_design = fmu.read_bytes(), design.read_bytes()
+    _edit_noise(design)
+    edited = design.read_bytes()
+    entries = _fmu_entries(root)
+    for cached in (True, False):
+        if not cached:
+            import shutil
+
+            shutil.rmtree(root)
+        with pytest.raises(PipelineError, match="edited by hand"):
+            build([name], None, tmp_path / "a", backend="python")
+        capsys.readouterr()
+        assert main(["build", name, "--backend", "python", "--out", str(tmp_path / "a")]) == 2
+        err = capsys.readouterr().err
+        assert str(design) in err and "latobs design" in err and err.count("\n") == 1, err
+        assert design.read_bytes() == edited and fmu.read_bytes() == original_fmu
+        assert _fmu_entries(root) == (entries if cached else [])
+    # a fresh folder: the unedited design, solved again (the cache was emptied), sealed
+    fresh, = build([name], None, tmp_path / "b", backend="python")
+    again = design_file.read(fresh.with_name(design.name))
+    assert design_file.seal_state(again) == "sealed" and again["noise"]["r"][0][0] == 10.0
+    assert fresh.read_bytes() == original_fmu
+    # packaged on purpose: certified again (its runtime tables, still the unedited design's, fail the
+    # certificate); without them, another design: its content's identity, not the inputs'
+    with pytest.raises(packaging.PackagingError, match="not certified"):
+        packaging.package_design(design, tmp_path / "c")
+    import json
+
+    data = json.loads(design.read_text())
+    del data["tables"]
+    design.write_text(json.dumps(data))
+    other = packaging.package_design(design, tmp_path / "c")
+    parts = identity.read_fmu(other).parts
+    assert parts["kind"] == "data" and parts != identity.read_fmu(fmu).parts
+    assert original_design != edited
+
+
+@pytest.mark.slow
+def test_a_patched_or_truncated_cache_entry_is_rejected_and_replaced(tmp_path, monkeypatch, capsys):
+    """A cached FMU whose bytes were patched (here its binary: what a gain x10 looks like to the
+    cache) or cut short is not installed: the entry is checked against the hashes it holds, removed,
+    the FMU built again and the entry stored anew, so the build after that installs from the cache."""
+    from latobs.pipeline import build
+
+    root = tmp_path / "cache"
+    monkeypatch.setenv(cache.ENV_DIR, str(root))
+    first, = build(["CarPlant"], None, tmp_path / "a", backend="python")
+    good = first.read_bytes()
+    for n, damage in enumerate((lambda raw: raw[:len(raw) // 2] + bytes([raw[len(raw) // 2] ^ 1]) + raw[len(raw) // 2 + 1:],
+                                lambda raw: raw[:3000])):
+        entry, = _fmu_entries(root)
+        (entry / "CarPlant.fmu").write_bytes(damage(good))
+        capsys.readouterr()
+        again, = build(["CarPlant"], None, tmp_path / f"b{n}", backend="python")
+        out = capsys.readouterr().out
+        assert "from the cache" not in out and again.read_bytes() == good, out
+        entry, = _fmu_entries(root)                       # replaced, whole
+        assert (entry / "CarPlant.fmu").read_bytes() == good
+        third, = build(["CarPlant"], None, tmp_path / f"c{n}", backend="python")
+        assert "from the cache" in capsys.readouterr().out and third.read_bytes() == good
+
+
+def test_a_value_entry_is_checked_against_its_own_hash(tmp_path, monkeypatch):
+    """remember/peek: an entry whose value was changed (not its hash) is removed and computed again;
+    a whole one is read without computing."""
+    import json
+
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path))
+    calls = []
+    assert cache.remember("k", {"a": 1}, lambda: calls.append(1) or {"gain": 2.5}) == {"gain": 2.5}
+    assert cache.peek("k", {"a": 1}) == {"gain": 2.5} and cache.peek("k", {"a": 2}) is None
+    path, = (tmp_path / "k").glob("*.json")
+    doc = json.loads(path.read_text())
+    doc["value"]["gain"] = 25.0
+    path.write_text(json.dumps(doc))
+    assert cache.peek("k", {"a": 1}) is None and not path.exists()
+    assert cache.remember("k", {"a": 1}, lambda: calls.append(1) or {"gain": 2.5}) == {"gain": 2.5}
+    assert len(calls) == 2
+    assert cache.remember("k", {"a": 1}, lambda: calls.append(1) or {"gain": 9.0}) == {"gain": 2.5}
+    assert len(calls) == 2
+
+
+def test_a_files_entry_missing_a_file_or_its_index_is_a_miss(tmp_path, monkeypatch):
+    monkeypatch.setenv(cache.ENV_DIR, str(tmp_path))
+    content = {"A.fmu": b"x" * 1000, "A.design.json": b"{}"}
+    cache.store_files("fmu", {"k": 1}, content)
+    assert cache.files("fmu", {"k": 1}) == content
+    entry = tmp_path / "fmu" / cache.key("fmu", {"k": 1})
+    (entry / "A.design.json").unlink()
+    assert cache.files("fmu", {"k": 1}) is None and not entry.exists()
+    cache.store_files("fmu", {"k": 1}, content)
+    (entry / ".files.json").write_text('["A.fmu", "A.design.json"]')     # the old layout: no hashes
+    assert cache.files("fmu", {"k": 1}) is None
+    cache.store_files("fmu", {"k": 1}, content)
+    assert cache.files("fmu", {"k": 1}) == content

@@ -252,3 +252,31 @@ def test_latobs_check_passes_on_the_other_platforms(name, platform, built_fmus, 
     code, out, err = _cli(fmu, "--platform", platform)
     assert code == 0, out + err
     assert out.startswith(f"PASS  {name}  ") and f"  {platform}: " in out, out
+
+
+def test_check_verifies_the_seal_and_survives_a_crashing_binary(built_fmus, tmp_path):
+    """`latobs check` fails (exit 1, one FAIL line each, the command itself alive) an FMU whose model
+    description or embedded design was edited after the build (its manifest's hashes), and one whose
+    binary is damaged so that loading it crashes the host process: the run happens in a child
+    process, and the signal that ended it is named."""
+    fmu = built_fmus.c_path("SideslipKalmanFilter")
+    code, out, err = _cli(fmu)
+    assert code == 0 and out.startswith("PASS  SideslipKalmanFilter  seal  all: every member"), out + err
+    so = next(n for n in _members(fmu) if n.startswith(f"binaries/{host_platform()}/"))
+    data = next(n for n in _members(fmu) if n.endswith(".design.json"))
+    edits = {
+        "model description": lambda f: {**f, "modelDescription.xml": f["modelDescription.xml"].replace(
+            b'description="', b'description="edited ', 1)},
+        "design": lambda f: {**f, data: f[data].replace(b'"certified": true', b'"certified": false', 1)},
+        "binary": lambda f: {**f, so: f[so][:len(f[so]) // 2]},
+        "a member added": lambda f: {**f, "resources/extra.txt": b"added"},
+    }
+    for what, change in edits.items():
+        altered = _rewrite(fmu, tmp_path / f"{what.replace(' ', '_')}.fmu", change)
+        assert _members(altered) != _members(fmu)
+        code, out, err = _cli(altered)
+        assert code == 1 and not err, (what, out, err)
+        seal = out.splitlines()[0]
+        assert seal.startswith("FAIL") and " seal " in seal, (what, out)
+        if what == "binary":
+            assert "crashed the host process (SIG" in out or "the run failed" in out, out
