@@ -212,7 +212,9 @@ def check_record(cols: Mapping[str, np.ndarray], tune_until: float, source: str 
     if t[tune].size < 2 or t[tune][-1] - t[0] < MIN_TUNING_SECONDS:
         raise IdentificationError(f"{source}: the tuning part (t < {tune_until:g} s) lasts "
                                   f"{(t[tune][-1] - t[0]) if t[tune].size else 0.0:.3g} s; at least "
-                                  f"{MIN_TUNING_SECONDS:g} s are needed")
+                                  f"{MIN_TUNING_SECONDS:g} s are needed"
+                                  + (f" (T is in the record's time, which starts at t = {t[0]:.12g} s)"
+                                     if tune_until <= t[0] else ""))
     for c in REQUIRED[1:]:
         bad = ~np.isfinite(np.asarray(cols[c], dtype=float)[tune])
         if bad.any():
