@@ -3,7 +3,7 @@ finds on its tuning part (t < 425 s): the reference lateral velocity's enclosure
 the bounds and the restarts per minute (``consistent`` falling to 0), on the tuning and the held-out
 part, as the measurement-error bounds (the FMU parameters yaw_rate_error_bound, ay_error_bound)
 vary: the quantile of the tuning part's sensor residuals they are taken at
-(``synthesis.identification.measurement_error_bounds``; identify writes the 99.9 % quantile).
+(``synthesis.identification.measurement_error_bounds``; identify writes the 99.99 % quantile).
 
     python benchmarks/interval_mbds.py [--box F] [--out DIR] [--more]
 

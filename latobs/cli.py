@@ -207,15 +207,29 @@ def _cmd_identify(args) -> int:
     else:
         tune_until = default_split(path)
         what = f"t < {tune_until:g} s (the record's tuning part; t >= {tune_until:g} s is held out)"
+    from tqdm import tqdm
+
+    # one tick per simulation of the record (the fit's evaluations, the bootstrap's Jacobian, the
+    # residuals): its count is not known before the fit converges, so the bar counts and times them
+    bar = tqdm(desc="identify: simulations of the record", unit="sim", mininterval=0.5, leave=False,
+               disable=None)        # (None: off when stderr is not a terminal)
     try:
         result = identification.identify(cols, base, tune_until, use_beta=not args.without_beta,
-                                         source=str(args.record))
+                                         source=str(args.record), progress=lambda stage: bar.update())
     except identification.IdentificationError as exc:
         raise CliError(str(exc)) from None
+    finally:
+        bar.close()
     doc = identification.vehicle_document(result, base, name, path.name if args.record != MBDS_ALIAS else "mbds",
                                           what, __version__)
     atomic_write_text(out, "# Written by latobs identify; see [identification] for how.\n" + tomli_w.dumps(doc))
     print(f"identified on {what}, {result.samples} samples, fitting {', '.join(result.signals)}:")
+    if result.capped_at is not None:
+        print(f"  the fit stopped at t = {result.capped_at:.6g} s: at most {identification.MAX_FIT_SAMPLES} fitted "
+              "samples (time and memory; the error bounds use the whole tuning part)")
+    for k, ts in result.glitches.items():
+        shown = ", ".join(f"{x:.6g}" for x in ts[:5]) + (", ..." if len(ts) > 5 else "")
+        print(f"  {len(ts)} glitch(es) in {k} repaired and left out (t = {shown} s): see [identification] glitches")
     for k, v, (lo, hi), kappa in (("Cf", result.Cf, result.Cf_interval, result.tire_ratios[0]),
                                   ("Cr", result.Cr, result.Cr_interval, result.tire_ratios[1])):
         slope = f"; the slope at zero slip: fitted / {kappa:.4f} on {base.name}'s tire curve" if kappa != 1.0 else ""
@@ -229,7 +243,8 @@ def _cmd_identify(args) -> int:
         print(f"  residual RMS {k}: {result.rms[k]:.4g} (with {base.name}'s values: {result.rms_base[k]:.4g})")
     for k, (bound, rms) in result.error_bounds.items():
         print(f"  {identification.NOISE_SIGNALS[k]} = {bound:.4g} {'rad/s' if k == 'yaw_rate' else 'm/s^2'} "
-              f"(measurement noise RMS {rms:.4g}; the interval observer's bound)")
+              f"(measurement noise RMS {rms:.4g}; the interval observer's bound; "
+              f"{identification.robust_basis(result, k)})")
     print(f"wrote {out}; next: latobs build NAME --vehicle {out}, latobs replay {args.record} --vehicle {out} "
           "--observer NAME")
     return 0

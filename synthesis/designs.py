@@ -27,15 +27,16 @@ class ArtefactNameError(ValueError):
 #: an FMI modelIdentifier (and so an FMU's file name): ASCII letters, digits and underscores, not
 #: starting with a digit. A vehicle's name is appended to a model's after "_" (``NAME_V``).
 MODEL_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-_NAME_PART = re.compile(r"[A-Za-z0-9_]+\Z")
 
 
 def check_vehicle_name(vehicle: str, origin: str = "") -> str:
-    """``vehicle`` (a parameter set's ``name``) if it can name an FMU, else ArtefactNameError."""
-    if not _NAME_PART.match(vehicle):
-        raise ArtefactNameError(f"{origin + ': ' if origin else ''}vehicle name {vehicle!r} cannot name an FMU "
-                                "(FMU names NAME_VEHICLE are FMI modelIdentifiers: ASCII letters, digits and "
-                                "underscores only)")
+    """``vehicle`` (a parameter set's ``name``) if it can name an FMU (the rule vehicle files are
+    loaded by: ``params.vehicle_name_problem``), else ArtefactNameError."""
+    from .params import vehicle_name_problem
+
+    problem = vehicle_name_problem(vehicle)
+    if problem:
+        raise ArtefactNameError(f"{origin + ': ' if origin else ''}{problem}")
     return vehicle
 
 

@@ -30,10 +30,11 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
+from ..data.checks import unit_findings, uniform_step
 from .lateral_interval_observer import ERROR_BOUND_PARAMETERS
 from .params import G, Vehicle
 from .relaxation_model import coefficients
@@ -52,6 +53,11 @@ SCALE_BOUNDS = (0.2, 5.0)     # the stiffness scales searched, x the base vehicl
 #: the yaw inertia is identified with Cf, Cr when the record's transients reveal it: its 95 %
 #: interval within +-IZ_MAX_SPREAD of the fit (relative), else it stays the base vehicle's, and why
 IZ_MAX_SPREAD = 0.15
+#: the fit simulates at most this many fitted samples (the first of the tuning part; 10 min at
+#: 100 Hz, twice the MBDS record's tuning part): time and memory stay bounded on a long record
+#: (a fit costs about 0.2 ms per fitted sample; the bootstrap's blocks hold the rest of the spread)
+MAX_FIT_SAMPLES = 60_000
+SIM_CHUNK = 8192              # samples discretised at once (memory: a few MB)
 
 
 class IdentificationError(ValueError):
@@ -79,21 +85,39 @@ class Identified:
     Iz: float | None = None                # kg m^2, when identified (else the base vehicle's stays)
     Iz_interval: tuple[float, float] | None = None
     not_identified: dict = field(default_factory=dict)     # {parameter: why the record does not reveal it}
+    glitches: dict = field(default_factory=dict)           # {signal: [t of each glitch repaired]} (find_glitches)
+    rejected: dict = field(default_factory=dict)           # {signal: samples the error bound rejected}
+    capped_at: float | None = None                         # s: the fit stopped there (MAX_FIT_SAMPLES)
 
 
 #: the measurement-error bounds: the residual of each sensor about its zero-phase low-pass
 #: (2nd-order Butterworth, forward and backward) at NOISE_CUTOFF_HZ, above a car's lateral dynamics
-#: (about 1-2 Hz) and below the vibration, at the NOISE_QUANTILE of its magnitude over the tuning part
+#: (about 1-2 Hz) and below the vibration, at the NOISE_QUANTILE of its magnitude over the tuning
+#: part, glitches repaired and left out (:func:`find_glitches`), and the samples farther than
+#: NOISE_REJECT_K robust standard deviations (1.4826 x the median absolute deviation) rejected: a
+#: few bad samples cannot set the bound (a clean record's residual stays within the limit: on the
+#: MBDS record at most 8.6 of them, none rejected)
 NOISE_SIGNALS = dict(zip(("yaw_rate", "ay"), ERROR_BOUND_PARAMETERS))     # {signal: vehicle parameter}
 NOISE_CUTOFF_HZ = 5.0
 NOISE_QUANTILE = 0.9999
+NOISE_REJECT_K = 12.0
 
 
-def measurement_error_bounds(cols: Mapping[str, np.ndarray], fit: np.ndarray) -> dict[str, tuple[float, float]]:
+def robust_sigma(x: np.ndarray) -> float:
+    """1.4826 x the median absolute deviation of ``x`` from its median: the standard deviation of a
+    normal sample, unmoved by a few outliers of any size."""
+    x = np.asarray(x, dtype=float)
+    return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size else 0.0
+
+
+def measurement_error_bounds(cols: Mapping[str, np.ndarray], fit: np.ndarray, rejected: dict | None = None
+                             ) -> dict[str, tuple[float, float]]:
     """{signal: (bound, RMS)} of the yaw rate's (rad/s) and ay's (m/s^2) measurement error on the
     samples ``fit``: the NOISE_QUANTILE of |y - lowpass(y)| (see NOISE_CUTOFF_HZ; at most 0.4 x the
-    Nyquist frequency of a slower record). A bound, not a model: the sensor's noise, vibration and
-    quantisation as the record shows them; a bias common to the whole drive is not visible here."""
+    Nyquist frequency of a slower record) over the samples within NOISE_REJECT_K robust standard
+    deviations (``rejected``, when given, gets {signal: the number of samples rejected}). A bound,
+    not a model: the sensor's noise, vibration and quantisation as the record shows them; a bias
+    common to the whole drive is not visible here. ``cols``: glitches already repaired."""
     from scipy.signal import butter, filtfilt
 
     t = np.asarray(cols["t"], dtype=float)
@@ -103,26 +127,74 @@ def measurement_error_bounds(cols: Mapping[str, np.ndarray], fit: np.ndarray) ->
     out = {}
     for k in NOISE_SIGNALS:
         y = np.asarray(cols[k], dtype=float)
-        e = np.abs(y - filtfilt(b, a, y))[fit]
+        r = (y - filtfilt(b, a, y))[fit]
+        keep = np.abs(r - np.median(r)) <= NOISE_REJECT_K * robust_sigma(r) if r.size else np.ones(0, bool)
+        if rejected is not None:
+            rejected[k] = int(r.size - keep.sum())
+        e = np.abs(r[keep]) if keep.any() else np.abs(r)
         out[k] = (float(np.quantile(e, NOISE_QUANTILE)), float(np.sqrt(np.mean(e ** 2))))
     return out
 
 
-def _uniform_time(t: np.ndarray, source: str) -> float:
-    if t.ndim != 1 or len(t) < 3 or not np.all(np.isfinite(t)):
-        raise IdentificationError(f"{source}: column 't' must hold at least 3 finite times")
-    dt = np.diff(t)
-    h = float(np.median(dt))
-    if not h > 0 or np.any(np.abs(dt - h) > 1e-6 * max(h, 1e-9) + 1e-9):
-        k = int(np.argmax(np.abs(dt - h)))
-        raise IdentificationError(f"{source}: the time column is not uniform (step {dt[k]:.6g} s at t = {t[k]:.6g} s, "
-                                  f"median {h:.6g} s): resample the record to a fixed step first")
-    return h
+#: glitches: samples of the record's signals that are not measurements. A sample is one when no
+#: car reaches it (|value| beyond GLITCH_IMPOSSIBLE, SI) or when it stands alone: farther from the
+#: running median of GLITCH_WINDOW samples than GLITCH_K robust standard deviations of that
+#: difference and GLITCH_FLOOR of the signal's range (its 0.5 ... 99.5 percentiles; a signal that
+#: is mostly flat has no deviation to speak of). The running median follows steps and ramps, so
+#: only a spike of at most (GLITCH_WINDOW - 1) / 2 samples stands out. Each glitch is replaced by
+#: the line between its neighbours and left out of the fit and of the error bounds; the times are
+#: reported. More than GLITCH_MAX_FRACTION of a column: refused (the record is damaged, not glitchy).
+#: (The MBDS record: four one-sample steering spikes of 0.13 to 0.5 rad, one at t = 207.27 s in the
+#: tuning part.) Non-finite values are refused, not repaired (check_record names the row).
+GLITCH_SIGNALS = ("delta", "vx", "yaw_rate", "ay", "beta")
+GLITCH_IMPOSSIBLE = {"delta": 1.2, "vx": 120.0, "yaw_rate": 5.0, "ay": 60.0, "beta": 1.2}
+GLITCH_WINDOW = 5
+GLITCH_K = 15.0
+GLITCH_FLOOR = 0.1
+GLITCH_MAX_FRACTION = 0.01
 
 
-def check_record(cols: Mapping[str, np.ndarray], tune_until: float, source: str = "the record") -> np.ndarray:
+def find_glitches(cols: Mapping[str, np.ndarray], source: str = "the record"
+                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(the record with its glitches repaired (new arrays where repaired), {signal: indices of its
+    glitches}) of the :data:`GLITCH_SIGNALS` present (finite values: see :data:`GLITCH_SIGNALS`'s
+    comment); IdentificationError when a column has more than GLITCH_MAX_FRACTION of them."""
+    from scipy.ndimage import median_filter
+
+    out, found = dict(cols), {}
+    for k in GLITCH_SIGNALS:
+        if k not in cols:
+            continue
+        y = np.asarray(cols[k], dtype=float)
+        if not np.all(np.isfinite(y)):       # refused where it matters (check_record, identify's beta)
+            continue
+        bad = np.abs(y) > GLITCH_IMPOSSIBLE[k]
+        if y.size > GLITCH_WINDOW:
+            d = y - median_filter(y, GLITCH_WINDOW, mode="nearest")
+            ok = y[~bad]
+            span = float(np.percentile(ok, 99.5) - np.percentile(ok, 0.5)) if ok.size else 0.0
+            bad |= np.abs(d) > max(GLITCH_K * robust_sigma(d[~bad]), GLITCH_FLOOR * span)
+        if not bad.any():
+            continue
+        idx = np.flatnonzero(bad)
+        if idx.size > GLITCH_MAX_FRACTION * y.size:
+            t = np.asarray(cols["t"], dtype=float)
+            raise IdentificationError(f"{source}: column {k!r} has {idx.size} glitches (samples no car reaches or that "
+                                      f"stand alone, the first at data row {idx[0] + 1}, t = {t[idx[0]]:.6g} s): more "
+                                      f"than {100 * GLITCH_MAX_FRACTION:g} % of the column; clean the record first")
+        good = np.flatnonzero(~bad)
+        y = y.copy()
+        y[idx] = np.interp(idx, good, y[good])
+        out[k], found[k] = y, idx
+    return out, found
+
+
+def check_record(cols: Mapping[str, np.ndarray], tune_until: float, source: str = "the record",
+                 wheelbase: float | None = None, excitation: bool = True) -> np.ndarray | None:
     """The mask of the samples to fit (tuning part, moving), after checking the record: the columns
-    of :data:`REQUIRED` present and finite there, a uniform time step, a tuning part of at least
+    of :data:`REQUIRED` present and finite there, a uniform time step and SI units (the rules
+    ``latobs replay`` applies: :mod:`latobs.data.checks`; ``wheelbase``, m, for the steering angle's
+    test), a tuning part of at least
     :data:`MIN_TUNING_SECONDS` mostly above :data:`MIN_SPEED`, steering that excites the yaw
     dynamics. IdentificationError naming the culprit otherwise."""
     missing = [c for c in REQUIRED if c not in cols]
@@ -130,17 +202,32 @@ def check_record(cols: Mapping[str, np.ndarray], tune_until: float, source: str 
         raise IdentificationError(f"{source}: missing column(s) {', '.join(missing)} (needs {', '.join(REQUIRED)}; "
                                   "delta is the road-wheel angle, rad)")
     t = np.asarray(cols["t"], dtype=float)
-    _uniform_time(t, source)
+    if t.ndim != 1 or len(t) < 3:
+        raise IdentificationError(f"{source}: column 't' must hold at least 3 times")
+    uniform_step(t, source, IdentificationError)       # the rule latobs replay applies too
+    found = unit_findings(cols, wheelbase)
+    if found:
+        raise IdentificationError(f"{source}: not in SI units (s, rad, rad/s, m/s, m/s^2): {'; '.join(found)}")
     tune = t < tune_until
     if t[tune].size < 2 or t[tune][-1] - t[0] < MIN_TUNING_SECONDS:
         raise IdentificationError(f"{source}: the tuning part (t < {tune_until:g} s) lasts "
                                   f"{(t[tune][-1] - t[0]) if t[tune].size else 0.0:.3g} s; at least "
-                                  f"{MIN_TUNING_SECONDS:g} s are needed")
+                                  f"{MIN_TUNING_SECONDS:g} s are needed"
+                                  + (f" (T is in the record's time, which starts at t = {t[0]:.12g} s)"
+                                     if tune_until <= t[0] else ""))
     for c in REQUIRED[1:]:
         bad = ~np.isfinite(np.asarray(cols[c], dtype=float)[tune])
         if bad.any():
+            first = int(np.flatnonzero(tune)[np.argmax(bad)])
             raise IdentificationError(f"{source}: column {c!r} has {int(bad.sum())} non-finite value(s) in the tuning "
-                                      f"part, the first at t = {t[tune][bad][0]:.6g} s")
+                                      f"part, the first at data row {first + 1} (t = {t[first]:.6g} s): a record "
+                                      "with non-finite values is refused, not repaired")
+    return _check_excitation(cols, tune, source) if excitation else None
+
+
+def _check_excitation(cols: Mapping[str, np.ndarray], tune: np.ndarray, source: str) -> np.ndarray:
+    """The moving samples of the tuning part ``tune``; IdentificationError when too few, or when the
+    steering does not excite the yaw dynamics."""
     vx = np.asarray(cols["vx"], dtype=float)
     moving = tune & (vx > MIN_SPEED)
     if moving.sum() < MIN_MOVING_FRACTION * tune.sum():
@@ -229,18 +316,20 @@ def simulate(cols: Mapping[str, np.ndarray], vals: Mapping[str, float], x0: tupl
     else:                                    # paper 002's Kalman peer (states vy, r)
         A, B, _, _ = bicycle(vals, vx)
     n, k = len(t), A.shape[1]
-    M = np.zeros((n, k + 1, k + 1))          # Van Loan: exp([[A, B], [0, 0]] h) = [[Phi, Gam], [0, 1]]
-    M[:, :k, :k] = A * h[:, None, None]
-    M[:, :k, k] = B * h[:, None]
-    E = expm_stack(M)
-    Phi, Gam = E[:, :k, :k], E[:, :k, k]
     x = np.empty((n, k))
     xk = np.zeros(k)
     xk[0] = x0[0] if kind.startswith("roll") else x0[0] * vx[0]      # beta, or vy = beta vx
     xk[1] = x0[1]
-    for i in range(n):                      # x_{i+1} = Phi_i x_i + Gam_i delta_i
-        x[i] = xk
-        xk = Phi[i] @ xk + Gam[i] * delta[i]
+    for c in range(0, n, SIM_CHUNK):        # (each matrix's exponential is its own: the same doubles)
+        sl = slice(c, min(c + SIM_CHUNK, n))
+        M = np.zeros((sl.stop - c, k + 1, k + 1))   # Van Loan: exp([[A, B], [0, 0]] h) = [[Phi, Gam], [0, 1]]
+        M[:, :k, :k] = A[sl] * h[sl, None, None]
+        M[:, :k, k] = B[sl] * h[sl, None]
+        E = expm_stack(M)
+        Phi, Gam = E[:, :k, :k], E[:, :k, k]
+        for i in range(sl.stop - c):        # x_{i+1} = Phi_i x_i + Gam_i delta_i
+            x[c + i] = xk
+            xk = Phi[i] @ xk + Gam[i] * delta[c + i]
     m, lf, lr, cf, cr = (float(vals[q]) for q in ("m", "lf", "lr", "Cf", "Cr"))
     if kind.startswith("roll"):      # paper 000's beta is the roll axis point's; the CG's: vy_cg = vy - hr phi'
         beta = x[:, 0] - float(vals["hr"]) * x[:, 3] / vx
@@ -265,12 +354,29 @@ def record_sha256(cols: Mapping[str, np.ndarray]) -> str:
 
 
 def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, use_beta: bool = True,
-             source: str = "the record", seed: int = 0) -> Identified:
-    """Cf and Cr of the car that drove ``cols`` (:func:`check_record`; ``use_beta``: fit the
-    record's ``beta`` too when it has one), the rest of the model from ``base``; see the module."""
+             source: str = "the record", seed: int = 0, progress: Callable[[str], None] | None = None
+             ) -> Identified:
+    """Cf and Cr of the car that drove ``cols`` (:func:`check_record`, glitches repaired and left
+    out: :func:`find_glitches`; ``use_beta``: fit the record's ``beta`` too when it has one), the
+    rest of the model from ``base``; see the module. ``progress(stage)``: called at every
+    simulation of the record (a progress bar's tick; the CLI's)."""
     from scipy.optimize import least_squares
 
-    fit = check_record(cols, tune_until, source)
+    tick = progress or (lambda stage: None)
+    sha = record_sha256(cols)
+    wheelbase = base.value("lf") + base.value("lr") if "lf" in base.parameters and "lr" in base.parameters else None
+    check_record(cols, tune_until, source, wheelbase, excitation=False)
+    cols, glitch_idx = find_glitches(cols, source)
+    t = np.asarray(cols["t"], dtype=float)
+    glitch = np.zeros(t.size, dtype=bool)
+    for idx in glitch_idx.values():
+        glitch[idx] = True
+    fit = _check_excitation(cols, t < tune_until, source) & ~glitch
+    capped_at, fit_all = None, fit.copy()          # (the error bounds: the whole tuning part)
+    where = np.flatnonzero(fit)
+    if where.size > MAX_FIT_SAMPLES:
+        fit[where[MAX_FIT_SAMPLES:]] = False
+        capped_at = float(t[where[MAX_FIT_SAMPLES]])
     vals0 = vehicle_dict(base)
     vals0.update({k: base.value(k) for k in ("sigma", *ROLL) if k in base.parameters})
     signals = ["yaw_rate", "ay"] + (["beta"] if use_beta and "beta" in cols else [])
@@ -297,6 +403,7 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
     head_fit, head_meas = fit[:head], {k: v[:head] for k, v in meas.items()}
 
     def residual_parts(s: np.ndarray) -> dict[str, np.ndarray]:
+        tick("fit")
         sim = simulate(head_cols, values(s), x0)
         return {k: (sim[k][head_fit] - head_meas[k][head_fit]) / spread[k] for k in signals}
 
@@ -340,10 +447,11 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
                                   "angle in rad, ay in m/s^2)")
     if iz_box is None:
         interval = _bootstrap(cols, fit, signals, residual_parts, s_hat, seed)
-    kappa = _tire_curve_ratios(base, simulate(cols, values(s_hat), x0), fit, vals0, s_hat)
+    kappa = _tire_curve_ratios(base, simulate(head_cols, values(s_hat), x0), head_fit, vals0, s_hat)
     parts = residual_parts(s_hat)
     parts_base = residual_parts(np.ones(len(s_hat)))
-    t = np.asarray(cols["t"], dtype=float)
+    rejected: dict = {}
+    bounds = measurement_error_bounds(cols, fit_all, rejected)
     # the slope at zero slip: the fitted (effective) stiffness over the tire curve's ratio; the box
     # reaches from the effective stiffness to the zero-slip slope's interval
     zero = [s_hat[i] / kappa[i] for i in range(2)]
@@ -352,12 +460,13 @@ def identify(cols: Mapping[str, np.ndarray], base: Vehicle, tune_until: float, u
         Cf=float(vals0["Cf"] * zero[0]), Cr=float(vals0["Cr"] * zero[1]),
         Cf_interval=(float(vals0["Cf"] * box[0][0]), float(vals0["Cf"] * box[0][1])),
         Cr_interval=(float(vals0["Cr"] * box[1][0]), float(vals0["Cr"] * box[1][1])),
-        base=base.name, record_sha256=record_sha256(cols), tune_until=float(min(tune_until, t[-1] + 1e-9)),
+        base=base.name, record_sha256=sha, tune_until=float(min(tune_until, t[-1] + 1e-9)),
         samples=int(fit.sum()),
         rms={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts.items()},
         rms_base={k: float(np.sqrt(np.mean((v * spread[k]) ** 2))) for k, v in parts_base.items()},
         signals=signals, nfev=int(sol.nfev), tire_ratios=(float(kappa[0]), float(kappa[1])),
-        error_bounds=measurement_error_bounds(cols, fit),
+        error_bounds=bounds, rejected=rejected, capped_at=capped_at,
+        glitches={k: [float(x) for x in t[idx]] for k, idx in glitch_idx.items()},
         Iz=None if iz_box is None else float(vals0["Iz"] * s_hat[2]),
         Iz_interval=None if iz_box is None else (float(vals0["Iz"] * iz_box[0]), float(vals0["Iz"] * iz_box[1])),
         not_identified=not_identified)
@@ -460,8 +569,9 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
         doc["parameters"][NOISE_SIGNALS[k]] = {
             "value": float(f"{bound:.4g}"), "unit": unit,
             "description": f"bound of |measured - true| {k} (the interval observer's measurement-error bound)",
-            "source": f"identified: the {NOISE_QUANTILE:.1%} quantile of |{k} - its zero-phase "
-                      f"{NOISE_CUTOFF_HZ:g} Hz low-pass| on {tune_until_text} (RMS {rms:.4g} {unit})"}
+            "source": f"identified: the {100 * NOISE_QUANTILE:g} % quantile of |{k} - its zero-phase "
+                      f"{NOISE_CUTOFF_HZ:g} Hz low-pass| on {tune_until_text} (RMS {rms:.4g} {unit}), "
+                      f"{robust_basis(result, k)}"}
     ranges = doc.setdefault("ranges", {})
     for k, (lo, hi) in (("Cf", result.Cf_interval), ("Cr", result.Cr_interval)):
         ranges[k] = {"min": round(lo, 1), "max": round(hi, 1), "unit": "N/rad",
@@ -480,7 +590,27 @@ def vehicle_document(result: Identified, base: Vehicle, name: str, record: str, 
                              "meaning": "the stiffness a linear model fits over the drive's slip angles / the "
                                         "slope at zero slip, on the base vehicle's tire curve (1: none given)"},
         "identified": identified,
+        "glitches": {k: {"count": len(ts), "t": [round(x, 6) for x in ts[:GLITCH_LISTED]]}
+                     for k, ts in result.glitches.items()},
+        "glitch_rule": (f"a sample beyond {', '.join(f'{k} {v:g}' for k, v in GLITCH_IMPOSSIBLE.items())} (SI), or "
+                        f"farther from the running median of {GLITCH_WINDOW} samples than {GLITCH_K:g} robust "
+                        f"standard deviations (1.4826 MAD) and {100 * GLITCH_FLOOR:g} % of the signal's range: "
+                        "replaced by the line between its neighbours, left out of the fit and the error bounds "
+                        "(non-finite values are refused)"),
+        "error_bound_rejected": dict(result.rejected),
         "given": sorted(k for k in doc["parameters"] if k not in identified),
         "not_identified": dict(result.not_identified),
     }
+    if result.capped_at is not None:
+        doc["identification"]["fit_capped_at"] = result.capped_at
     return doc
+
+
+GLITCH_LISTED = 20      # glitch times listed per signal (the count is whole)
+
+
+def robust_basis(result: Identified, k: str) -> str:
+    """How the bound of ``k`` was made robust: glitches left out, far samples rejected."""
+    n = len(result.glitches.get(k, ()))
+    return (f"{n} glitch(es) left out, {result.rejected.get(k, 0)} sample(s) beyond {NOISE_REJECT_K:g} robust "
+            "standard deviations (1.4826 MAD) rejected")

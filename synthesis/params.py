@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -16,6 +17,25 @@ G = 9.81  # m/s^2, gravitational acceleration used by every model of this packag
 
 class VehicleParameterError(ValueError):
     """A vehicle parameter set is missing a value or holds an invalid one."""
+
+
+#: a vehicle's name: it names FMUs (``NAME_VEHICLE``: an FMI modelIdentifier, a C symbol prefix)
+#: and their files, so ASCII letters, digits and underscores, at most VEHICLE_NAME_MAX characters
+#: (the longest FMU name, SideslipFixedOrderEstimatorScheduled_V.design.json and its temporaries,
+#: then stays far below a file system's 255 bytes and Windows's 260-character paths)
+VEHICLE_NAME = re.compile(r"[A-Za-z0-9_]+\Z")
+VEHICLE_NAME_MAX = 64
+
+
+def vehicle_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot be a vehicle's name (see :data:`VEHICLE_NAME`), or None."""
+    if not VEHICLE_NAME.match(name):
+        return (f"vehicle name {name!r} cannot name an FMU (FMU names NAME_VEHICLE are FMI modelIdentifiers: "
+                "ASCII letters, digits and underscores only)")
+    if len(name) > VEHICLE_NAME_MAX:
+        return (f"vehicle name {name[:20]!r}... has {len(name)} characters, at most {VEHICLE_NAME_MAX} (it names "
+                "FMUs and their files)")
+    return None
 
 
 @dataclass(frozen=True)
@@ -129,6 +149,9 @@ def parse_vehicle(data: Mapping, origin: str) -> Vehicle:
         if key not in data:
             raise VehicleParameterError(f"{origin}: missing top-level key {key!r}")
     name = str(data["name"])
+    problem = vehicle_name_problem(name)
+    if problem:
+        raise VehicleParameterError(f"{origin}: {problem}")
     params: dict[str, Parameter] = {}
     for pname, entry in data["parameters"].items():
         if not isinstance(entry, Mapping) or "value" not in entry or "unit" not in entry:
@@ -154,17 +177,23 @@ def vehicle_names() -> list[str]:
 
 
 def load_vehicle(name_or_path: str | Path) -> Vehicle:
-    """Load a shipped set by name (``sedan``...) or any TOML file by path."""
+    """Load a shipped set by name (``sedan``...) or any TOML file by path (a file named as a shipped
+    set, ``name = "sedan"``, must hold that set: otherwise VehicleParameterError, rename it)."""
     path = Path(name_or_path)
     if path.suffix == ".toml" and path.exists():
-        text, origin = path.read_text(), str(path)
-    else:
-        names = vehicle_names()
-        if str(name_or_path) not in names:
-            raise VehicleParameterError(f"unknown vehicle {str(name_or_path)!r}; known: {', '.join(names)}")
-        res = resources.files(__package__) / "vehicles" / f"{name_or_path}.toml"
-        text, origin = res.read_text(), f"vehicles/{name_or_path}.toml"
-    return _parsed(text, origin)
+        vehicle = _parsed(path.read_text(), str(path))
+        if vehicle.name in vehicle_names() and vehicle != load_vehicle(vehicle.name):
+            # its FMUs would take the shipped car's names (NAME.fmu, NAME_V.fmu) and their cache
+            raise VehicleParameterError(
+                f"{path}: named {vehicle.name!r} like the shipped vehicle, but its content differs from it: give it "
+                f"a name of its own (name = \"my_{vehicle.name}\"), so that its FMUs are not named as the shipped "
+                f"car's (a file identical to the shipped {vehicle.name}.toml is that vehicle and keeps its name)")
+        return vehicle
+    names = vehicle_names()
+    if str(name_or_path) not in names:
+        raise VehicleParameterError(f"unknown vehicle {str(name_or_path)!r}; known: {', '.join(names)}")
+    res = resources.files(__package__) / "vehicles" / f"{name_or_path}.toml"
+    return _parsed(res.read_text(), f"vehicles/{name_or_path}.toml")
 
 
 @functools.lru_cache(maxsize=64)

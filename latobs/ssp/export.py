@@ -41,7 +41,8 @@ def default_observers(scenario) -> list[str]:
 
 def _check_out(out: Path) -> None:
     """Fail before any work if ``out`` cannot be written: it is a folder, or its nearest existing
-    ancestor is not a writable folder (nothing is created here)."""
+    ancestor is not a writable folder. Nothing is written here (a probe file in the nearest existing
+    ancestor was written outside --out: in / for ``--out /missing/x.ssp``)."""
     if out.is_dir():
         raise SspError(f"--out {out}: is a folder; give the .ssp file to write")
     anc = out.absolute().parent
@@ -49,12 +50,38 @@ def _check_out(out: Path) -> None:
         anc = anc.parent
     if not anc.is_dir():
         raise SspError(f"--out {out}: {anc} is a file, not a folder")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise SspError(f"--out {out}: cannot write in {anc}")
+
+
+def _write_package(out: Path, files: Mapping[str, bytes]) -> None:
+    """The package of ``files`` written to ``out`` atomically after :func:`check_package` passed.
+    The missing folders of ``out``'s parent are made (as asked) and removed again when the
+    package is not written: a failed export leaves nothing, a missing --out folder never makes
+    one elsewhere."""
+    from .. import packaging
+
+    made = [p for p in (out.absolute().parent, *out.absolute().parent.parents) if not p.exists()]
     try:
-        fd, probe = tempfile.mkstemp(prefix=".latobs-export.", suffix=".probe", dir=anc)
-        os.close(fd)
-        os.unlink(probe)
+        with atomic_path(out, suffix=".ssp") as tmp_ssp:
+            packaging.write_zip(tmp_ssp, files, stored=(".fmu",))
+            problems = check_package(tmp_ssp)
+            if problems:
+                raise SspError(f"the package would not be valid SSP 1.0, nothing written: {'; '.join(problems)}")
     except OSError as exc:
-        raise SspError(f"--out {out}: cannot write in {anc} ({exc.strerror or exc})") from None
+        _remove_empty(made)
+        raise SspError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
+    except BaseException:
+        _remove_empty(made)
+        raise
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for p in folders:                   # deepest first
+        try:
+            p.rmdir()
+        except OSError:
+            break
 
 
 def export_ssp(scenario, observers: list[str] | None = None, out: Path | None = None,
@@ -149,14 +176,7 @@ def export_ssp(scenario, observers: list[str] | None = None, out: Path | None = 
         desc = (f"latobs validate {sc.name}: {plant.model_name} ({vehicle_name}) beside "
                 f"{', '.join(observers) or 'no observer'}; {sc.description}")
         files[SSD_NAME] = ssd_bytes(sc.name, desc, components, conns, float(t[0]), float(t[-1]), dt, info)
-        try:
-            with atomic_path(out, suffix=".ssp") as tmp_ssp:
-                packaging.write_zip(tmp_ssp, files, stored=(".fmu",))
-                problems = check_package(tmp_ssp)
-                if problems:
-                    raise SspError(f"the package would not be valid SSP 1.0, nothing written: {'; '.join(problems)}")
-        except OSError as exc:
-            raise SspError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
+        _write_package(out, files)
     if not quiet:
         print(f"wrote {out}: {len(components)} components ({SOURCE_LABEL}, {PLANT_LABEL}: {plant_path.name}, "
               f"{', '.join(observers)}), {len(conns)} connections, step {dt:g} s, stop {float(t[-1]):g} s; "

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -13,6 +14,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from ..atomic import sha256_file  # noqa: F401  (also this module's: the record's identity)
+from ..data import checks as _checks
 from ..data import records as _records
 from . import baselines as _baselines
 from . import metrics as _metrics
@@ -25,8 +27,7 @@ MBDS_ALIAS = "mbds"
 MBDS_VEHICLE = "mbds_250lm"
 #: Default split time (s) per file name: the MBDS record is tuned on t < 425 s, tested on the rest.
 DEFAULT_SPLITS = {"mbds_250lm_100hz.csv.gz": 425.0, "mbds_250lm_100hz.csv": 425.0}
-UNIFORM_RTOL = 1e-6   # allowed relative deviation of each time step from the mean step
-UNIFORM_ULPS = 8      # plus this many ulps of max|t|: the rounding of the times as doubles
+UNIFORM_RTOL, UNIFORM_ULPS = _checks.UNIFORM_RTOL, _checks.UNIFORM_ULPS   # the time axis's rule (data.checks)
 ZOOM_S = 20.0         # length of the zoomed figure's window, s
 FORCE_BOUNDS = ("Fyf_lower", "Fyr_lower", "Fyf_upper", "Fyr_upper")
 
@@ -79,31 +80,12 @@ def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 
 def uniform_step(t: np.ndarray, source: Any = "the record") -> float:
-    """The time step of ``t`` (s): the mean step, when the record is uniform.
-
-    Time is judged relative to the first sample (tau = t - t_0): every step tau_k+1 - tau_k must
-    be within ``UNIFORM_RTOL * dt + UNIFORM_ULPS`` ulps of max|t| of the mean step dt. The ulps
-    term is the rounding of the times as doubles: a 50 Hz record in Unix time (t ~ 1.7e9 s, one
-    ulp = 2.4e-7 s) has steps that differ from 0.02 s by a few 1e-7 s although it is uniform.
-    Otherwise a ReplayError names the step that departs most from the usual (median) step, where
-    it is (data rows and times) and by how much.
-    """
-    t = np.asarray(t, dtype=float)
-    if t.size < 2:
-        raise ReplayError(f"{source}: fewer than 2 samples, no time step")
-    tau = t - t[0]
-    dt = float(tau[-1] / (t.size - 1))
-    d = np.diff(tau)
-    tol = UNIFORM_RTOL * dt + UNIFORM_ULPS * float(np.spacing(np.max(np.abs(t))))
-    usual = float(np.median(d))
-    if np.any(np.abs(d - dt) > tol):
-        i = int(np.argmax(np.abs(d - usual)))
-        what = "a gap" if d[i] > usual else "a short step"
-        raise ReplayError(f"{source}: the time step is not uniform: {what} of {d[i]:.6g} s between data rows "
-                          f"{i + 1} and {i + 2} (t = {t[i]:.12g} s and {t[i + 1]:.12g} s, {tau[i]:.9g} s after the "
-                          f"first sample) where the usual step is {usual:.6g} s (allowed deviation {tol:.3g} s); "
-                          "resample the record to a fixed step")
-    return dt
+    """The time step of ``t`` (s): the mean step, when the record is uniform, by the rule
+    ``latobs identify`` shares (:func:`latobs.data.checks.uniform_step`: time relative to the first
+    sample, every step within UNIFORM_RTOL of the mean step plus UNIFORM_ULPS ulps of max|t|);
+    otherwise a ReplayError names the step that departs most from the usual (median) step, where
+    it is (data rows and times) and by how much."""
+    return _checks.uniform_step(t, source, ReplayError)
 
 
 def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the record",
@@ -141,6 +123,22 @@ def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the reco
             raise ReplayError(f"{source}: column {v.name!r} = {shown} at data row {i + 1} is outside "
                               f"the range [{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
                               f" that {who} declares for input {v.name!r} ({int(out.sum())} row(s) outside)")
+
+
+def unit_warnings(data: Mapping[str, np.ndarray], source: Any = "the record",
+                  design: Mapping[str, Any] | None = None) -> list[str]:
+    """What in the record looks like another unit than SI (degrees, km/h, g, milliseconds: the rule
+    ``latobs identify`` refuses by, :func:`latobs.data.checks.unit_findings`, with the wheelbase of
+    the FMU's design vehicle when it has one), each printed as a warning on stderr; returned."""
+    try:
+        geo = _baselines.parameter_values(_metrics.design_vehicle(design), ["lf", "lr"])
+        wheelbase = geo["lf"] + geo["lr"]
+    except _baselines.BaselineUnavailable:      # no design file, or no such geometry: without it
+        wheelbase = None
+    found = [f"{source}: {msg}" for msg in _checks.unit_findings(data, wheelbase)]
+    for msg in found:
+        print(f"warning: {msg}", file=sys.stderr)
+    return found
 
 
 # --------------------------------------------------------------------------------------------
@@ -570,6 +568,7 @@ def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str |
     if split is not None and not np.isfinite(split):
         raise ReplayError(f"split time must be finite, got {split}")
     rr = drive(fmu_path, cols, label=Path(fmu_path).stem, source=path)
+    warned = unit_warnings(cols, path, rr.design)
     try:   # the mass the FMU was designed with, when its design file carries it
         mass = _baselines.parameter_values(_metrics.design_vehicle(rr.design), ["m"])["m"]
     except _baselines.BaselineUnavailable:
@@ -577,6 +576,8 @@ def run(csv_file: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str |
     info = {"csv": str(path), "csv_sha256": sha256_file(path) if path.is_file() else None,
             "observer": observer or rr.label}
     m = score(rr, split=split, mass=mass, vehicle=vehicle, info=info)
+    if warned:
+        m["warnings"] = warned
     out_dir = Path(out_dir)
     paths = [_metrics.write(m, out_dir)]
     if callable(plots):                  # drawn elsewhere (the demo's worker processes)

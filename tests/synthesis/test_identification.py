@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import tomllib
 
 import numpy as np
@@ -246,3 +247,140 @@ def test_the_interval_observer_for_the_identified_car_encloses_held_out_manoeuvr
         missed = np.flatnonzero((vy < lo) | (vy > hi))
         assert missed.size == 0, (name, missed[:5], h.time[missed[:5]])
         assert np.mean(hi - lo) < 1.0, (name, float(np.mean(hi - lo)))     # m/s (0.3-0.6): not the initial box
+
+
+# ---------------------------------------------------------------------------------------------
+# issue 47: glitches, time axes, units, long records
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def mbds():
+    from latobs.data.records import MBDS_CSV, load_csv
+
+    return load_csv(MBDS_CSV)
+
+
+MBDS_SPLIT = 425.0
+
+
+@pytest.fixture(scope="module")
+def mbds_clean(mbds):
+    return ident.identify(mbds, load_vehicle("mbds_250lm"), MBDS_SPLIT)
+
+
+def test_one_glitch_neither_sets_the_error_bound_nor_moves_the_fit_and_is_reported(mbds, mbds_clean, tmp_path,
+                                                                                  capsys):
+    """One ``ay = 1e300`` sample in the MBDS record's tuning part made identify write
+    ``ay_error_bound = 3.3e299``: the glitch is now repaired, left out and reported (count and
+    time, on the command line and in the vehicle file), and the bounds and stiffnesses are those
+    of the record without it."""
+    clean = mbds_clean
+    cols = {k: v.copy() for k, v in mbds.items()}
+    i = int(np.searchsorted(cols["t"], 300.0))
+    cols["ay"][i] = 1e300
+    record = tmp_path / "glitch.csv"
+    _write_csv(record, cols)
+    out = tmp_path / "car.toml"
+    assert main(["identify", str(record), "--vehicle", "mbds_250lm", "--tune-until", "425", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "1 glitch(es) in ay repaired and left out (t = 300 s)" in printed, printed
+    doc = tomllib.loads(out.read_text())
+    prov = doc["identification"]
+    assert prov["glitches"]["ay"] == {"count": 1, "t": [300.0]}
+    assert "1.4826 MAD" in prov["glitch_rule"] and prov["error_bound_rejected"] == {"yaw_rate": 0, "ay": 0}
+    for k, sig in (("yaw_rate_error_bound", "yaw_rate"), ("ay_error_bound", "ay")):
+        assert doc["parameters"][k]["value"] == pytest.approx(clean.error_bounds[sig][0], rel=0.01), k
+    assert "the 99.99 % quantile" in doc["parameters"]["ay_error_bound"]["source"]     # (was "100.0%")
+    assert "1 glitch(es) left out" in doc["parameters"]["ay_error_bound"]["source"]
+    for k in ("Cf", "Cr"):
+        assert doc["parameters"][k]["value"] == pytest.approx(getattr(clean, k), rel=1e-3), k
+
+
+def test_glitches_are_samples_no_car_reaches_or_that_stand_alone():
+    """find_glitches: an impossible value, a one-sample spike, a two-sample spike; a step, a
+    noisy sine and a flat signal are not glitches; a column full of spikes is refused."""
+    t = np.arange(0.0, 60.0, 0.01)
+    g = np.random.default_rng(1)
+    cols = {"t": t, "ay": 3 * np.sin(t) + 0.05 * g.standard_normal(t.size), "vx": np.where(t < 30, 20.0, 25.0),
+            "delta": np.full(t.size, 0.01), "yaw_rate": 0.1 * np.sin(t)}
+    fixed, found = ident.find_glitches(cols)
+    assert found == {} and all(fixed[k] is cols[k] for k in cols)
+    spoiled = {k: v.copy() for k, v in cols.items()}
+    spoiled["ay"][[100, 2000, 2001]] = [1e300, 9.0, 9.5]
+    spoiled["yaw_rate"][3000] = -7.0          # rad/s: no car
+    fixed, found = ident.find_glitches(spoiled)
+    assert found["ay"].tolist() == [100, 2000, 2001] and found["yaw_rate"].tolist() == [3000]
+    assert np.max(np.abs(fixed["ay"] - cols["ay"])) < 0.3 and spoiled["ay"][100] == 1e300    # (a new array)
+    spoiled["ay"][::50] = 40.0
+    with pytest.raises(ident.IdentificationError, match="'ay' has 120 glitches.*more than 1 %"):
+        ident.find_glitches(spoiled, "x.csv")
+
+
+def test_unix_timestamps_and_printed_precision_pass_as_for_replay_and_gaps_do_not(mbds, mbds_clean):
+    """identify refused a record in Unix time that replay accepts: one rule now (latobs.data.checks),
+    time from the first sample, steps within 5 % of the mean step: Unix time, 200 Hz printed with 9
+    digits (steps 0.00499984 ... 0.0050001 s) pass both; a dropped sample is refused by both."""
+    from latobs.data import checks
+    from latobs.validation.replay import ReplayError, uniform_step
+
+    unix = {**mbds, "t": mbds["t"] + 1.7e9}
+    res = ident.identify(unix, load_vehicle("mbds_250lm"), 1.7e9 + MBDS_SPLIT, source="unix.csv")
+    for k in ("Cf", "Cr"):          # (the steps' rounding at 1.7e9 s, 2.4e-7 s, moves them by 1e-5 or so)
+        assert getattr(res, k) == pytest.approx(getattr(mbds_clean, k), rel=1e-4), k
+    t200 = np.array([float(f"{x:.9g}") for x in 1000.0 + 0.00499984 * np.arange(20000)])
+    assert np.ptp(np.diff(t200)) > 1e-6          # steps of 0.00499 and 0.00500 s (9 digits of 1000 s)
+    for t in (unix["t"], t200):
+        assert checks.uniform_step(t) == uniform_step(t) == pytest.approx(np.mean(np.diff(t)))
+    gap = np.delete(mbds["t"], 5000)
+    with pytest.raises(ReplayError, match="a gap of 0.02 s between data rows 5000 and 5001"):
+        uniform_step(gap, "g.csv")
+    with pytest.raises(ident.IdentificationError, match="g.csv: the time step is not uniform: a gap of 0.02 s"):
+        ident.check_record({k: np.delete(v, 5000) for k, v in mbds.items()}, MBDS_SPLIT, "g.csv")
+
+
+def _steady_turn_in_degrees() -> dict:
+    """A gentle highway curve (30 m/s, ay up to 1.8 m/s^2) with its road-wheel angle in degrees:
+    at most 0.4 'rad', nothing beyond what a car steers; only the wheelbase tells."""
+    t = np.arange(0.0, 120.0, 0.01)
+    r = 0.06 * np.sin(2 * np.pi * t / 60.0)
+    return {"t": t, "vx": np.full(t.size, 30.0), "yaw_rate": r, "ay": 30.0 * r,
+            "delta": np.degrees(1.5 * 2.4 * r / 30.0), "beta": np.zeros(t.size)}
+
+
+@pytest.mark.parametrize("change, culprit", [
+    (lambda c: c.update(delta=np.degrees(c["delta"])), "column 'delta' reaches .* looks like degrees"),
+    (lambda c: c.update(_steady_turn_in_degrees()), "column 'delta' is .* times the kinematic steering angle"),
+    (lambda c: c.update(vx=c["vx"] * 3.6), "most likely vx in km/h \\(divide by 3.6\\)"),
+    (lambda c: c.update(yaw_rate=np.degrees(c["yaw_rate"])), "most likely yaw_rate in deg/s"),
+    (lambda c: c.update(ay=c["ay"] / 9.81), "most likely ay in g"),
+    (lambda c: c.update(t=c["t"] * 1000.0), "column 't' steps by 10 s .* looks like milliseconds"),
+], ids=["delta-deg", "delta-deg-small", "vx-kmh", "r-deg", "ay-g", "t-ms"])
+def test_a_record_in_other_units_is_refused_by_identify_and_warned_by_replay(mbds, change, culprit, capsys):
+    """Degrees under pi (delta x 10: the steering of 0.5 deg read as rad is found by the
+    wheelbase), km/h, g and milliseconds passed without a word; one check (latobs.data.checks)
+    now refuses them in identify and warns in replay, each naming the column and the fix."""
+    from latobs.validation import replay as rp
+
+    cols = {k: v.copy() for k, v in mbds.items()}
+    change(cols)
+    base = load_vehicle("mbds_250lm")
+    tune = float(cols["t"][0] + 0.5 * (cols["t"][-1] - cols["t"][0]))
+    with pytest.raises(ident.IdentificationError, match=culprit):
+        ident.identify(cols, base, tune, source="u.csv")
+    design = {"vehicle": base.as_dict()}
+    found = rp.unit_warnings(cols, "u.csv", design)
+    assert found and any(re.search(culprit, m) for m in found), found
+    assert "warning: u.csv: " in capsys.readouterr().err
+    assert rp.unit_warnings(mbds, "mbds", design) == []          # the real record: SI
+
+
+def test_a_long_record_is_fitted_on_a_bounded_part_with_progress(mbds, monkeypatch):
+    """identify of 1e6 rows took 940 s and 1.65 GB with no progress shown: the fit now simulates at
+    most MAX_FIT_SAMPLES fitted samples (said in the result and the file) and ticks a progress
+    callback at every simulation (the CLI's tqdm bar). Here the cap is lowered to the MBDS record."""
+    monkeypatch.setattr(ident, "MAX_FIT_SAMPLES", 15000)
+    ticks = []
+    res = ident.identify(mbds, load_vehicle("mbds_250lm"), MBDS_SPLIT, progress=ticks.append)
+    assert res.samples == 15000 and 150.0 + 150.0 - 1 < res.capped_at < MBDS_SPLIT
+    assert len(ticks) >= res.nfev and set(ticks) == {"fit"}
+    doc = ident.vehicle_document(res, load_vehicle("mbds_250lm"), "x", "mbds", "t < 425 s", "test")
+    assert doc["identification"]["fit_capped_at"] == res.capped_at

@@ -86,7 +86,7 @@ def test_loader_names_the_culprit(tmp_path):
     with pytest.raises(ReplayError, match=r"no such file"):
         load_csv(tmp_path / "missing.csv")
     with pytest.raises(ReplayError, match=r"time step is not uniform"):
-        uniform_step(np.array([0.0, 0.01, 0.02, 0.0301]), "f.csv")
+        uniform_step(np.array([0.0, 0.01, 0.02, 0.0351]), "f.csv")
     uniform_step(np.arange(100) * 0.01 + 1e-10)              # float noise is fine
 
 
