@@ -13,6 +13,17 @@ from bisect import bisect_right
 
 from .linalg import dot as _dot   # sum_j row[j] x[j] from the left, as ``dot_from(0.0, ...)`` in C
 
+#: s (2^-30, about 0.93 ns): the shortest baseline over which the first-order hold takes its slope,
+#: and the shortest step that extrapolates it. Departure (no such rule in the paper, whose
+#: measurements are continuous): below it the slope (w_k - w_a) / (t_k - t_a) is meaningless in
+#: doubles (the rounding of w_k - w_a, u |w|, divided by a subnormal baseline overflows), and an
+#: extrapolation factor h / baseline <= 2^30 (h <= 1 s, the longest step any FMU accepts) keeps
+#: that rounding below 2^-22 |w|. A step shorter than it holds w (zero-order): its slope term
+#: moves w by at most 2^-30 s times the slope, s by O(h^2). Such a step keeps the hold's previous
+#: sample as the baseline (its age grows by h), so that the next slope spans a real interval.
+#: The C model (c/sideslip_bank_observer.c, FOH_MIN_BASE) uses the same value.
+FOH_MIN_BASE = 2.0 ** -30
+
 OUTPUT_NAMES = ("beta_hat", "yaw_rate_hat", "roll_angle_hat", "roll_rate_hat", "bank_angle_hat", "mode", "valid")
 ESTIMATES = OUTPUT_NAMES[:4]
 
@@ -140,7 +151,10 @@ class SwitchedPIObserver:
         M, G = self.system(idx, self.modes[idx % self.nm]["fixed_v"])
         if self.foh:
             Ma = [m + g for m, g in zip(M, G)] + [[0.0] * (ns + nw) for _ in range(nw)]
-            Gi = [[0.0] * nw for _ in range(ns)] + [[1.0 / h if i == j else 0.0 for j in range(nw)] for i in range(nw)]
+            # a step below FOH_MIN_BASE has e = 0 (its column unused): 0, not 1/h (inf below ~5.6e-309 s,
+            # whose product with e = 0 would be NaN)
+            ih = 1.0 / h if h >= FOH_MIN_BASE else 0.0
+            Gi = [[0.0] * nw for _ in range(ns)] + [[ih if i == j else 0.0 for j in range(nw)] for i in range(nw)]
         else:
             Ma, Gi = M, G
         nsub = max(1, math.ceil(h / self.max_step - 1e-9))
@@ -290,9 +304,14 @@ class SwitchedPIObserver:
         x = self.s + w
         e = []
         if self.foh:                   # (not in the paper, whose measurements are continuous) the
-            # increment e of the first-order hold w_k + tau (w_k - w_{k-1}) / h_{k-1} over the step h
-            prev, self._prev = self._prev, (w, h)
-            e = [0.0] * len(w) if prev is None else [(a - p) * (h / prev[1]) for a, p in zip(w, prev[0])]
+            # increment e of the first-order hold w_k + tau (w_k - w_a) / (t_k - t_a) over the step h,
+            # w_a the hold's previous sample (w_{k-1}, or an older one after steps < FOH_MIN_BASE)
+            prev = self._prev
+            if prev is None or prev[1] < FOH_MIN_BASE or h < FOH_MIN_BASE:
+                e = [0.0] * len(w)     # no slope: first step, restart, too short a baseline or step
+            else:
+                e = [(a - p) * (h / prev[1]) for a, p in zip(w, prev[0])]
+            self._prev = (w, h) if prev is None or h >= FOH_MIN_BASE else (prev[0], prev[1] + h)
             x += e
         self.s = s = self.advance(idx, self.model_v(self.mode, vx), h, x)
         for i, name in enumerate(ESTIMATES):   # x^ = z + N y with the hold's y at t + h

@@ -106,6 +106,17 @@ def run_libcosim(spec: dict) -> dict:
     return {"outputs": out}
 
 
+#: constant, realistic inputs (SI; any other input 0): a steady turn at 15 m/s
+STEADY = {"delta": 0.02, "vx": 15.0, "yaw_rate": 0.1, "ay": 1.0, "roll_angle": 0.01, "roll_rate": 0.0,
+          "bank_angle": 0.0, "steer_angle": 0.01, "rider_torque": 5.0, "stiffness_scale_f": 1.0,
+          "stiffness_scale_r": 1.0}
+#: issue 47, item 2 (None: the FMU's longest step, at most 1 s): doStep(5e-324) returned OK and every
+#: estimate of the paper-000 observers stayed NaN for good; then 1e-310 s (where 1/h overflows),
+#: tiny and long steps alternating, a step of 1e300 s (refused) and a tiny one after it
+SUBNORMAL_STEPS = [0.005, 5e-324, 0.005, 0.005, 1e-310, 0.005, 5e-324, 5e-324, 2.0 ** -30, 0.005, 1e-300, None,
+                   5e-324, None, 1e-310, None, 5e-324, 0.005, 1e300, 5e-324, 0.005]
+
+
 def declared_max_step(path) -> float:
     """The longest communication step an FMU accepts (s), from its model description (inf if it
     declares none)."""

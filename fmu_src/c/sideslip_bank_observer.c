@@ -74,6 +74,10 @@
 #define NA (PI_NS + PI_FOH * PI_NW)    /* the state of the system RK4 integrates (first-order hold: [s; w]) */
 #define INVALID_LOG_PERIOD 1.0         /* s of simulated time between "valid = 0" messages */
 #define MAX_SUBSTEPS 1e6               /* longer steps are refused */
+/* s (2^-30): the shortest baseline of the first-order hold's slope and the shortest step that
+ * extrapolates it (the runtime's FOH_MIN_BASE, which gives the reasons): a shorter step holds w
+ * (e = 0) and keeps the hold's previous sample, its age grown by h */
+#define FOH_MIN_BASE 0x1p-30
 
 /* full unrolling of the short loops of eval_interval (a hint; other compilers ignore it) */
 #if defined(__clang__)
@@ -403,7 +407,8 @@ static void build_map(Model *m, int idx, double h, int nsub)
             else Gi[i][j] = G[i][j];              /* ... or the held input */
         }
     }
-    for (int j = 0; PI_FOH && j < NW; j++) Gi[NS + j][j] = 1.0 / h;
+    /* below FOH_MIN_BASE e = 0, its column unused: 0, not 1/h (inf below ~5.6e-309 s, 0 * inf = NaN) */
+    for (int j = 0; PI_FOH && j < NW; j++) Gi[NS + j][j] = h >= FOH_MIN_BASE ? 1.0 / h : 0.0;
     substep_map(Ma, Gi, h / nsub, W);
     int have = 0;
     for (unsigned k = (unsigned)nsub;;) {          /* binary powering: all factors commute */
@@ -485,16 +490,19 @@ void model_initialize(Model *m, const double *u, const Log *log)
     start(m, u);
 }
 
-/* first-order hold: e = the increment of w_k + tau (w_k - w_{k-1}) / h_{k-1} over h (0 after a
- * restart); remembers w_k, h */
+/* first-order hold: e = the increment of w_k + tau (w_k - w_a) / (t_k - t_a) over h, w_a the hold's
+ * previous sample (prev_w, its age prev_h); 0 after a restart, and when the age or h is below
+ * FOH_MIN_BASE. Remembers w_k, h; after a step below FOH_MIN_BASE keeps w_a, its age grown by h */
 static void hold_increment(Model *m, double h, const double w[NW], double e[NW])
 {
-    double c = !m->have_prev ? 0.0 : h == m->prev_h ? 1.0 : h / m->prev_h;   /* h / h == 1 exactly */
+    int slope = m->have_prev && m->prev_h >= FOH_MIN_BASE && h >= FOH_MIN_BASE;
+    double c = !slope ? 0.0 : h == m->prev_h ? 1.0 : h / m->prev_h;   /* h / h == 1 exactly */
+    int keep = m->have_prev && h < FOH_MIN_BASE;
     for (int j = 0; j < NW; j++) {
-        e[j] = m->have_prev ? (w[j] - m->prev_w[j]) * c : 0.0;
-        m->prev_w[j] = w[j];
+        e[j] = slope ? (w[j] - m->prev_w[j]) * c : 0.0;
+        if (!keep) m->prev_w[j] = w[j];
     }
-    m->prev_h = h;
+    m->prev_h = keep ? m->prev_h + h : h;
     m->have_prev = 1;
 }
 

@@ -181,6 +181,22 @@ def test_every_branch_and_warning_equals_python_fmu(fmus):
     assert 0 in b["consistent"] and set(b["mode"].tolist()) == {1, 2, 3}
 
 
+def test_tiny_and_alternating_steps_equal_python_fmu_bit_for_bit(fmus):
+    """Issue 47, item 2: the synthetic drive's first 600 inputs with steps of 5e-324, 1e-310,
+    1e-300 s, 1 us ... between ordinary ones and alternating 1 us / 50 ms: every step accepted,
+    the bounds finite, both FMUs bit for bit (a correction without finite bounds is skipped in
+    both), no "non-finite" restart."""
+    u, _ = synthetic_drive(fmus["design"], n=600)
+    u = u[200:]                          # (moving: past the frozen start)
+    tiny = [5e-324, 1e-310, 1e-300, 1e-200, 2.0 ** -30, 1e-12, 1e-6]
+    h = np.array([0.005] * 100 + [x for t in tiny for x in (t, 0.005, 0.005)] + [1e-6, 0.05] * 139)[:len(u)]
+    (a, log_a), (b, log_b) = drive(fmus["py"], u, h), drive(fmus["c"], u, h)
+    for k in OUTPUT_NAMES:
+        assert np.all(np.isfinite(b[k])), k
+        assert np.array_equal(a[k], b[k]), k
+    assert log_a == log_b and not any("non-finite" in m for m in log_b), log_b
+
+
 def test_measurement_error_bound_parameters_equal_python_fmu(fmus):
     """yaw_rate_error_bound and ay_error_bound (FMU parameters, not in the paper): the synthetic
     drive's measurements with errors inside +-nu. Both FMUs agree, and with the bounds set the

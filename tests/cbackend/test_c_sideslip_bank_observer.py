@@ -24,6 +24,7 @@ at fixed grid speeds) and ...TirePaper; all four with the first-order input hold
 from __future__ import annotations
 
 import json
+import math
 from ctypes import c_double
 
 import numpy as np
@@ -322,6 +323,58 @@ def test_absurd_step_is_refused_with_the_state_kept(built_fmus):
     assert got[2] is None and any(m.startswith("[ERROR]") and "communication step 1e+300 s exceeds" in m
                                   for m in log), log
     assert [got[0], got[1], got[3], got[4]] == ref
+
+
+#: steps below the first-order hold's FOH_MIN_BASE (2^-30 s; the smallest subnormal, 1e-310, where 1/h
+#: overflows), alternating with ordinary and long ones (issue 47, item 2)
+TINY_STEPS = [0.005, 0.005, 5e-324, 0.005, 1e-310, 0.005, 1e-12, 1e-12, 0.002, 5e-324, 5e-324, 0.005, 0.1,
+              5e-324, 0.1, 2.0 ** -30, 0.005, 1e-300, 0.002]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_subnormal_and_alternating_tiny_steps_stay_finite_and_equal_python(built_fmus, name):
+    """doStep(5e-324), (1e-310), tiny steps between ordinary and long ones: every step accepted, every
+    estimate finite, in both backends bit for bit (the first-order hold used to divide by the
+    previous step, 5e-324 s, and 1/h overflowed in the fixed-speed maps: NaN for good, status OK);
+    the steps after the last tiny one as if the tiny ones had been a single sample of the hold."""
+    longest = declared_max_step(built_fmus.path(name))
+    u0 = {"vx": 15.0, "delta": 0.01, "yaw_rate": 0.1, "roll_angle": 0.01, "roll_rate": 0.0}
+    steps = [(min(h, longest), u0 | {"delta": 0.01 + 0.002 * (k % 3), "yaw_rate": 0.1 + 0.01 * (k % 4)})
+             for k, h in enumerate(TINY_STEPS)]
+    py, py_log = run_cs(built_fmus.path(name), "py", u0, steps)
+    c, c_log = run_cs(built_fmus.c_path(name), "c", u0, steps)
+    assert None not in py and None not in c, (py_log, c_log)
+    for out in (py, c):
+        assert all(np.isfinite(o[k]) for o in out for k in ESTIMATES), (name, out)
+    assert [o[k] for o in py for k in ESTIMATES] == [o[k] for o in c for k in ESTIMATES]   # bit for bit
+    rt = SwitchedPIObserver(built_fmus.design(name), {})
+    rt.initialize(u0)
+    for h, u in steps:
+        rt.step(h, u)
+    assert [rt.y[k] for k in ESTIMATES] == [py[-1][k] for k in ESTIMATES]
+
+
+def test_the_hold_keeps_its_sample_over_tiny_steps(built_fmus):
+    """The first-order hold's rule below FOH_MIN_BASE in both runtimes (their constants equal): a
+    tiny step extrapolates nothing and keeps the previous sample, so that the next slope is taken
+    over the real interval; with steps >= FOH_MIN_BASE nothing changes."""
+    from pathlib import Path
+    import re
+
+    import latobs.fmu_src.sideslip_bank_observer as rtmod
+
+    c_src = (Path(rtmod.__file__).parent / "c" / "sideslip_bank_observer.c").read_text()
+    assert float.fromhex(re.search(r"#define FOH_MIN_BASE (\S+)", c_src).group(1)) == rtmod.FOH_MIN_BASE
+    data = built_fmus.design("SideslipBankObserver")
+    u = {"vx": 15.0, "delta": 0.01, "yaw_rate": 0.1, "roll_angle": 0.01, "roll_rate": 0.0}
+    a, b = SwitchedPIObserver(data, {}), SwitchedPIObserver(data, {})
+    for rt in (a, b):
+        rt.initialize(u)
+        rt.step(0.005, u)
+    a.step(1e-12, u | {"yaw_rate": 0.5})            # a tiny step: a sample the hold does not take
+    assert a._prev[0] == b._prev[0] and a._prev[1] == 0.005 + 1e-12
+    a.step(0.005, u | {"yaw_rate": 0.11})
+    assert all(math.isfinite(a.y[k]) for k in ESTIMATES)
 
 
 def _me_instance(fmu, tmp_path, inputs: dict, log: list):

@@ -417,3 +417,33 @@ def test_model_exchange_calls_out_of_order_or_with_wrong_sizes_are_fmi3error(obs
     assert "fmi3DoStep" in log.errors()[-1]
     m.terminate()
     m.freeInstance()
+
+
+
+
+@pytest.mark.parametrize("name", C_NAMES)
+def test_a_subnormal_step_keeps_every_output_finite_in_fmi3(built_fmus, name, tmp_path):
+    """Issue 47, item 2 in FMI 3.0: doStep(5e-324), (1e-310), tiny steps between the longest ones:
+    accepted with every output finite; 1e300 s refused (fmi3Error) with the outputs kept."""
+    from conformance_runs import STEADY, SUBNORMAL_STEPS, declared_max_step
+
+    fmu = built_fmus.c3_path(name)
+    longest = min(declared_max_step(built_fmus.c_path(name)), 1.0)
+    log = Logged()
+    md, s = _slave(fmu, tmp_path, log)
+    inputs = {v.name: STEADY[v.name] for v in md.modelVariables if v.causality == "input" and v.name in STEADY}
+    _start(md, s, inputs)
+    t, last = 0.0, None
+    for k, h in enumerate(SUBNORMAL_STEPS):
+        h = longest if h is None else h
+        status = _status(lambda: s.doStep(t, h))
+        out = _outputs(md, s)
+        if h == 1e300:
+            assert status == 3 and out == last, (name, status, log.messages[-2:])
+        else:
+            assert status <= 1, (name, k, h, log.messages[-3:])
+            t += h
+        assert all(math.isfinite(x) for x in out), f"{name}: outputs {out} after doStep({h!r}) (step {k})"
+        last = out
+    s.terminate()
+    s.freeInstance()

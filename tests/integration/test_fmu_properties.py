@@ -3,15 +3,17 @@
 Parametrised over ``latobs.packaging.OBSERVERS`` and ``PLANTS``: a new FMU gets them automatically.
 Hypothesis draws, per FMU, FMI call programs: random input values (realistic ones, and extreme but
 finite ones: up to +-1e300, +-1e-300, 0, the smallest subnormal, jumps between them from one step
-to the next; now and then a non-finite one), random communication steps (1e-9 ... 1e300 s, now and
-then a zero, negative or non-finite one), parameters inside and outside their declared range, and
-calls out of order (doStep or get before initialisation, exitInitializationMode without enter,
+to the next; now and then a non-finite one), random communication steps (log-uniform over every
+positive double up to 1e300 s, the smallest subnormal 5e-324 s included, and runs alternating tiny
+and long steps; now and then a zero, negative or non-finite one), parameters inside and outside
+their declared range, and calls out of order (doStep or get before initialisation, exitInitializationMode without enter,
 double initialisation, set/step/get after terminate, fmi2Reset anywhere). Asserted:
 
 * the host never crashes (the program ends and the host process is alive), never hangs: every
   call returns within ``CALL_SECONDS``;
 * no call to get returns a non-finite output, or an Integer output outside its declared
-  [min, max], unless the doStep just before it returned fmi2Discard or worse;
+  [min, max], unless the doStep just before it returned fmi2Discard or worse; a get after a
+  refused doStep returns the outputs of the get before it (the state kept);
 * a step with an input outside its declared [min, max] or longer than the FMU's declared longest
   step is refused (fmi2Discard or worse), and the state is kept: the run then continues exactly as
   if the step had not been asked;
@@ -54,7 +56,7 @@ pytestmark = pytest.mark.slow
 RUNNER = Path(__file__).resolve().parents[1] / "conformance_runs.py"
 FMU_NAMES = [*packaging.OBSERVERS, *packaging.PLANTS]
 from conftest import C_NAMES, FMU_VARIANTS  # noqa: E402  (every FMU, pythonfmu and native C)
-from conformance_runs import declared_max_step  # noqa: E402
+from conformance_runs import STEADY, SUBNORMAL_STEPS, declared_max_step  # noqa: E402
 #: examples per FMU and property; LATOBS_PROPERTY_EXAMPLES=500 for a deeper (local) search
 EXAMPLES = int(os.environ.get("LATOBS_PROPERTY_EXAMPLES", "25"))
 SETTINGS = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
@@ -158,8 +160,16 @@ def any_value(name: str):
 
 
 NON_FINITE_VALUES = st.sampled_from(NON_FINITE)
-STEP_SIZES = st.one_of(st.sampled_from([1e-4, 0.005, 0.01, 0.1]), st.floats(1e-4, 0.1),
-                       st.sampled_from([1e-9, 1e-6, 0.5, 1.0, 2.0, 1e4, 1e300]), st.floats(1e-9, 1e300))
+#: every positive double step up to 1e300 s, log-uniform: 2^e, e uniform in [-1074, log2(1e300)]
+#: (2^-1074 = 5e-324, the smallest subnormal)
+LOG_STEPS = st.floats(-1074.0, math.log2(1e300)).map(lambda e: 2.0 ** e)
+#: steps where a runtime's 1/h overflows (below ~5.6e-309), the smallest normal, the first-order
+#: hold's shortest baseline 2^-30 s and its neighbours (issue 47, item 2)
+TINY_STEPS = [5e-324, 1e-323, 1e-320, 1e-310, 2.2250738585072014e-308, 1e-300, 1e-200, 2.0 ** -30,
+              math.nextafter(2.0 ** -30, 0.0), 1e-12, 1e-9]
+TINY = st.one_of(st.sampled_from(TINY_STEPS), st.floats(-1074.0, math.log2(1e-6)).map(lambda e: 2.0 ** e))
+STEP_SIZES = st.one_of(st.sampled_from([1e-4, 0.005, 0.01, 0.1]), st.floats(1e-4, 0.1), TINY,
+                       st.sampled_from([1e-6, 0.5, 1.0, 2.0, 1e4, 1e300]), LOG_STEPS)
 BAD_STEP_SIZES = st.sampled_from([0.0, -0.005, math.nan, math.inf])
 
 
@@ -208,10 +218,13 @@ def calls(draw, w: Worker, n_min: int, n_max: int):
     if draw(st.integers(0, 3)) > 0:                       # usually a proper start first
         out += [["setup", 0.0], ["enter"], ["set", draw(full_inputs(w.inputs))], ["exit"]]
     kinds = ["step", "step", "step", "set", "set", "get", "setup", "enter", "exit", "terminate", "reset",
-             "badstep"] + (["param"] if w.params else [])
+             "badstep", "alternate"] + (["param"] if w.params else [])
     for _ in range(draw(st.integers(n_min, n_max))):
         k = draw(st.sampled_from(kinds))
-        if k in ("step", "badstep"):
+        if k == "alternate":
+            out += draw(alternating_steps(w, t))
+            t = out[-2][1] + out[-2][2]
+        elif k in ("step", "badstep"):
             h = draw(STEP_SIZES if k == "step" else BAD_STEP_SIZES)
             out += [["set", draw(input_sets(w.inputs))], ["step", t, h], ["get"]]
             t += h if math.isfinite(h) and h > 0 else 0.0
@@ -227,11 +240,32 @@ def calls(draw, w: Worker, n_min: int, n_max: int):
 
 
 @st.composite
+def alternating_steps(draw, w: Worker, t: float):
+    """2..6 steps alternating one tiny (TINY) and one long step (1 ms up to just beyond the FMU's
+    longest: a few refused), the same tiny and long size throughout, finite inputs."""
+    tiny = draw(TINY)
+    long = draw(st.one_of(st.floats(1e-3, min(w.max_step, 1.0)), st.sampled_from([min(w.max_step, 1.0), 0.05]),
+                          st.floats(min(w.max_step, 1.0), 2.0 * min(w.max_step, 1.0))))
+    first = draw(st.booleans())
+    out = []
+    for j in range(draw(st.integers(2, 6))):
+        h = tiny if (j % 2 == 0) == first else long
+        out += [["set", draw(input_sets(w.inputs, finite=True))], ["step", t, h], ["get"]]
+        t += h
+    return out
+
+
+@st.composite
 def clean_runs(draw, w: Worker):
-    """A proper run: initialise with every input set, then steps (finite inputs, sizes 1e-4..0.1 s)."""
+    """A proper run: initialise with every input set, then steps (finite inputs, any size of
+    STEP_SIZES), now and then a run of alternating tiny and long steps."""
     out = [["setup", 0.0], ["enter"], ["set", draw(full_inputs(w.inputs))], ["exit"], ["get"]]
     t = 0.0
     for _ in range(draw(st.integers(1, 12))):
+        if draw(st.integers(0, 5)) == 0:
+            out += draw(alternating_steps(w, t))
+            t = out[-2][1] + out[-2][2]
+            continue
         h = draw(STEP_SIZES)
         out += [["set", draw(input_sets(w.inputs, finite=True))], ["step", t, h], ["get"]]
         t += h
@@ -243,13 +277,17 @@ def clean_runs(draw, w: Worker):
 # ---------------------------------------------------------------------------------------------
 def check_outputs(w: Worker, program: list, result: dict):
     """Every get: status OK/warning; finite Reals and in-range Integers unless the step before it
-    was refused (fmi2Discard or worse). Every call within CALL_SECONDS."""
+    was refused (fmi2Discard or worse); after a refused step, the outputs of the get before it
+    (only sets, gets and refused steps between them). Every call within CALL_SECONDS."""
     slow = max(result.get("seconds") or [0.0])
     assert slow < CALL_SECONDS, f"{w.path.name}: a call took {slow:.3g} s in {program}"
     last_step = None
-    for call in result["calls"]:
+    before = refused = None     # the last get's outputs; the doStep refused since (only sets between)
+    for i, call in enumerate(result["calls"]):
         if call[0] == "step":
             last_step = call[1]
+            refused = i if call[1] >= 2 and before is not None else None
+            before = before if refused is not None else None
         elif call[0] == "get":
             status, values = call[1], call[2]
             assert status <= 1, f"{w.path.name}: get returned status {status} in {program}"
@@ -261,6 +299,12 @@ def check_outputs(w: Worker, program: list, result: dict):
                 assert last_step is not None and last_step >= 2, (
                     f"{w.path.name}: outputs {bad} returned after a doStep with status {last_step} "
                     f"(OK or warning); program {program}; FMU log {result['logs']}")
+            if refused is not None:
+                assert _same(values, before), (f"{w.path.name}: the doStep refused at call {refused} changed the "
+                                               f"outputs {before} to {values}; program {program}")
+            before, refused = values, None
+        elif call[0] != "set":      # new, setup, enter, exit, terminate, reset: the outputs may change
+            before = refused = None
 
 
 @SETTINGS
@@ -297,10 +341,6 @@ def test_reset_anywhere_then_a_run_equals_a_fresh_instance(worker, data):
 # ---------------------------------------------------------------------------------------------
 # long communication steps
 # ---------------------------------------------------------------------------------------------
-#: constant, realistic inputs (SI; any other input 0): a steady turn at 15 m/s
-STEADY = {"delta": 0.02, "vx": 15.0, "yaw_rate": 0.1, "ay": 1.0, "roll_angle": 0.01, "roll_rate": 0.0,
-          "bank_angle": 0.0, "steer_angle": 0.01, "rider_torque": 5.0, "stiffness_scale_f": 1.0,
-          "stiffness_scale_r": 1.0}
 #: FMUs known to fail the test below (issue 10, item 6): a strict xfail flips when they are fixed
 UNBOUNDED_AT_LONG_STEPS: dict[str, str] = {}
 
@@ -406,6 +446,30 @@ def test_every_fmu_runs_unconnected_from_its_start_values_with_ok(variant, built
         if v.causality == "input":
             assert float(v.min) <= float(v.start) <= float(v.max), (v.name, v.start, v.min, v.max)
     assert all(math.isfinite(x) for row in res for x in row)
+
+
+def test_a_subnormal_step_keeps_every_output_finite(worker):
+    """Every FMU, both backends (FMI 2; FMI 3: tests/cbackend/test_fmi3.py): a step of the smallest
+    subnormal, 1e-310 s and tiny steps between long ones are accepted (OK or warning) with every
+    output finite, and the step of 1e300 s among them is refused with the outputs kept."""
+    w = worker
+    u = {n: STEADY.get(n, 0.0) for n in w.inputs}
+    program = [["new"], ["setup", 0.0], ["enter"], ["set", u], ["exit"]]
+    t = 0.0
+    for h in SUBNORMAL_STEPS:
+        h = min(w.max_step, 1.0) if h is None else h
+        program += [["step", t, h], ["get"]]
+        t += h if h < 1e300 else 0.0
+    res = w.run(program)
+    calls = res["calls"][5:]
+    for k, h in enumerate(SUBNORMAL_STEPS):
+        (_, status), (_, got, out) = calls[2 * k], calls[2 * k + 1]
+        assert got <= 1 and (status >= 2 if h == 1e300 else status <= 1), (w.path.stem, k, h, status, res["logs"][-3:])
+        bad = {n: v for n, v in out.items() if not math.isfinite(v)}
+        assert not bad, f"{w.path.stem}: outputs {bad} after doStep({h!r}) (step {k}); logs {res['logs'][-3:]}"
+        if h == 1e300:
+            assert out == calls[2 * k - 1][2], f"{w.path.stem}: the refused step changed the outputs"
+    check_outputs(w, program, res)
 
 
 @pytest.mark.parametrize("name", C_NAMES)
