@@ -405,6 +405,9 @@ class Fmi2Slave:
                 why = self._fault or f"doStep called in phase {self._phase!r} (call exitInitializationMode first)"
                 self.log(f"step refused at t = {current_time}: {why}", ERROR)
                 return False
+            if not math.isfinite(current_time):
+                self.log(f"step refused: communication point {current_time!r} is not finite; state held", ERROR)
+                return False
             if not (step_size > 0 and math.isfinite(step_size)):
                 self.log(f"step refused: communication step {step_size!r} must be finite and > 0 s", ERROR)
                 return False
