@@ -15,7 +15,8 @@
  *     half 0xFF, a one-bit flip at every header bit and at random payload bits, random mutations
  *     (a few bytes, a block, the top bytes of two words, another length, all bytes; up to
  *     ITERATIONS of them, or SECONDS): each refused;
- *     its in-memory state with a bit flipped: SetFMUState refused; the intact ones accepted;
+ *     its in-memory state with a bit flipped: SetFMUState refused; 64 random bytes given as a
+ *     state: refused, untouched; the intact ones accepted (also into a block of their own);
  *   - after all that, each main instance and its twin stepped on: bit-identical outputs.
  * "msg CHECK: TEXT" lines give the message logged by a refusal (for the test to read).
  * Exits 0 only if every check passed. Built by the test with the system C compiler, plain (the
@@ -439,13 +440,26 @@ static void damaged(Fmu *f, long iterations, double seconds)
     printf("msg memflip %s: %s\n", what, last_error);
     check(bad == 0 && same_as_twin(f), "%s: %ld in-memory one-bit flips refused by SetFMUState, outputs kept", what,
           tried);
+    /* in memory: 64 random bytes, not a state at all */
+    unsigned char junk[64], kept[64];
+    for (size_t j = 0; j < sizeof junk; j++) junk[j] = kept[j] = (unsigned char)rnd();
+    void *jp = junk;
+    size_t js;
+    int r1 = f->set(f->main, junk), r2 = f->get(f->main, &jp), r3 = f->freest(f->main, &jp);
+    int r4 = f->size(f->main, junk, &js), r5 = f->ser(f->main, junk, b, n);
+    check(r1 >= 3 && r2 >= 3 && r3 >= 3 && r4 >= 3 && r5 >= 3 && jp == junk && !memcmp(junk, kept, sizeof junk) &&
+          same_as_twin(f), "%s: 64 random bytes refused as a state by the five calls taking one, untouched", what);
+    printf("msg junk %s: %s\n", what, last_error);
     /* the intact ones still work */
     void *got = NULL;
     int s1 = f->deser(f->main, good, n, &got);
     int s2 = s1 == 0 ? f->set(f->main, got) : -1;
     int s3 = f->set(f->main, st);
-    check(s1 == 0 && s2 == 0 && s3 == 0 && same_as_twin(f), "%s: the intact state deserialised and set (%d, %d, %d)",
-          what, s1, s2, s3);
+    void *again = st; /* a state of this FMU given back to be overwritten (FMI allows it) */
+    int s4 = f->get(f->main, &again), s5 = f->deser(f->main, good, n, &again);
+    check(s1 == 0 && s2 == 0 && s3 == 0 && s4 == 0 && s5 == 0 && again == st && same_as_twin(f),
+          "%s: the intact state deserialised and set, and got and deserialised into its own block (%d, %d, %d, %d, %d)",
+          what, s1, s2, s3, s4, s5);
     f->freest(f->main, &got);
     f->freest(f->main, &st);
     free(b);
