@@ -646,13 +646,15 @@ static int values_possible(const Values *v, Interface type, char *why, size_t n)
     return 0;
 }
 
-/* whether `state` (`avail` bytes, or (size_t)-1 when it is in memory: its size unknown) is a state
+#define IN_MEMORY ((size_t)-1) /* the byte count of a state given by pointer: unknown */
+
+/* whether `state` (`avail` bytes, or IN_MEMORY: its size unknown) is a state
  * of this FMU, made by this layer on this platform, of `avail` bytes if known; with `whole`, also
  * its checksum and values, and of this instance's interface. Else an error logged, 0 */
 static int check_state(Instance *inst, const char *what, const unsigned char *state, size_t avail, int whole)
 {
     const size_t need = state_bytes();
-    const int in_memory = avail == (size_t)-1;
+    const int in_memory = avail == IN_MEMORY;
     StateHeader h;
     char why[320], other[sizeof h.model];
     if (state == NULL) {
@@ -729,7 +731,7 @@ static int get_state(Instance *inst, const char *what, void **state)
         return LOG_ERROR;
     }
     /* a state given to be overwritten must be one of this FMU's (FMI: one it returned before) */
-    if (*state != NULL && !check_state(inst, what, (const unsigned char *)*state, (size_t)-1, 0)) return LOG_ERROR;
+    if (*state != NULL && !check_state(inst, what, (const unsigned char *)*state, IN_MEMORY, 0)) return LOG_ERROR;
     unsigned char *blob = (unsigned char *)(*state != NULL ? *state : malloc(state_bytes()));
     if (blob == NULL) {
         say(inst, LOG_ERROR, "%s: out of memory", what);
@@ -756,7 +758,7 @@ static int get_state(Instance *inst, const char *what, void **state)
 static int set_state(Instance *inst, const char *what, const void *state)
 {
     const unsigned char *blob = (const unsigned char *)state;
-    if (!check_state(inst, what, blob, (size_t)-1, 1)) return LOG_ERROR;
+    if (!check_state(inst, what, blob, IN_MEMORY, 1)) return LOG_ERROR;
     memcpy(&inst->v, blob + sizeof(StateHeader), sizeof inst->v);
     memcpy(inst->model, blob + sizeof(StateHeader) + sizeof inst->v, model_size());
     return LOG_INFO;
@@ -767,7 +769,7 @@ static int set_state(Instance *inst, const char *what, const void *state)
 static int free_state(Instance *inst, const char *what, void **state)
 {
     if (state == NULL || *state == NULL) return LOG_INFO; /* FMI: ignored */
-    if (!check_state(inst, what, (const unsigned char *)*state, (size_t)-1, 0)) return LOG_ERROR;
+    if (!check_state(inst, what, (const unsigned char *)*state, IN_MEMORY, 0)) return LOG_ERROR;
     memset(*state, 0, sizeof(StateHeader));
     free(*state);
     *state = NULL;
@@ -776,7 +778,7 @@ static int free_state(Instance *inst, const char *what, void **state)
 
 static int state_size(Instance *inst, const char *what, const void *state, size_t *size)
 {
-    if (!check_state(inst, what, (const unsigned char *)state, (size_t)-1, 1)) return LOG_ERROR;
+    if (!check_state(inst, what, (const unsigned char *)state, IN_MEMORY, 1)) return LOG_ERROR;
     if (size == NULL) {
         say(inst, LOG_ERROR, "%s: NULL size pointer", what);
         return LOG_ERROR;
@@ -788,7 +790,7 @@ static int state_size(Instance *inst, const char *what, const void *state, size_
 /* serialised: the state's bytes as they are in memory (header, values, model) */
 static int serialize(Instance *inst, const char *what, const void *state, unsigned char *bytes, size_t size)
 {
-    if (!check_state(inst, what, (const unsigned char *)state, (size_t)-1, 1)) return LOG_ERROR;
+    if (!check_state(inst, what, (const unsigned char *)state, IN_MEMORY, 1)) return LOG_ERROR;
     if (bytes == NULL || size < state_bytes()) {
         say(inst, LOG_ERROR, "%s: buffer of %zu bytes, %zu needed", what, bytes ? size : 0, state_bytes());
         return LOG_ERROR;
@@ -805,7 +807,7 @@ static int deserialize(Instance *inst, const char *what, const unsigned char *by
         return LOG_ERROR;
     }
     if (!check_state(inst, what, bytes, bytes ? size : 0, 1)) return LOG_ERROR;
-    if (*state != NULL && !check_state(inst, what, (const unsigned char *)*state, (size_t)-1, 0)) return LOG_ERROR;
+    if (*state != NULL && !check_state(inst, what, (const unsigned char *)*state, IN_MEMORY, 0)) return LOG_ERROR;
     void *blob = *state != NULL ? *state : malloc(state_bytes());
     if (blob == NULL) {
         say(inst, LOG_ERROR, "%s: out of memory", what);
