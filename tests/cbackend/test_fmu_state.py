@@ -361,6 +361,34 @@ def test_a_non_finite_communication_point_is_refused_the_state_kept(built_fmus, 
             a.close(), b.close()
 
 
+def test_a_non_finite_communication_point_is_refused_by_the_fmi3_layer_too(built_fmus, tmp_path):
+    from fmpy.fmi3 import FMU3Slave
+
+    fmu = built_fmus.c3_path("CarPlant")
+    md = read_model_description(str(fmu))
+    errors: list[str] = []
+
+    def log(env, status, category, message):
+        if status >= 3:
+            errors.append(message.decode())
+
+    s = FMU3Slave(guid=md.guid, unzipDirectory=extract(str(fmu), unzipdir=str(tmp_path / "u")),
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="t")
+    s.instantiate(loggingOn=True, logMessage=log)
+    try:
+        s.enterInitializationMode(startTime=0.0)
+        s.exitInitializationMode()
+        s.doStep(0.0, DT)
+        flags = [ctypes.c_bool() for _ in range(3)] + [ctypes.c_double()]
+        for t in (math.inf, -math.inf, math.nan):
+            status = s._functions["fmi3DoStep"](s.component, t, DT, True, *map(ctypes.byref, flags))
+            assert status == 3 and "communication point" in errors[-1] and "is not finite; state held" in errors[-1]
+        s.doStep(DT, DT)                                       # a finite one proceeds
+    finally:
+        s.terminate()
+        s.freeInstance()
+
+
 @pytest.mark.parametrize("target", NAMES)
 def test_pythonfmu_fmus_refuse_native_states_and_their_bytes_the_state_kept(built_fmus, tmp_path, target):
     """The pythonfmu FMUs get and set no state (their guard refuses the six calls): a native FMU's
