@@ -341,6 +341,9 @@ class Fmi2Slave:
     # (an exception would be fmi2Fatal and destroy the instance), so: the refusal is logged as an
     # error, and after a refused fmi2SetFMUstate the instance is in the error state (every later
     # doStep refused, fmi2Discard), since the host believes it has restored a state it has not.
+    # Whatever state is handed in (pythonfmu passes its pointer on as a Python object: another
+    # FMU's state cannot be told apart here, only the guard can refuse it unread), nothing of it
+    # is read or kept: every state is refused alike (docs/using-fmus.md, "Unusual calls").
     def _get_fmu_state(self):
         self.log("fmi2GetFMUstate: this FMU cannot get or set its state (canGetAndSetFMUstate=\"false\"); "
                  "the state returned is empty and cannot be restored", ERROR)
@@ -404,6 +407,9 @@ class Fmi2Slave:
             if self._phase != "stepping":
                 why = self._fault or f"doStep called in phase {self._phase!r} (call exitInitializationMode first)"
                 self.log(f"step refused at t = {current_time}: {why}", ERROR)
+                return False
+            if not math.isfinite(current_time):
+                self.log(f"step refused: communication point {current_time!r} is not finite; state held", ERROR)
                 return False
             if not (step_size > 0 and math.isfinite(step_size)):
                 self.log(f"step refused: communication step {step_size!r} must be finite and > 0 s", ERROR)

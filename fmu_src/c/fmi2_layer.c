@@ -32,7 +32,11 @@
  *     (fmu_src/framework.py) refuses the same steps with the same messages (as fmi2Discard);
  *   - warnings of the model (clamps, excursions): fmi2Warning for that call.
  * fmi2GetFMUstate/fmi2SetFMUstate and their serialisation copy the whole instance state (the
- * model holds no pointers).
+ * model holds no pointers), behind a header naming the FMU (a hash of its guid), the layer, the
+ * platform, the size and a checksum (layer.h). A state of another FMU (or of this model's FMI 3.0
+ * FMU), a truncated, extended or corrupted one, in memory or serialised, is refused with fmi2Error
+ * and a message saying which, the instance's state kept; fmi2FreeFMUstate refuses to free another
+ * FMU's state.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -270,9 +274,8 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    if (begin(c) == NULL) return fmi2Error;
-    free_state(state);
-    return fmi2OK;
+    Instance *inst = begin(c);
+    return inst == NULL ? fmi2Error : status(free_state(inst, "fmi2FreeFMUstate", state));
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
@@ -293,8 +296,8 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 {
     Instance *inst = begin(c);
     return inst == NULL ? fmi2Error
-                        : status(deserialize(inst, "fmi2DeSerializeFMUstate", "guid",
-                                             (const unsigned char *)serializedState, size, state));
+                        : status(deserialize(inst, "fmi2DeSerializeFMUstate", (const unsigned char *)serializedState,
+                                             size, state));
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,

@@ -26,6 +26,9 @@
  *   - a non-finite, non-positive or too long communication step (MAX_STEP), an input outside its
  *     declared [min, max] (non-finite included) at fmi3DoStep or a ModelExchange evaluation:
  *     fmi3Error, the state kept;
+ *   - a state of another FMU (or of this model's FMI 2.0 FMU), a truncated, extended or corrupted
+ *     one, in memory or serialised, given to any FMU-state function: fmi3Error, the state kept
+ *     (layer.h: a state carries a hash of its FMU's token, its size and a checksum);
  *   - functions of what the FMU does not provide (clocks, directional and adjoint derivatives,
  *     variable dependencies, output derivatives, types other than Float64 and Int32): fmi3Error.
  * Log messages are plain text (FMI 3.0's logger takes no format string).
@@ -505,9 +508,8 @@ fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState state)
 
 fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *state)
 {
-    if (begin(c) == NULL) return fmi3Error;
-    free_state(state);
-    return fmi3OK;
+    Instance *inst = begin(c);
+    return inst == NULL ? fmi3Error : status(free_state(inst, "fmi3FreeFMUState", state));
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState state, size_t *size)
@@ -527,7 +529,7 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedStat
 {
     Instance *inst = begin(c);
     return inst == NULL ? fmi3Error
-                        : status(deserialize(inst, "fmi3DeserializeFMUState", "token", serializedState, size, state));
+                        : status(deserialize(inst, "fmi3DeserializeFMUState", serializedState, size, state));
 }
 
 /* ------------------------------------------------------------------ co-simulation */
