@@ -260,6 +260,9 @@ class CoSimulation:
     # ----------------------------------------------------------------------------------------
     def _simulate(self, plant: FmuInstance, observers: dict[str, FmuInstance]) -> SimResult:
         sc, dt = self.scenario, self.dt
+        from .campaign import check_run_resources
+
+        check_run_resources(f"scenario {sc.name!r}", sc.duration, dt)    # before its grid is made
         t = sc.time_grid(dt)
         n = len(t)
         scen = sc.sampled(t, self.vehicle)

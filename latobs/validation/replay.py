@@ -78,6 +78,22 @@ def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise ReplayError(str(exc)) from None
 
 
+#: bytes a replay holds per sample and value (the record's columns and the FMU's outputs): the
+#: column itself, the master's matrices, the outputs' copies and the scoring's selections (a
+#: lower estimate)
+BYTES_PER_VALUE = 24
+
+
+def check_resources(data: Mapping[str, np.ndarray], n_outputs: int, source: Any = "the record") -> None:
+    """Refuse (ResourceLimitError, naming the estimate and the limit) a replay of ``data`` through
+    an FMU with ``n_outputs`` outputs that would not fit in memory, before the FMU is built or run."""
+    from ..data import budget
+
+    n = len(data["t"]) if "t" in data else 0
+    budget.check(f"replaying {source} ({n} samples of {len(data)} columns, {n_outputs} outputs)",
+                 memory=n * (len(data) + n_outputs) * BYTES_PER_VALUE)
+
+
 def uniform_step(t: np.ndarray, source: Any = "the record") -> float:
     """The time step of ``t`` (s): the mean step, when the record is uniform.
 

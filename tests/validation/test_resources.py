@@ -1,0 +1,299 @@
+"""Bounded resources (issue 47): inputs that would exhaust the machine are refused before they
+run, records are regular files within a size limit, campaign names are safe folder names, and the
+parallel build's workers and temporary folders do not outlive it."""
+from __future__ import annotations
+
+import gzip
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from latobs.data import budget, records
+
+#: runs a command in a child process and prints {"rc", "seconds", "maxrss_mb", "stderr"}: the peak
+#: resident memory of that child alone (this launcher has no other child). The child's address
+#: space is capped at 4 GB so that a version that would exhaust memory fails fast instead of
+#: being killed with the machine.
+_LAUNCHER = textwrap.dedent("""
+    import json, resource, subprocess, sys, time
+    def cap():
+        resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
+    t0 = time.perf_counter()
+    try:
+        p = subprocess.run(sys.argv[1:], capture_output=True, text=True, timeout=60, preexec_fn=cap)
+        rc, err = p.returncode, p.stderr
+    except subprocess.TimeoutExpired as exc:
+        rc, err = "timeout", str(exc.stderr)
+    seconds = time.perf_counter() - t0
+    print(json.dumps({"rc": rc, "seconds": seconds, "stderr": err,
+                      "maxrss_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}))
+""")
+
+
+def _measured(args: list[str], cwd: Path, env: dict | None = None) -> dict:
+    out = subprocess.run([sys.executable, "-c", _LAUNCHER, sys.executable, "-m", "latobs", *args], cwd=cwd,
+                         capture_output=True, text=True, timeout=120, env={**os.environ, **(env or {})})
+    return json.loads(out.stdout)
+
+
+def _campaign_file(tmp_path: Path, name: str, extra: str) -> Path:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(f'name = "{name}"\nscenario = "double-lane-change"\nobservers = ["SideslipBankObserver"]\n'
+                    f"seed = 1\n{extra}\n", encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("case", ["campaign dt = 1e-9", "campaign runs = 1e10", "replay /dev/zero"])
+def test_inputs_that_would_exhaust_memory_exit_2_within_5_s_using_less_than_500_mb(tmp_path, case):
+    if case == "campaign dt = 1e-9":
+        args = ["campaign", str(_campaign_file(tmp_path, "tiny_step", "runs = 10\ndt = 1e-9"))]
+        expect = ["1e-09", "would need about", "more than the limit"]
+    elif case == "campaign runs = 1e10":
+        args = ["campaign", str(_campaign_file(tmp_path, "many_runs", "runs = 10000000000"))]
+        expect = ["10000000000 runs", "would need about", "more than the limit"]
+    else:
+        if not Path("/dev/zero").exists():
+            pytest.skip("no /dev/zero")
+        args = ["replay", "/dev/zero", "--observer", "SideslipBankObserver"]
+        expect = ["/dev/zero", "character device"]
+    r = _measured([*args, "--out", str(tmp_path / "out"), "--fmu-dir", str(tmp_path / "fmus")], tmp_path)
+    assert r["rc"] == 2, r
+    assert all(e in r["stderr"] for e in expect), r["stderr"]
+    assert r["seconds"] < 5.0, r
+    assert r["maxrss_mb"] < 500, r
+    assert not (tmp_path / "fmus").exists()            # refused before anything was built
+
+
+def test_the_memory_limit_is_the_options_and_says_how_to_raise_it(tmp_path):
+    # a plain campaign fits the machine; with a 1 MB limit its 10 runs' rows and run do not
+    path = _campaign_file(tmp_path, "small", "runs = 10")
+    r = _measured(["campaign", str(path), "--max-memory", "1", "--out", str(tmp_path / "out"),
+                   "--fmu-dir", str(tmp_path / "fmus")], tmp_path)
+    assert r["rc"] == 2 and "limit of 1 MB (--max-memory / $LATOBS_MAX_MEMORY_MB = 1 MB)" in r["stderr"], r
+    r = _measured(["campaign", str(path), "--max-hours", "1e-9", "--out", str(tmp_path / "out"),
+                   "--fmu-dir", str(tmp_path / "fmus")], tmp_path)
+    assert r["rc"] == 2 and "would take about" in r["stderr"] and "--max-hours" in r["stderr"], r
+
+
+def test_budget_limits_come_from_the_environment_else_the_available_memory(monkeypatch):
+    monkeypatch.delenv(budget.MEMORY_ENV, raising=False)
+    limit, why = budget.memory_limit()
+    assert 0 < limit <= budget.available_memory() and "available" in why
+    monkeypatch.setenv(budget.MEMORY_ENV, "300")
+    assert budget.memory_limit()[0] == 300 * budget.MB
+    budget.check("x", memory=299 * budget.MB)
+    with pytest.raises(budget.ResourceLimitError, match="x would need about 301 MB of memory, more than the limit "
+                                                        "of 300 MB"):
+        budget.check("x", memory=301 * budget.MB)
+    monkeypatch.setenv(budget.MEMORY_ENV, "-1")
+    with pytest.raises(budget.ResourceLimitError, match="LATOBS_MAX_MEMORY_MB must be a positive number"):
+        budget.memory_limit()
+
+
+# --- records -----------------------------------------------------------------------------------
+def test_a_fifo_is_refused_by_replay_and_identify_without_waiting_for_a_writer(tmp_path):
+    fifo = tmp_path / "drive.csv"
+    os.mkfifo(fifo)
+    for args in (["replay", str(fifo), "--observer", "SideslipBankObserver"],
+                 ["identify", str(fifo), "--vehicle", "sedan", "--out", str(tmp_path / "car.toml")]):
+        r = _measured(args, tmp_path)
+        assert r["rc"] == 2 and "is a FIFO (named pipe), not a record file" in r["stderr"], r
+        assert r["stderr"].count(str(fifo)) == 1, r["stderr"]
+
+
+def _record(path: Path, rows: int) -> Path:
+    t = np.arange(rows) * 0.01
+    text = "t,delta,vx\n" + "".join(f"{x:.2f},0.01,20\n" for x in t)
+    if path.suffix == ".gz":
+        path.write_bytes(gzip.compress(text.encode()))
+    else:
+        path.write_text(text)
+    return path
+
+
+def test_a_record_over_the_size_limit_is_refused_unless_asked(tmp_path, monkeypatch):
+    big = _record(tmp_path / "big.csv", 20000)            # ~ 300 kB
+    monkeypatch.setenv(budget.RECORD_ENV, "0.1")
+    with pytest.raises(records.RecordError, match=r"big.csv: 0.\d+ MB, larger than the record limit of 0.1 MB "
+                                                  r"\(--max-record-mb"):
+        records.load_csv(big)
+    # a .gz is counted by its text as it is read: a small file of much text is refused too
+    gz = _record(tmp_path / "big.csv.gz", 20000)
+    assert gz.stat().st_size < 0.1 * budget.MB
+    with pytest.raises(records.RecordError, match="more than 0.1 MB of text, the record limit"):
+        records.load_csv(gz)
+    monkeypatch.setenv(budget.RECORD_ENV, "1")
+    assert records.load_csv(gz)["t"].size == records.load_csv(big)["t"].size == 20000
+    # and on the command line
+    monkeypatch.delenv(budget.RECORD_ENV)
+    for limit, ok in (("0.1", False), ("1", True)):
+        r = _measured(["identify", str(big), "--vehicle", "sedan", "--out", str(tmp_path / "car.toml"),
+                       "--max-record-mb", limit], tmp_path)
+        assert ("larger than the record limit" in r["stderr"]) != ok, r
+
+
+def test_a_record_read_in_blocks_is_the_record_read_at_once(tmp_path, monkeypatch):
+    path = _record(tmp_path / "r.csv", 1000)
+    whole = records.load_csv(path)
+    monkeypatch.setattr(records, "BLOCK_ROWS", 7)
+    records._parsed.cache_clear()
+    blocks = records.load_csv(path)
+    assert list(blocks) == list(whole) and all(np.array_equal(blocks[k], whole[k]) for k in whole)
+    # t checked across a block boundary (rows 7 and 8: lines 8 and 9), with the file's own text
+    lines = path.read_text().splitlines()
+    lines[8] = "0.055,0.01,20"
+    path.write_text("\n".join(lines) + "\n")
+    records._parsed.cache_clear()
+    with pytest.raises(records.RecordError, match=r"not strictly increasing at line 9 \(t = 0.055 after 0.06\)"):
+        records.load_csv(path)
+
+
+# --- names -------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["two\\nlines", "a/b", "nul\\u0000", "tab\\there", ".hidden", "x" * 101, ""])
+def test_a_campaign_name_unsafe_as_a_folder_is_refused_before_anything_is_created(tmp_path, name):
+    path = tmp_path / "c.toml"
+    path.write_text(f'name = "{name}"\nscenario = "double-lane-change"\nobservers = ["SideslipBankObserver"]\n'
+                    "runs = 2\nseed = 1\n", encoding="utf-8")
+    out = tmp_path / "out"
+    r = _measured(["campaign", str(path), "--out", str(out), "--fmu-dir", str(tmp_path / "fmus")], tmp_path)
+    assert r["rc"] == 2 and "`name` must be a plain word" in r["stderr"], r
+    assert not out.exists() and not (tmp_path / "fmus").exists()
+
+
+def test_a_tag_with_a_newline_is_refused():
+    from latobs.cli import parser
+
+    for args in (["campaign", "double-lane-change", "--tag", "a\nb"], ["validate", "double-lane-change", "--tag", "a\x00b"]):
+        with pytest.raises(SystemExit) as exc:
+            parser().parse_args(args)
+        assert exc.value.code == 2
+
+
+# --- processes and temporary folders ---------------------------------------------------------------
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(d.name))
+    return out
+
+
+def _group(pgid: int) -> list[int]:
+    """The live processes of process group ``pgid`` (zombies are dead)."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == pgid and fields[0] != "Z":
+                out.append(int(d.name))
+    return out
+
+
+def _wait_for(cond, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_sigkill_of_the_main_build_process_leaves_no_latobs_process_alive_after_10_s(tmp_path):
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {**os.environ, "LATOBS_CACHE_DIR": str(tmp_path / "cache"), "TMPDIR": str(tmp), "LATOBS_JOBS": "2"}
+    log = (tmp_path / "build.log").open("w")
+    p = subprocess.Popen([sys.executable, "-m", "latobs", "build", "SideslipKalmanFilter", "CarPlant",
+                          "--platforms", "host", "--out", str(tmp_path / "out")], env=env, stdout=log,
+                         stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        # the two workers are the main process's children that run a multiprocessing spawn
+        def workers():
+            return [c for c in _children(p.pid)
+                    if b"multiprocessing" in Path(f"/proc/{c}/cmdline").read_bytes()
+                    and b"resource_tracker" not in Path(f"/proc/{c}/cmdline").read_bytes()]
+        assert _wait_for(lambda: len(workers()) >= 2, 120), (tmp_path / "build.log").read_text()
+        time.sleep(1.0)                             # the workers at work (importing, designing)
+        assert list(tmp.glob(f"latobs-reference-{p.pid}-*"))
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait()
+        assert _wait_for(lambda: not _group(p.pid), 10), [Path(f"/proc/{q}/cmdline").read_bytes()
+                                                            for q in _group(p.pid)]
+    finally:
+        for q in _group(p.pid):
+            os.kill(q, signal.SIGKILL)
+        log.close()
+    # the killed build's temporary folder is left; the next build's sweep removes it
+    from latobs import pipeline
+
+    left = list(tmp.glob("latobs-*"))
+    assert left
+    assert sorted(pipeline.remove_stale_folders(tmp)) == sorted(left)
+    assert not list(tmp.glob("latobs-*"))
+
+
+_SLOW_MAP = textwrap.dedent("""
+    import os, sys, tempfile, time
+    from latobs.synthesis import lmi
+    with tempfile.TemporaryDirectory(prefix="latobs-reference-%d-" % os.getpid()):
+        print("mapping", flush=True)
+        lmi.parallel_map(time.sleep, [60.0, 60.0])
+""")
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_sigterm_or_ctrl_c_of_a_parallel_map_ends_its_workers_and_removes_its_folders(tmp_path, sig):
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    p = subprocess.Popen([sys.executable, "-c", _SLOW_MAP], env={**os.environ, "TMPDIR": str(tmp), "LATOBS_JOBS": "2"},
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        assert _wait_for(lambda: len([c for c in _children(p.pid) if b"resource_tracker" not in
+                                      Path(f"/proc/{c}/cmdline").read_bytes()]) >= 2, 60)
+        time.sleep(1.0)
+        assert list(tmp.glob("latobs-*"))
+        os.kill(p.pid, sig)
+        p.wait(timeout=20)
+        assert _wait_for(lambda: not _group(p.pid), 10)
+        assert not list(tmp.glob("latobs-*"))
+        assert p.returncode in ((128 + signal.SIGTERM,) if sig == signal.SIGTERM else (1, -signal.SIGINT)), \
+            p.stderr.read()
+    finally:
+        for q in _group(p.pid):
+            os.kill(q, signal.SIGKILL)
+
+
+def test_the_stale_folder_sweep_keeps_the_folders_of_live_processes(tmp_path):
+    from latobs import pipeline
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    live = tmp_path / f"latobs-part-{os.getppid()}-abc"
+    gone = tmp_path / f"latobs-reference-{dead.pid}-xyz"
+    old = tmp_path / "latobs-reference-q1w2e3"           # an older latobs: no PID, by age
+    new = tmp_path / "latobs-reference-r4t5y6"
+    other = tmp_path / f"something-{dead.pid}-else"
+    for d in (live, gone, old, new, other):
+        d.mkdir()
+        (d / "f").write_text("x")
+    os.utime(old, (time.time() - 2 * pipeline.STALE_S,) * 2)
+    assert sorted(pipeline.remove_stale_folders(tmp_path)) == sorted([gone, old])
+    assert live.is_dir() and new.is_dir() and other.is_dir()
