@@ -968,12 +968,18 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
 
     if observer not in designs.DESIGNS:
         raise rp.ReplayError(f"unknown observer {observer!r}; known: {', '.join(designs.DESIGNS)}")
+    from .validation import stream
+
     path = rp.resolve_csv(csv)
-    data = rp.load_csv(path)                    # a bad file fails before anything is built
-    rp.uniform_step(data["t"], path)
-    # the record must carry every input the observer reads, in range, before anything is built
-    rp.check_record(data, observer_inputs(observer), path, observer)
-    rp.check_resources(data, len(observer_outputs(observer)), path)   # memory, before anything is built
+    long = stream.streamed(path)                # replayed block by block, in constant memory
+    if long:                                    # read once to check it, before anything is built
+        data, scanned = None, stream.scan(path, observer_inputs(observer), observer)
+    else:
+        data = rp.load_csv(path)                # a bad file fails before anything is built
+        rp.uniform_step(data["t"], path)
+        # the record must carry every input the observer reads, in range, before anything is built
+        rp.check_record(data, observer_inputs(observer), path, observer)
+        rp.check_resources(data, len(observer_outputs(observer)), path)   # memory, before anything is built
     veh = load_vehicle(vehicle or designs.DESIGNS[observer].default_vehicle)
     if rp.default_split(path) is not None and veh.name != rp.MBDS_VEHICLE and not quiet:
         print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
@@ -983,8 +989,14 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
                  host_suffices=True)    # reused if current (and holds this machine's platform), else built
     mass = veh.parameters["m"].value if "m" in veh.parameters else None
     out_dir = Path(out) / f"replay_{rp.csv_stem(path)}_{name}"
-    metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,
-                            plots=plots, data=data)
+    if long:
+        if split == "auto":
+            split = rp.default_split(path)
+        metrics, paths = stream.run(path, fmu, out_dir, split, observer, veh.name, mass, plots=bool(plots),
+                                    progress=not quiet, info=scanned)
+    else:
+        metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,
+                                plots=plots, data=data)
     if not quiet:
         print(text_table(metrics))
         print(f"wrote {', '.join(str(p) for p in paths)}")

@@ -11,6 +11,7 @@ import os
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -110,15 +111,28 @@ class _Limited:
 
 
 def _parse(path: Path) -> dict[str, np.ndarray]:
+    blocks: dict[str, list[np.ndarray]] = {}       # {column: its blocks}
+    for block in iter_blocks(path):
+        for n, a in block.items():
+            blocks.setdefault(n, []).append(a)
+    return {n: np.concatenate(blocks.pop(n)) for n in list(blocks)}
+
+
+def iter_blocks(path: str | os.PathLike, rows: int | None = None) -> Iterator[dict[str, np.ndarray]]:
+    """The record at ``path`` as consecutive blocks of up to ``rows`` (default :data:`BLOCK_ROWS`)
+    rows, each {column: float array}, with every check of :func:`load_csv` (a RecordError when the
+    block that holds the culprit is read; at the end, fewer than 2 rows). Memory: one block."""
     from . import budget
 
+    path = Path(path)
+    check_file(path)
     limit, why = budget.record_limit()
+    block_rows = max(2, rows or BLOCK_ROWS)      # (a whole block: the 2 rows a record needs)
     opener = gzip.open if path.name.lower().endswith(".gz") else open
-    blocks: dict[str, list[np.ndarray]] = {}       # {column: its blocks}
     names: list[str] = []
     state = {"last": None}               # the previous block's last (t text, t value, line)
 
-    def convert(rows: list[list[str]], lines: list[int]) -> None:
+    def convert(rows: list[list[str]], lines: list[int]) -> dict[str, np.ndarray]:
         for row, line in zip(rows, lines):
             if len(row) != len(names):
                 raise RecordError(f"{path}: line {line} has {len(row)} field(s), the header {len(names)}")
@@ -152,11 +166,11 @@ def _parse(path: Path) -> dict[str, np.ndarray]:
             raise RecordError(f"{path}: column 't' is not strictly increasing at line {tl[i + 1]} "
                               f"(t = {tx[i + 1].strip()} after {tx[i].strip()})")
         state["last"] = (texts[-1], float(t[-1]), lines[-1])
-        for j, n in enumerate(names):
-            blocks.setdefault(n, []).append(data[:, j].copy())
+        return {n: data[:, j].copy() for j, n in enumerate(names)}
 
     header = None
     n_rows = 0
+    block = None
     try:
         with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:
             reader = csv.reader(_Limited(fh, limit, why, path))
@@ -177,12 +191,12 @@ def _parse(path: Path) -> dict[str, np.ndarray]:
                     continue
                 rows.append(row)
                 lines.append(reader.line_num)
-                if len(rows) == BLOCK_ROWS:
-                    convert(rows, lines)
+                if len(rows) == block_rows:
+                    yield convert(rows, lines)
                     n_rows += len(rows)
                     rows, lines = [], []
             if rows:
-                convert(rows, lines)
+                block = convert(rows, lines)
                 n_rows += len(rows)
     except FileNotFoundError:
         raise RecordError(f"{path}: no such file") from None
@@ -193,4 +207,5 @@ def _parse(path: Path) -> dict[str, np.ndarray]:
         raise RecordError(f"{path}: empty file (a header row of column names is needed)")
     if n_rows < 2:
         raise RecordError(f"{path}: {n_rows} data row(s); at least 2 are needed")
-    return {n: np.concatenate(blocks.pop(n)) for n in names}
+    if block is not None:
+        yield block

@@ -297,3 +297,108 @@ def test_the_stale_folder_sweep_keeps_the_folders_of_live_processes(tmp_path):
     os.utime(old, (time.time() - 2 * pipeline.STALE_S,) * 2)
     assert sorted(pipeline.remove_stale_folders(tmp_path)) == sorted([gone, old])
     assert live.is_dir() and new.is_dir() and other.is_dir()
+
+
+# --- long records, streamed ------------------------------------------------------------------------
+def _drive(path: Path, rows: int, dt: float = 0.001) -> Path:
+    """A record SideslipBankObserver can replay (its inputs and the truths beta, yaw_rate), ``rows`` long."""
+    t = np.arange(rows) * dt
+    d = 0.02 * np.sin(0.5 * t)
+    vx = 20 + 2 * np.sin(0.01 * t)
+    r = vx * d / 2.7
+    cols = np.column_stack([t, d, vx, r, 0.01 * np.sin(0.5 * t), 0.005 * np.cos(0.5 * t), vx * r,
+                            0.01 * np.sin(0.5 * t + 0.3)])
+    with path.open("w") as fh:
+        fh.write("t,delta,vx,yaw_rate,roll_angle,roll_rate,ay,beta\n")
+        np.savetxt(fh, cols, fmt=["%.4f"] + ["%.9g"] * 7, delimiter=",")
+    return path
+
+
+def _without(d, keys=("baselines", "streamed", "csv")):
+    if isinstance(d, dict):
+        return {k: _without(v, keys) for k, v in d.items() if k not in keys}
+    return d
+
+
+def _close(a, b, path=""):
+    if isinstance(a, dict):
+        assert set(a) == set(b), path
+        for k in a:
+            _close(a[k], b[k], f"{path}/{k}")
+    elif isinstance(a, float) and isinstance(b, float):
+        assert b == pytest.approx(a, rel=1e-12, abs=1e-300), path
+    else:
+        assert a == b, path
+
+
+def test_a_streamed_replay_scores_as_the_whole_record_and_writes_every_output(fmu_dir, tmp_path, monkeypatch):
+    import pyarrow.parquet as pq
+
+    from latobs import pipeline
+    from latobs.validation import replay as rp
+    from latobs.validation import stream
+
+    rec = _drive(tmp_path / "drive.csv", 3001)
+    monkeypatch.setenv(stream.STREAM_ENV, "1000")
+    assert not stream.streamed(rec)
+    whole = pipeline.replay(str(rec), "SideslipBankObserver", out=tmp_path / "whole", fmu_dir=fmu_dir, split=1.234,
+                            plots=False, quiet=True)
+    monkeypatch.setenv(stream.STREAM_ENV, "0")
+    monkeypatch.setattr(records, "BLOCK_ROWS", 256)       # 12 blocks
+    assert stream.streamed(rec)
+    streamed = pipeline.replay(str(rec), "SideslipBankObserver", out=tmp_path / "stream", fmu_dir=fmu_dir,
+                               split=1.234, plots=True, quiet=True)
+    assert streamed["streamed"]["outputs"] == "outputs.parquet" and "streamed" not in whole
+    assert "not computed for a streamed record" in streamed["observers"]["SideslipBankObserver"]["baselines"][
+        "skipped"]["all"]
+    _close(_without(whole), _without(streamed))
+    # every output of every row, bit for bit those of the whole record driven at once
+    folder = tmp_path / "stream" / "replay_drive_SideslipBankObserver"
+    table = pq.read_table(folder / "outputs.parquet").to_pydict()
+    run = rp.drive(fmu_dir / "SideslipBankObserver.fmu", records.load_csv(rec))
+    assert np.array_equal(table["t"], run.time)
+    for k, v in run.outputs.items():
+        assert np.array_equal(np.asarray(table[k]), v), k
+    assert (folder / "replay.png").is_file()
+
+
+_STREAM_RSS = textwrap.dedent("""
+    import json, sys
+    from latobs import cli
+    from latobs.data import records
+    records.BLOCK_ROWS = 2048
+    def status(key):
+        for line in open("/proc/self/status"):
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) / 1024
+    warm, args = sys.argv[1], sys.argv[2:]
+    assert cli.main([*args[:1], warm, *args[2:]]) == 0     # imports, the FMU: what any length needs
+    with open("/proc/self/clear_refs", "w") as fh:        # the peak (VmHWM) from here on
+        fh.write("5")
+    base = status("VmRSS")
+    rc = cli.main(args)
+    print(json.dumps({"rc": rc, "growth_mb": status("VmHWM") - base}))
+""")
+
+
+@pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="needs Linux's /proc/self/clear_refs")
+def test_a_streamed_replay_holds_the_same_memory_for_a_record_8_times_longer(fmu_dir, tmp_path):
+    """The peak memory a streamed replay adds (after a first replay has imported everything) does
+    not grow with the record; the whole-record replay's, the control, does: 10 000 and 80 000 rows
+    at 1 ms."""
+    warm = _drive(tmp_path / "warm.csv", 3000)
+
+    def growth(rows: int, stream_above_mb: str) -> float:
+        rec = _drive(tmp_path / f"d{rows}.csv", rows)
+        out = subprocess.run([sys.executable, "-c", _STREAM_RSS, str(warm), "replay", str(rec), "--observer",
+                              "SideslipBankObserver", "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out"),
+                              "--no-plots"], capture_output=True, text=True, timeout=300,
+                             env={**os.environ, "LATOBS_STREAM_ABOVE_MB": stream_above_mb})
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+        assert r["rc"] == 0, out.stderr
+        return r["growth_mb"]
+
+    short, long = growth(10_000, "0"), growth(80_000, "0")
+    assert long - short < 5, (short, long)
+    whole_short, whole_long = growth(10_000, "1000"), growth(80_000, "1000")
+    assert whole_long - whole_short > 20, (whole_short, whole_long)      # the control: it does grow
