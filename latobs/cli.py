@@ -223,8 +223,9 @@ def _cmd_identify(args) -> int:
         tune_until = default_split(path)
         what = f"t < {tune_until:g} s (the record's tuning part; t >= {tune_until:g} s is held out)"
     try:
-        result = identification.identify(cols, base, tune_until, use_beta=not args.without_beta,
-                                         source=str(args.record))
+        rows = len(t) if t is not None else 0
+        result = _with_progress(f"identify: fitting {rows} samples", rows, identification.identify, cols, base, tune_until, use_beta=not args.without_beta,
+                                source=str(args.record))
     except identification.IdentificationError as exc:
         raise CliError(str(exc)) from None
     doc = identification.vehicle_document(result, base, name, path.name if args.record != MBDS_ALIAS else "mbds",
@@ -248,6 +249,40 @@ def _cmd_identify(args) -> int:
     print(f"wrote {out}; next: latobs build NAME --vehicle {out}, latobs replay {args.record} --vehicle {out} "
           "--observer NAME")
     return 0
+
+
+#: `latobs identify` on a record of this many rows or more shows its elapsed time on a terminal
+IDENTIFY_PROGRESS_ROWS = 100_000
+
+
+def _with_progress(label: str, rows: int, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)``; on a terminal, for a record of ``rows`` >= IDENTIFY_PROGRESS_ROWS,
+    with a line that shows the time elapsed until it returns (the fit has no count of its own to
+    show: it runs in a daemon thread, this one draws the line; Ctrl-C still stops the command at
+    once)."""
+    import threading
+
+    if rows < IDENTIFY_PROGRESS_ROWS or not sys.stderr.isatty():
+        return fn(*args, **kwargs)
+    from tqdm import tqdm
+
+    out: dict = {}
+
+    def work():
+        try:
+            out["result"] = fn(*args, **kwargs)
+        except BaseException as exc:          # re-raised in the command's thread
+            out["error"] = exc
+
+    thread = threading.Thread(target=work, name="latobs-identify", daemon=True)
+    thread.start()
+    with tqdm(total=None, desc=label, bar_format="{desc}: {elapsed}", file=sys.stderr, leave=False) as bar:
+        while thread.is_alive():
+            thread.join(0.5)
+            bar.refresh()
+    if "error" in out:
+        raise out["error"]
+    return out["result"]
 
 
 def _split(text: str):

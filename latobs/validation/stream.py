@@ -230,7 +230,7 @@ def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.
         prev = None                                    # the previous block's last row: (t, {col}, {out})
         schema = pa.schema([("t", pa.float64())] + [(x, pa.float64() if typ is float else pa.int64())
                                                     for x, typ in out_types.items()])
-        bar = tqdm(total=n, unit="row", desc=f"replay {path.name}", disable=not progress, leave=False,
+        bar = tqdm(total=n, unit="row", desc=f"replay {path.name}", disable=None if progress else True, leave=False,
                    mininterval=0.5)
         row = 0
         with atomic_path(out_dir / "outputs.parquet", suffix=".parquet") as tmp, \

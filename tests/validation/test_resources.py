@@ -214,6 +214,20 @@ def _wait_for(cond, timeout: float) -> bool:
     return False
 
 
+def _kill_and_check_group(p: subprocess.Popen, log) -> None:
+    """SIGKILL of ``p`` (started in a session of its own), then: no process of its group is alive
+    10 s later (the ones that are get killed, and the test fails naming them)."""
+    try:
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait()
+        assert _wait_for(lambda: not _group(p.pid), 10), [Path(f"/proc/{q}/cmdline").read_bytes()
+                                                            for q in _group(p.pid)]
+    finally:
+        for q in _group(p.pid):
+            os.kill(q, signal.SIGKILL)
+        log.close()
+
+
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
 def test_sigkill_of_the_main_build_process_leaves_no_latobs_process_alive_after_10_s(tmp_path):
     tmp = tmp_path / "tmp"
@@ -232,14 +246,8 @@ def test_sigkill_of_the_main_build_process_leaves_no_latobs_process_alive_after_
         assert _wait_for(lambda: len(workers()) >= 2, 120), (tmp_path / "build.log").read_text()
         time.sleep(1.0)                             # the workers at work (importing, designing)
         assert list(tmp.glob(f"latobs-reference-{p.pid}-*"))
-        os.kill(p.pid, signal.SIGKILL)
-        p.wait()
-        assert _wait_for(lambda: not _group(p.pid), 10), [Path(f"/proc/{q}/cmdline").read_bytes()
-                                                            for q in _group(p.pid)]
     finally:
-        for q in _group(p.pid):
-            os.kill(q, signal.SIGKILL)
-        log.close()
+        _kill_and_check_group(p, log)
     # the killed build's temporary folder is left; the next build's sweep removes it
     from latobs import pipeline
 
@@ -247,6 +255,22 @@ def test_sigkill_of_the_main_build_process_leaves_no_latobs_process_alive_after_
     assert left
     assert sorted(pipeline.remove_stale_folders(tmp)) == sorted(left)
     assert not list(tmp.glob("latobs-*"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_sigkill_of_a_campaign_leaves_no_dask_worker_alive_after_10_s(fmu_dir, tmp_path):
+    log_path = tmp_path / "campaign.log"
+    log = log_path.open("w")
+    p = subprocess.Popen([sys.executable, "-m", "latobs", "campaign", "double-lane-change", "--runs", "400",
+                          "--workers", "2", "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out"), "--no-plots",
+                          "--no-progress"], stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        # the local cluster's two worker processes at work (beside this process and its resource tracker)
+        assert _wait_for(lambda: "400 runs (" in log_path.read_text() and len(_group(p.pid)) >= 4, 180), \
+            log_path.read_text()
+        time.sleep(2.0)
+    finally:
+        _kill_and_check_group(p, log)
 
 
 _SLOW_MAP = textwrap.dedent("""
@@ -402,3 +426,52 @@ def test_a_streamed_replay_holds_the_same_memory_for_a_record_8_times_longer(fmu
     assert long - short < 5, (short, long)
     whole_short, whole_long = growth(10_000, "1000"), growth(80_000, "1000")
     assert whole_long - whole_short > 20, (whole_short, whole_long)      # the control: it does grow
+
+
+# --- progress ------------------------------------------------------------------------------------
+class _Terminal:
+    """A stderr that says it is a terminal and keeps what is written."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+def test_a_long_fit_shows_its_elapsed_time_on_a_terminal_and_passes_on_its_result_or_error(monkeypatch):
+    from latobs import cli
+
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    assert cli._with_progress("identify: fitting 5 samples", 5, lambda x: x + 1, 1) == 2
+    assert term.text == ""                                   # a short record: no line
+    assert cli._with_progress("identify: fitting 200000 samples", 200_000, lambda: time.sleep(1.2) or "fit") == "fit"
+    assert "identify: fitting 200000 samples: 00:0" in term.text
+
+    def fails():
+        raise ValueError("bad fit")
+    with pytest.raises(ValueError, match="bad fit"):
+        cli._with_progress("identify: fitting 200000 samples", 200_000, fails)
+
+
+def test_a_long_run_shows_a_stepping_bar_on_a_terminal_only(fmu_dir, tmp_path, monkeypatch):
+    from latobs.validation import master
+    from latobs.validation import replay as rp
+
+    rec = records.load_csv(_drive(tmp_path / "d.csv", 2000))
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(master, "PROGRESS_STEPS", 1000)
+    rp.drive(fmu_dir / "SideslipBankObserver.fmu", rec)
+    assert "stepping:" in term.text and "/1999 [" in term.text
+    term.text = ""
+    monkeypatch.setattr(master, "_interactive", lambda: False)     # a worker, or not a terminal
+    rp.drive(fmu_dir / "SideslipBankObserver.fmu", rec)
+    assert term.text == ""
