@@ -258,6 +258,26 @@ def test_sigkill_of_the_main_build_process_leaves_no_latobs_process_alive_after_
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_sigterm_of_the_main_build_process_ends_its_workers_and_removes_every_temporary_folder(tmp_path):
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {**os.environ, "LATOBS_CACHE_DIR": str(tmp_path / "cache"), "TMPDIR": str(tmp), "LATOBS_JOBS": "2"}
+    p = subprocess.Popen([sys.executable, "-m", "latobs", "build", "SideslipKalmanFilter", "CarPlant",
+                          "--platforms", "host", "--out", str(tmp_path / "out")], env=env, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        # the workers' scratch folders (latobs-part-PID-*) beside the shared one: the workers at work
+        assert _wait_for(lambda: len(list(tmp.glob("latobs-part-*"))) == 2, 120)
+        os.kill(p.pid, signal.SIGTERM)
+        assert p.wait(timeout=20) == 128 + signal.SIGTERM
+        assert _wait_for(lambda: not _group(p.pid), 10)
+        assert not list(tmp.iterdir())
+    finally:
+        for q in _group(p.pid):
+            os.kill(q, signal.SIGKILL)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
 def test_sigkill_of_a_campaign_leaves_no_dask_worker_alive_after_10_s(fmu_dir, tmp_path):
     log_path = tmp_path / "campaign.log"
     log = log_path.open("w")
