@@ -220,7 +220,7 @@ def parallel_map(fn, items: list) -> list:
     except BrokenProcessPool:                 # a worker could not start or died: this process does it
         return [fn(x) for x in items]
     finally:
-        if main:
+        if main and old_term is not None:     # (None: a handler not set from Python, left as it is)
             signal.signal(signal.SIGTERM, old_term)
     if usage is not None:
         for _, calls in done:

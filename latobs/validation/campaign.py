@@ -430,8 +430,8 @@ def check_name(name: str, what: str = "campaign name") -> str:
 # what a campaign needs (estimated before it runs)
 # --------------------------------------------------------------------------------------------
 #: memory a run holds per communication step, bytes: its time grid, signals, the plant's and the
-#: observers' inputs and outputs and the metrics' copies (a lower estimate: 1 h at 1 ms of
-#: ``latobs validate double-lane-change`` measured 2.4 GB, 670 bytes a step)
+#: observers' inputs and outputs and the metrics' copies (a lower estimate: a 1 h random-manoeuvre
+#: run at 1 ms, 3.6e6 steps, with its full validation output peaked at 2.87 GB, 800 bytes a step)
 RUN_BYTES_PER_STEP = 400
 #: time a run takes per communication step, s (a lower estimate: the native FMUs' coupled loop)
 RUN_SECONDS_PER_STEP = 1e-6
@@ -452,22 +452,23 @@ def check_run_resources(what: str, duration: float, dt: float, workers: int = 1)
                  memory=workers * steps * RUN_BYTES_PER_STEP, seconds=steps * RUN_SECONDS_PER_STEP)
 
 
-def check_resources(c: "Campaign", workers: int = 1, steps: float | None = None) -> None:
+def check_resources(c: "Campaign", workers: int | None = 1, steps: float | None = None) -> None:
     """Refuse (ResourceLimitError, naming the estimate and the limit) a campaign whose runs would
     not fit in memory or time: ``steps`` communication steps a run (default: the scenario's
-    duration at the campaign's step; a replay campaign's segment at 1 ms), ``workers`` runs at
-    once, a row of each run kept. Checked before any FMU is built or any run starts."""
+    duration at the campaign's step; a replay campaign's segment at the bundled record's 100 Hz),
+    ``workers`` runs at once (None: unknown, a running scheduler's: one run's memory, time not
+    estimated), a row of each run kept. Checked before any FMU is built or any run starts."""
     from ..data import budget
 
     if steps is None:
         if c.kind == "cosim":
             steps = c.base_scenario().duration / (c.dt or DEFAULT_DT)
         else:
-            steps = float(c.replay.get("segment_s", 30.0)) / 0.001
-    workers = max(1, min(int(workers), c.runs))
-    budget.check(f"campaign {c.name}: {c.runs} runs of {steps:.3g} steps, {workers} at once",
-                 memory=workers * steps * RUN_BYTES_PER_STEP + c.runs * ROW_BYTES,
-                 seconds=c.runs * (steps * RUN_SECONDS_PER_STEP + RUN_SECONDS) / workers)
+            steps = float(c.replay.get("segment_s", 30.0)) / 0.01
+    n = max(1, min(int(workers or 1), c.runs))
+    budget.check(f"campaign {c.name}: {c.runs} runs of {steps:.3g} steps, {n} at once",
+                 memory=n * steps * RUN_BYTES_PER_STEP + c.runs * ROW_BYTES,
+                 seconds=c.runs * (steps * RUN_SECONDS_PER_STEP + RUN_SECONDS) / n if workers else None)
 
 
 # --------------------------------------------------------------------------------------------
