@@ -176,6 +176,31 @@ class _Modes:
         return {"occupancy": {str(m): w / total for m, w in sorted(self.w.items())}, "switches": self.switches}
 
 
+def _zero_baseline(o: Mapping[str, Any], zero: Mapping[tuple[str, str], _Err], segs: list[str], seg: str,
+                   n: int) -> dict[str, Any]:
+    """The ``baselines`` entry of a streamed replay: the zero baseline (every estimate 0) beside
+    each scored estimate and interval midpoint, summed over the blocks; the model baselines, which
+    simulate the whole record (and fit one on its tuning part), are not computed: ``skipped``, and
+    ``not_computed`` in each verdict (so no verdict that the observer is best)."""
+    why = (f"not computed for a streamed record ({n} samples, replayed block by block): it simulates the whole "
+           "record")
+    missing = {"bicycle": why, **({"regression": why} if seg == "after_split" else {})}
+    out: dict[str, Any] = {"zero": {}}
+    summary = {}
+    for kind in ("estimates", "intervals"):
+        for name, e in o[kind].items():
+            out["zero"][name] = {"truth": e["truth"], "unit": e.get("unit"),
+                                 **{s: zero[(name, s)].result() for s in segs}}
+            stats = e if kind == "estimates" else e["midpoint"]
+            summary[name] = {"segment": seg, **_metrics.baseline_summary(
+                (stats.get(seg) or {}).get("rms"), {"zero": out["zero"][name][seg]["rms"]}, "rms",
+                "estimate" if kind == "estimates" else "interval midpoint", missing)}
+    out["summary"] = summary
+    out["skipped"] = dict(missing)
+    out["about"] = {"zero": {"what": "every estimate 0, summed over the blocks"}}
+    return out
+
+
 def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.PathLike, split: float | None,
         observer: str, vehicle: str | None, mass: float | None, plots: bool = True,
         progress: bool = True, info: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], list[Path]]:
@@ -224,6 +249,7 @@ def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.
         fil = {(x, s): _Err() for x in filtered if truth[_metrics.quantity_of(x)] for s in segs}
         enc = {(q, s): _Enc() for q in pairs if truth[q] for s in segs}
         mid = {(q, s): _Err() for q in pairs if truth[q] for s in segs}
+        zero = {k: _Err() for k in [*est, *fil, *mid]}       # the zero baseline beside each: -truth
         fsum = {s: _Enc() for s in segs} if force and mass is not None else {}
         modes = {s: _Modes() for s in segs} if "mode" in outs else {}
         seg_t = {s: [None, None, 0] for s in segs}
@@ -259,12 +285,15 @@ def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.
                         st[2] += int(sel.sum())
                     for (name, s2), acc in est.items():
                         if s2 == s:
-                            acc.add(y[name][sel], b[truth[_metrics.quantity_of(name)]][sel])
+                            x = b[truth[_metrics.quantity_of(name)]][sel]
+                            acc.add(y[name][sel], x)
+                            zero[(name, s)].add(np.zeros(x.size), x)
                     for (q, s2), acc in enc.items():
                         if s2 == s:
                             lo, hi, x = y[q + "_lower"][sel], y[q + "_upper"][sel], b[truth[q]][sel]
                             acc.add(lo, hi, x)
                             mid[(q, s)].add(0.5 * (np.asarray(lo, float) + np.asarray(hi, float)), x)
+                            zero[(q, s)].add(np.zeros(x.size), x)
                     if s in fsum:
                         lo = np.asarray(y["Fyf_lower"], float) + np.asarray(y["Fyr_lower"], float)
                         hi = np.asarray(y["Fyf_upper"], float) + np.asarray(y["Fyr_upper"], float)
@@ -283,6 +312,7 @@ def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.
                             tt = t if prev is None else np.concatenate([[prev[0]], t])
                             ok = in_seg(s, tt)[:-1]
                             acc.add(np.asarray(yy, float)[1:][ok], xx[:-1][ok])
+                            zero[(name, s)].add(np.zeros(int(ok.sum())), xx[:-1][ok])
                 if plots:                              # every k-th row, for the figures
                     pick = (row + np.arange(m)) % every == 0
                     for k, v in [*b.items(), *(("out:" + x, v) for x, v in y.items())]:
@@ -323,9 +353,7 @@ def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.
         o["may_in_force_sum"] = entry
     if modes:
         o["modes"] = {s: modes[s].result() for s in segs}
-    why = (f"not computed for a streamed record ({n} samples, replayed block by block): the model baselines "
-           "simulate the whole record")
-    o["baselines"] = {"summary": {}, "skipped": {"all": why}, "about": {}}
+    o["baselines"] = _zero_baseline(o, zero, segs, "after_split" if split is not None else "all", n)
     o["unscored_outputs"] = sorted(set(outs) - scored - {"mode"})
     o["log_messages"] = len(logs)
     o["log_excerpt"] = logs[:10]

@@ -393,8 +393,13 @@ def test_a_streamed_replay_scores_as_the_whole_record_and_writes_every_output(fm
     streamed = pipeline.replay(str(rec), "SideslipBankObserver", out=tmp_path / "stream", fmu_dir=fmu_dir,
                                split=1.234, plots=True, quiet=True)
     assert streamed["streamed"]["outputs"] == "outputs.parquet" and "streamed" not in whole
-    assert "not computed for a streamed record" in streamed["observers"]["SideslipBankObserver"]["baselines"][
-        "skipped"]["all"]
+    b_whole = whole["observers"]["SideslipBankObserver"]["baselines"]
+    b_stream = streamed["observers"]["SideslipBankObserver"]["baselines"]
+    assert "not computed for a streamed record" in b_stream["skipped"]["bicycle"]
+    _close(b_whole["zero"], b_stream["zero"])                       # the zero baseline, summed over the blocks
+    for name, v in b_stream["summary"].items():                    # no verdict without the model baselines
+        assert v["baselines"]["zero"] == pytest.approx(b_whole["summary"][name]["baselines"]["zero"], rel=1e-12)
+        assert v["observer_best"] is not True
     _close(_without(whole), _without(streamed))
     # every output of every row, bit for bit those of the whole record driven at once
     folder = tmp_path / "stream" / "replay_drive_SideslipBankObserver"
