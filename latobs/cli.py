@@ -224,8 +224,8 @@ def _cmd_identify(args) -> int:
         what = f"t < {tune_until:g} s (the record's tuning part; t >= {tune_until:g} s is held out)"
     try:
         rows = len(t) if t is not None else 0
-        result = _with_progress(f"identify: fitting {rows} samples", rows, identification.identify, cols, base, tune_until, use_beta=not args.without_beta,
-                                source=str(args.record))
+        result = _with_progress(f"identify: fitting {rows} samples", rows, identification.identify, cols, base,
+                                tune_until, use_beta=not args.without_beta, source=str(args.record))
     except identification.IdentificationError as exc:
         raise CliError(str(exc)) from None
     doc = identification.vehicle_document(result, base, name, path.name if args.record != MBDS_ALIAS else "mbds",
@@ -428,8 +428,8 @@ def _positive(unit: str):
     return check
 
 
-MAX_MEMORY_HELP = ("refuse, before starting, what is estimated to need more memory than this many MB (default: 80 percent "
-                   "of the memory available; $LATOBS_MAX_MEMORY_MB)")
+MAX_MEMORY_HELP = ("refuse, before starting, what is estimated to need more memory than this many MB (default: "
+                   "80 percent of the memory available; $LATOBS_MAX_MEMORY_MB)")
 MAX_RECORD_HELP = ("read records of up to this many MB of CSV text (a .gz's decompressed text; default 1024; "
                    "$LATOBS_MAX_RECORD_MB); device files and FIFOs are never read")
 

@@ -389,7 +389,7 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
 #: the temporary folders of the parallel build: TEMP_PREFIX + "reference-" or "part-", the PID of
 #: the process that made it, "-", tempfile's random suffix
 TEMP_PREFIX = "latobs-"
-_TEMP_RE = r"latobs-(?:reference|part)-(?:(\d+)-)?[A-Za-z0-9_]+"
+_TEMP_RE = r"latobs-(?:reference|part|c)-(?:(\d+)-)?[A-Za-z0-9_]+"    # (latobs-c-*: a compilation's, no PID)
 #: a temporary folder of the parallel build without a PID in its name (made by an older latobs) is
 #: stale after this long, s
 STALE_S = 24 * 3600.0
@@ -398,8 +398,9 @@ STALE_S = 24 * 3600.0
 def remove_stale_folders(where: str | Path | None = None) -> list[Path]:
     """Remove the parallel build's temporary folders (``latobs-reference-PID-*``,
     ``latobs-part-PID-*`` in the temporary folder) left by a process that no longer runs (killed:
-    no ``finally`` ran), and those of an older latobs (no PID in the name) older than
-    :data:`STALE_S`; returns those removed. A folder of a running process is kept."""
+    no ``finally`` ran), and those without a PID in the name (an older latobs's; a compilation's
+    ``latobs-c-*``, whose thread a killed process took with it) older than :data:`STALE_S`;
+    returns those removed. A folder of a running process is kept."""
     import os
     import re
     import shutil

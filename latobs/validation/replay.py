@@ -143,7 +143,8 @@ def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the reco
         if unit == "rad" and x.size and np.max(np.abs(x)) > math.pi:
             i = int(np.argmax(np.abs(x)))
             raise ReplayError(f"{source}: column {v.name!r} is an angle in rad, but reaches {x[i]:.6g} at data row "
-                              f"{first_row + i + 1} (beyond +-pi): the record looks like degrees; give it in SI units (rad)")
+                              f"{first_row + i + 1} (beyond +-pi): the record looks like degrees; give it in SI units "
+                              "(rad)")
         lo, hi = getattr(v, "min", None), getattr(v, "max", None)
         lo = None if lo is None else float(lo)
         hi = None if hi is None else float(hi)

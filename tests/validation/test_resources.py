@@ -171,7 +171,8 @@ def test_a_campaign_name_unsafe_as_a_folder_is_refused_before_anything_is_create
 def test_a_tag_with_a_newline_is_refused():
     from latobs.cli import parser
 
-    for args in (["campaign", "double-lane-change", "--tag", "a\nb"], ["validate", "double-lane-change", "--tag", "a\x00b"]):
+    for args in (["campaign", "double-lane-change", "--tag", "a\nb"],
+                 ["validate", "double-lane-change", "--tag", "a\x00b"]):
         with pytest.raises(SystemExit) as exc:
             parser().parse_args(args)
         assert exc.value.code == 2
@@ -334,12 +335,14 @@ def test_the_stale_folder_sweep_keeps_the_folders_of_live_processes(tmp_path):
     gone = tmp_path / f"latobs-reference-{dead.pid}-xyz"
     old = tmp_path / "latobs-reference-q1w2e3"           # an older latobs: no PID, by age
     new = tmp_path / "latobs-reference-r4t5y6"
+    compiled = tmp_path / "latobs-c-a1b2c3"              # a compilation's scratch folder: by age
     other = tmp_path / f"something-{dead.pid}-else"
-    for d in (live, gone, old, new, other):
+    for d in (live, gone, old, new, compiled, other):
         d.mkdir()
         (d / "f").write_text("x")
-    os.utime(old, (time.time() - 2 * pipeline.STALE_S,) * 2)
-    assert sorted(pipeline.remove_stale_folders(tmp_path)) == sorted([gone, old])
+    for d in (old, compiled):
+        os.utime(d, (time.time() - 2 * pipeline.STALE_S,) * 2)
+    assert sorted(pipeline.remove_stale_folders(tmp_path)) == sorted([gone, old, compiled])
     assert live.is_dir() and new.is_dir() and other.is_dir()
 
 
