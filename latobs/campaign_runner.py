@@ -155,6 +155,8 @@ def run_campaign(spec: str, observers: list[str] | None = None, runs: int | None
     ``dashboard``: the address of the local cluster's Dask dashboard (e.g. ``":8787"``); None, the
     default, serves none."""
     c = resolve(spec, observers, runs, seed)
+    # memory and time estimated before anything is built or run; a local cluster runs a run per core
+    cp.check_resources(c, workers=(workers or os.cpu_count() or 1) if scheduler is None else None)
     refs = fmu_refs(c, Path(fmu_dir))
     cr.check_supports(c, refs)                  # a draw outside an FMU's declared range: refused now
     record, split, record_sha = load_record(c)

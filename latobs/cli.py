@@ -141,9 +141,22 @@ def _cmd_check(args) -> int:
     return 0 if all(r.passed for r in results) else 1
 
 
+def _limits(args) -> None:
+    """--max-memory, --max-hours, --max-record-mb: the limits of :mod:`latobs.data.budget`, given
+    to it (and to the processes this one starts) as its environment variables."""
+    from .data import budget
+
+    for attr, env in (("max_memory", budget.MEMORY_ENV), ("max_hours", budget.HOURS_ENV),
+                      ("max_record_mb", budget.RECORD_ENV)):
+        value = getattr(args, attr, None)
+        if value is not None:
+            os.environ[env] = repr(value)
+
+
 def _cmd_validate(args) -> int:
     from .pipeline import run_validation
 
+    _limits(args)
     plant_parameters = _plant_params(args.plant_param)
     _check_observers(args.observer or [], Path(args.fmu_dir))
     run_validation(args.scenario, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
@@ -155,6 +168,7 @@ def _cmd_validate(args) -> int:
 def _cmd_replay(args) -> int:
     from .pipeline import replay
 
+    _limits(args)
     replay(args.csv, args.observer, vehicle=args.vehicle, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
            split=_split(args.split), plots=not args.no_plots)
     return 0
@@ -171,8 +185,9 @@ def _cmd_identify(args) -> int:
     from .synthesis.params import load_vehicle
     from .validation.replay import MBDS_ALIAS, default_split, resolve_csv
 
+    _limits(args)
     path = resolve_csv(args.record)
-    if not path.is_file():
+    if not path.exists():
         raise CliError(f"{args.record}: no such file (a .csv or .csv.gz with a header row, or 'mbds')")
     base_name = args.vehicle or ("mbds_250lm" if args.record == MBDS_ALIAS else None)
     if base_name is None:
@@ -192,7 +207,7 @@ def _cmd_identify(args) -> int:
     try:
         cols = load_csv(path)
     except (OSError, ValueError) as exc:
-        raise CliError(f"{args.record}: {exc}") from None
+        raise CliError(str(exc) if str(exc).startswith(f"{path}:") else f"{args.record}: {exc}") from None
     t = cols.get("t")
     if args.tune_until is not None:
         tune_until, what = args.tune_until, f"t < {args.tune_until:g} s"
@@ -250,6 +265,7 @@ def _cmd_identify(args) -> int:
     return 0
 
 
+
 def _split(text: str):
     """--split: a time in s, 'none', or 'auto' (the file's default: 425 s for the MBDS record)."""
     if text.lower() in ("auto", "none"):
@@ -272,6 +288,7 @@ def _cmd_bench(args) -> int:
 def _cmd_campaign(args) -> int:
     from .campaign_runner import rerun, run_campaign
 
+    _limits(args)
     if args.rerun is not None:
         rerun(args.campaign, args.rerun, observers=args.observer, out=Path(args.out), fmu_dir=Path(args.fmu_dir),
               tag=args.tag, plots=not args.no_plots)
@@ -364,10 +381,38 @@ def _seed(text: str) -> int:
 
 
 def _tag(text: str) -> str:
-    """--tag: the suffix of a folder name, so no path separator."""
+    """--tag: the suffix of a folder name: a plain word (no path separator, newline, NUL, space or
+    other control character; :func:`latobs.validation.campaign.check_name`), or empty."""
+    if text == "":
+        return text
     if "/" in text or "\\" in text or text in (".", ".."):
         raise argparse.ArgumentTypeError(f"must be a plain name (no '/', not '.' or '..'), got {text!r}")
+    from .validation.campaign import NAME_MAX, NAME_RE
+
+    if len(text) > NAME_MAX or not NAME_RE.fullmatch(text):
+        raise argparse.ArgumentTypeError(f"must be a plain word of letters, digits, '.', '_', '+' or '-' (it names a "
+                                         f"folder), got {text!r}")
     return text
+
+
+def _positive(unit: str):
+    """A ``type=`` of a finite number > 0 of ``unit``: --max-memory / --max-record-mb (MB), --max-hours,
+    bench's --lmi-timeout (seconds)."""
+    def check(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"invalid number of {unit}: {text!r}") from None
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"must be a positive number of {unit}, got {text!r}")
+        return value
+    return check
+
+
+MAX_MEMORY_HELP = ("refuse, before starting, what is estimated to need more memory than this many MB (default: "
+                   "80 percent of the memory available; $LATOBS_MAX_MEMORY_MB)")
+MAX_RECORD_HELP = ("read records of up to this many MB of CSV text (a .gz's decompressed text; default 1024; "
+                   "$LATOBS_MAX_RECORD_MB); device files and FIFOs are never read")
 
 
 def _dir(text: str, writable: bool) -> str:
@@ -475,15 +520,6 @@ def _check_bench_args(argv: list[str]) -> None:
             return text
         return check
 
-    def seconds(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
-        if not (math.isfinite(value) and value > 0):
-            raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text!r}")
-        return value
-
     def existing_file(text: str) -> str:
         if not Path(text).is_file():
             raise argparse.ArgumentTypeError(f"{text!r}: no such file")
@@ -498,7 +534,7 @@ def _check_bench_args(argv: list[str]) -> None:
     p.add_argument("--backends", type=names(BACKENDS, "backend(s)"))
     p.add_argument("--designs", type=names(list(designs.DESIGNS), "design(s)"))
     p.add_argument("--scs-max-iters", type=_positive_int)
-    p.add_argument("--lmi-timeout", type=seconds)
+    p.add_argument("--lmi-timeout", type=_positive("seconds"))
     for flag in ("--skip-build", "--skip-lmi", "--skip-fmus", "--skip-coupled", "--skip-scaling"):
         p.add_argument(flag, action="store_true")
     p.parse_known_args(argv)
@@ -567,6 +603,7 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
     v.add_argument("--plant-vehicle", default=None, metavar="V", type=_vehicle,
                    help="vehicle of the plant FMU (default: the plant's default vehicle), e.g. sedan_no_roll")
+    v.add_argument("--max-memory", type=_positive("MB"), default=None, metavar="MB", help=MAX_MEMORY_HELP)
     v.set_defaults(func=_cmd_validate)
     r = sub.add_parser("replay", help="drive an observer FMU with recorded signals and score it against the "
                                       "reference columns present")
@@ -582,6 +619,8 @@ def parser() -> argparse.ArgumentParser:
                    help="also score t < T and t >= T separately (s); 'none', or 'auto' (default: 425 s for the "
                         "MBDS record, whose t >= 425 s is a held-out test, none for other files)")
     r.add_argument("--no-plots", action="store_true", help="write metrics.json only, no PNG figures")
+    r.add_argument("--max-memory", type=_positive("MB"), default=None, metavar="MB", help=MAX_MEMORY_HELP)
+    r.add_argument("--max-record-mb", type=_positive("MB"), default=None, metavar="MB", help=MAX_RECORD_HELP)
     r.set_defaults(func=_cmd_replay)
     idf = sub.add_parser("identify", help="identify a car's cornering stiffnesses from a recorded drive into a "
                                           "vehicle file (then build and replay with --vehicle FILE)")
@@ -600,6 +639,7 @@ def parser() -> argparse.ArgumentParser:
                      help="do not fit the record's reference sideslip 'beta' (only yaw rate and ay)")
     idf.add_argument("--name", default=None, help="the identified vehicle's name (default: the file name's stem)")
     idf.add_argument("--out", required=True, metavar="FILE.toml", help="the vehicle file written")
+    idf.add_argument("--max-record-mb", type=_positive("MB"), default=None, metavar="MB", help=MAX_RECORD_HELP)
     idf.set_defaults(func=_cmd_identify)
     bn = sub.add_parser("bench", help="µs per step of the built FMUs and the coupled run, beside references",
                         add_help=False)
@@ -630,6 +670,10 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.add_argument("--dashboard", nargs="?", const=":8787", default=None, metavar="ADDRESS",
                    help="serve the local cluster's Dask dashboard (default address :8787); none without it")
+    c.add_argument("--max-memory", type=_positive("MB"), default=None, metavar="MB", help=MAX_MEMORY_HELP)
+    c.add_argument("--max-hours", type=_positive("hours"), default=None, metavar="H",
+                   help="refuse, before starting, a campaign estimated to take longer than H hours (default 24; "
+                        "$LATOBS_MAX_HOURS)")
     c.set_defaults(func=_cmd_campaign)
     m = sub.add_parser("demo", help="build everything, run the default scenarios, write build/report/index.md")
     m.add_argument("--out", default=str(DEFAULT_OUT), type=_out_dir, metavar="DIR",
@@ -745,7 +789,8 @@ USER_ERRORS = (("latobs.cli", "CliError"), ("latobs.pipeline", "PipelineError"),
                ("latobs.validation.scenarios", "UnknownScenarioError"),
                ("latobs.validation.harness", "WiringError"), ("latobs.validation.harness", "CoSimulationError"),
                ("latobs.validation.replay", "ReplayError"), ("latobs.validation.campaign", "CampaignError"),
-               ("latobs.check", "CheckError"), ("latobs.cache", "CacheSettingError"))
+               ("latobs.check", "CheckError"), ("latobs.cache", "CacheSettingError"),
+               ("latobs.data.budget", "ResourceLimitError"), ("latobs.data.records", "RecordError"))
 #: (module, function) whose KeyError means "unknown name" (the message names it and the known ones).
 USER_KEY_ERRORS = (("latobs.synthesis.designs", "get"), ("latobs.synthesis.designs", "parse_artefact"))
 

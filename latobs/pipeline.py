@@ -369,11 +369,13 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
     unit, the FMU last: :func:`_install`) and kept only if current. Returns the names installed;
     one that failed is left to the build's own sequential step, which reports the failure. The
     plants of the observers' reference runs are built once, in a folder the workers share."""
+    import os
     import tempfile
 
     from . import cache
     from .synthesis import lmi
 
+    remove_stale_folders()
     states = {p.name: p.current(design_files) for p in plans}
     todo = [p for p in plans if not states[p.name][0] and not _in_cache(p)]
     todo.sort(key=lambda p: -build_seconds(p.model))        # the longest first (a stable sort)
@@ -384,7 +386,9 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
         print(states[p.name][1])                           # building / rebuilding, saying what changed
     print(f"making {len(todo)} FMUs in {n} processes", flush=True)
     made = set()
-    with tempfile.TemporaryDirectory(prefix="latobs-reference-") as shared:   # the workers' reference plants
+    # the workers' reference plants; removed on every exit of this block (an error, Ctrl-C, SIGTERM:
+    # lmi.parallel_map), and by the next build when this process was killed (its PID in the name)
+    with tempfile.TemporaryDirectory(prefix=f"{TEMP_PREFIX}reference-{os.getpid()}-") as shared:
         items = [(p.model, p.vehicle, p.backend, p.platforms, p.fmi, shared) for p in todo]
         for p, (printed, scratch, files) in zip(todo, lmi.parallel_map(_make_worker, items)):
             if files is not None and _install(p, files):
@@ -394,6 +398,66 @@ def _make_in_parallel(plans: list[_Artefact], design_files: bool) -> set[str]:
                 print("\n".join(lines), flush=True)
                 made.add(p.name)
     return made
+
+
+#: the temporary folders of the parallel build: TEMP_PREFIX + "reference-" or "part-", the PID of
+#: the process that made it, "-", tempfile's random suffix
+TEMP_PREFIX = "latobs-"
+_TEMP_RE = r"latobs-(?:reference|part|c)-(?:(\d+)-)?[A-Za-z0-9_]+"    # (latobs-c-*: a compilation's, no PID)
+#: a temporary folder of the parallel build without a PID in its name (made by an older latobs) is
+#: stale after this long, s
+STALE_S = 24 * 3600.0
+
+
+def remove_stale_folders(where: str | Path | None = None) -> list[Path]:
+    """Remove the parallel build's temporary folders (``latobs-reference-PID-*``,
+    ``latobs-part-PID-*`` in the temporary folder) left by a process that no longer runs (killed:
+    no ``finally`` ran), and those without a PID in the name (an older latobs's; a compilation's
+    ``latobs-c-*``, whose thread a killed process took with it) older than :data:`STALE_S`;
+    returns those removed. A folder of a running process is kept."""
+    import os
+    import re
+    import shutil
+    import tempfile
+    import time
+
+    root = Path(where or tempfile.gettempdir())
+    removed = []
+    try:
+        entries = list(root.iterdir())
+    except OSError:
+        return removed
+    for d in entries:
+        m = re.fullmatch(_TEMP_RE, d.name)
+        if m is None or not d.is_dir() or d.is_symlink():
+            continue
+        try:
+            if m.group(1) is not None:
+                pid = int(m.group(1))
+                if pid == os.getpid() or _alive(pid):
+                    continue
+            elif time.time() - d.stat().st_mtime < STALE_S:
+                continue
+            if d.stat().st_uid != os.getuid():
+                continue
+        except OSError:
+            continue
+        shutil.rmtree(d, ignore_errors=True)
+        removed.append(d)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (another user's counts as alive)."""
+    import os
+
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
 
 
 def _make_worker(item: tuple) -> tuple[str, str, dict[str, bytes] | None]:
@@ -413,7 +477,7 @@ def _make_worker(item: tuple) -> tuple[str, str, dict[str, bytes] | None]:
     # (paper 002's speed bands) in itself, not in processes of its own (each would import the
     # solver stack again; the results are those of the parallel map, tested)
     os.environ[lmi.JOBS_ENV] = "1"
-    scratch = Path(tempfile.mkdtemp(prefix="latobs-part-"))
+    scratch = Path(tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}part-{os.getpid()}-"))   # (remove_stale_folders)
     out = fmi_folder(scratch, fmi)
     buf = io.StringIO()
     try:
@@ -925,16 +989,26 @@ def run_validation(scenario: str, observers: list[str] | None, out: Path, fmu_di
     return metrics
 
 
-def observer_inputs(observer: str):
-    """The inputs (name, unit, declared min/max) of observer ``observer``'s FMU, as its model file
-    declares them: known without building the FMU."""
+def _observer_spec(observer: str):
+    """The model file's SPEC of observer ``observer``'s FMU: known without building the FMU."""
     from importlib import import_module
 
     from . import fmu_src, packaging
+
+    return import_module(f"{fmu_src.__name__}.models.{packaging.OBSERVERS[observer].model_module}").SPEC
+
+
+def observer_inputs(observer: str):
+    """The inputs (name, unit, declared min/max) of observer ``observer``'s FMU, as its model file
+    declares them: known without building the FMU."""
     from .validation.replay import InputSpec
 
-    spec = import_module(f"{fmu_src.__name__}.models.{packaging.OBSERVERS[observer].model_module}").SPEC
-    return [InputSpec(v.name, v.unit, v.min, v.max) for v in spec.inputs]
+    return [InputSpec(v.name, v.unit, v.min, v.max) for v in _observer_spec(observer).inputs]
+
+
+def observer_outputs(observer: str) -> list[str]:
+    """The output names of observer ``observer``'s FMU, as its model file declares them."""
+    return [v.name for v in _observer_spec(observer).outputs]
 
 
 def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("build"),
@@ -954,11 +1028,18 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
 
     if observer not in designs.DESIGNS:
         raise rp.ReplayError(f"unknown observer {observer!r}; known: {', '.join(designs.DESIGNS)}")
+    from .validation import stream
+
     path = rp.resolve_csv(csv)
-    data = rp.load_csv(path)                    # a bad file fails before anything is built
-    rp.uniform_step(data["t"], path)
-    # the record must carry every input the observer reads, in range, before anything is built
-    rp.check_record(data, observer_inputs(observer), path, observer)
+    long = stream.streamed(path)                # replayed block by block, in constant memory
+    if long:                                    # read once to check it, before anything is built
+        data, scanned = None, stream.scan(path, observer_inputs(observer), observer)
+    else:
+        data = rp.load_csv(path)                # a bad file fails before anything is built
+        rp.uniform_step(data["t"], path)
+        # the record must carry every input the observer reads, in range, before anything is built
+        rp.check_record(data, observer_inputs(observer), path, observer)
+        rp.check_resources(data, len(observer_outputs(observer)), path)   # memory, before anything is built
     veh = load_vehicle(vehicle or designs.DESIGNS[observer].default_vehicle)
     if rp.default_split(path) is not None and veh.name != rp.MBDS_VEHICLE and not quiet:
         print(f"note: the MBDS record is of vehicle {rp.MBDS_VEHICLE!r}; replaying {observer} designed for "
@@ -968,8 +1049,14 @@ def replay(csv, observer: str, vehicle: str | None = None, out: Path = Path("bui
                  host_suffices=True)    # reused if current (and holds this machine's platform), else built
     mass = veh.parameters["m"].value if "m" in veh.parameters else None
     out_dir = Path(out) / f"replay_{rp.csv_stem(path)}_{name}"
-    metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,
-                            plots=plots, data=data)
+    if long:
+        if split == "auto":
+            split = rp.default_split(path)
+        metrics, paths = stream.run(path, fmu, out_dir, split, observer, veh.name, mass, plots=bool(plots),
+                                    progress=not quiet, info=scanned)
+    else:
+        metrics, paths = rp.run(path, fmu, out_dir, split=split, observer=observer, vehicle=veh.name, mass=mass,
+                                plots=plots, data=data)
     if not quiet:
         print(text_table(metrics))
         print(f"wrote {', '.join(str(p) for p in paths)}")

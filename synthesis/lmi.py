@@ -184,27 +184,93 @@ def parallel_map(fn, items: list) -> list:
     solves; the caller's main script is not run in them). ``fn`` must be a module-level function of
     an importable module, and items and results picklable. Each item is
     computed by the same code on the same input as in this process: the results are those of the
-    sequential loop (tested). An exception of ``fn`` is raised here, the first in item order."""
+    sequential loop (tested). An exception of ``fn`` is raised here, the first in item order.
+
+    The workers die with this process (:func:`_worker_start`): killed (even by SIGKILL), it leaves
+    none behind. A SIGTERM of this process (in the main thread) raises SystemExit(143) here, as
+    Ctrl-C raises KeyboardInterrupt: either way the workers are terminated and the callers' ``with``
+    and ``finally`` blocks (their temporary folders) run."""
     items = list(items)
     n = jobs(len(items))
     if n <= 1:
         return [fn(x) for x in items]
     import multiprocessing
+    import os
+    import signal
+    import threading
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
     from functools import partial
 
     name, settings_, usage = _CHOICE.get()
+    main = threading.current_thread() is threading.main_thread()
+    old_term = signal.signal(signal.SIGTERM, _terminated) if main else None
     try:
-        with main_not_run_again(), ProcessPoolExecutor(max_workers=n,
-                                                        mp_context=multiprocessing.get_context("spawn")) as pool:
-            done = list(pool.map(partial(_in_worker, (name, settings_), fn), items))
+        with main_not_run_again():           # (the workers start as the items are submitted)
+            pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                                       initializer=_worker_start, initargs=(os.getpid(), main))
+            try:
+                done = list(pool.map(partial(_in_worker, (name, settings_), fn), items))
+            except BaseException:             # Ctrl-C, SIGTERM, an error of fn: no worker outlives it
+                for p in list((getattr(pool, "_processes", None) or {}).values()):
+                    p.terminate()
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown()
     except BrokenProcessPool:                 # a worker could not start or died: this process does it
         return [fn(x) for x in items]
+    finally:
+        if main and old_term is not None:     # (None: a handler not set from Python, left as it is)
+            signal.signal(signal.SIGTERM, old_term)
     if usage is not None:
         for _, calls in done:
             usage.calls.extend(calls)
     return [result for result, _ in done]
+
+
+#: how often a worker of :func:`parallel_map` checks that its parent is alive, s; and how long it
+#: takes to clean up (its ``finally`` blocks) once the parent is gone, before it exits regardless
+PARENT_CHECK_S = 0.5
+CLEANUP_S = 2.0
+PR_SET_PDEATHSIG = 1          # <linux/prctl.h>
+
+
+def _terminated(signum, frame):
+    """SIGTERM as an exception (SystemExit(128 + SIGTERM)): ``finally`` blocks run."""
+    raise SystemExit(128 + signum)
+
+
+def _worker_start(parent: int, parent_main_thread: bool) -> None:
+    """Initializer of :func:`parallel_map`'s workers: a worker ends when its parent does. On Linux
+    the kernel sends it SIGTERM when the parent dies (``prctl(PR_SET_PDEATHSIG)``; only when the
+    parent's main thread started it: the signal follows the thread); everywhere a watchdog thread
+    sees the parent gone (its parent PID changes) within :data:`PARENT_CHECK_S`. SIGTERM raises
+    SystemExit in the worker (its ``finally`` blocks remove its scratch folders); after
+    :data:`CLEANUP_S` the watchdog ends it regardless."""
+    import os
+    import signal
+    import sys
+    import threading
+
+    signal.signal(signal.SIGTERM, _terminated)
+    if parent_main_thread and sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_CHECK_S)
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+        finally:
+            time.sleep(CLEANUP_S)
+            os._exit(1)
+
+    threading.Thread(target=watch, name="latobs-parent-watch", daemon=True).start()
 
 
 def solved(status: str) -> bool:

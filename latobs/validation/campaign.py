@@ -12,6 +12,7 @@ import hashlib
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -270,8 +271,7 @@ def from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Campaign:
         return v
 
     name = req("name", str, "a name")
-    if not name or any(c in name for c in "/\\ \t") or name.startswith("."):
-        raise CampaignError(f"{where}: `name` must be a plain word (it names the output folder), got {name!r}")
+    check_name(name, f"{where}: `name`")
     kind = raw.get("kind", "cosim")
     if kind not in KINDS:
         raise CampaignError(f"{where}: `kind` must be one of {', '.join(KINDS)}, got {kind!r}")
@@ -402,12 +402,73 @@ def scenario_cases(where: str, name: str, fields: Mapping[str, Dist], dt: float)
         if not 0 < sc.duration <= MAX_DURATION_S:
             raise CampaignError(f"{where}: {culprit}: the duration {sc.duration:g} s is outside (0, "
                                 f"{MAX_DURATION_S:g}] s")
+        check_run_resources(f"{where}: {culprit}", sc.duration, dt)     # before a grid of its steps is made
         try:
             sc.time_grid(dt)
         except ValueError as exc:
             raise CampaignError(f"{where}: {culprit}: {exc}") from None
         out.append((label, sc))
     return out
+
+
+#: a campaign's name names its folder (campaign_NAME): letters, digits, '.', '_', '+', '-', not
+#: starting with '.', at most NAME_MAX characters. Anything else (a '/', a newline, a NUL, a space,
+#: a control character) is refused before anything is created.
+NAME_RE = re.compile(r"[\w+-][\w.+-]*")
+NAME_MAX = 100
+
+
+def check_name(name: str, what: str = "campaign name") -> str:
+    """``name`` if it is safe as (part of) a folder name (:data:`NAME_RE`), else CampaignError."""
+    if not (isinstance(name, str) and 0 < len(name) <= NAME_MAX and NAME_RE.fullmatch(name)):
+        raise CampaignError(f"{what} must be a plain word of at most {NAME_MAX} letters, digits, '.', '_', '+' or "
+                            f"'-', not starting with '.' (it names the output folder), got {name!r}")
+    return name
+
+
+# --------------------------------------------------------------------------------------------
+# what a campaign needs (estimated before it runs)
+# --------------------------------------------------------------------------------------------
+#: memory a run holds per communication step, bytes: its time grid, signals, the plant's and the
+#: observers' inputs and outputs and the metrics' copies (a lower estimate: a 1 h random-manoeuvre
+#: run at 1 ms, 3.6e6 steps, with its full validation output peaked at 2.87 GB, 800 bytes a step)
+RUN_BYTES_PER_STEP = 400
+#: time a run takes per communication step, s (a lower estimate: the native FMUs' coupled loop)
+RUN_SECONDS_PER_STEP = 1e-6
+#: memory a finished run's row takes in the campaign's process (journal, summary), bytes (lower)
+ROW_BYTES = 1000
+#: time a run takes besides its steps (instantiating the FMUs, the metrics), s (lower)
+RUN_SECONDS = 0.01
+
+
+def check_run_resources(what: str, duration: float, dt: float, workers: int = 1) -> None:
+    """Refuse (ResourceLimitError) a run of ``duration`` s at step ``dt`` that would not fit
+    in memory (``workers`` of them at once) or in time, before it allocates anything."""
+    from ..data import budget
+
+    steps = duration / dt if dt > 0 else math.inf
+    budget.check(f"{what}: a run of {duration:g} s at dt = {dt:g} s ({steps:.3g} steps"
+                 + (f", {workers} at once" if workers > 1 else "") + ")",
+                 memory=workers * steps * RUN_BYTES_PER_STEP, seconds=steps * RUN_SECONDS_PER_STEP)
+
+
+def check_resources(c: "Campaign", workers: int | None = 1, steps: float | None = None) -> None:
+    """Refuse (ResourceLimitError, naming the estimate and the limit) a campaign whose runs would
+    not fit in memory or time: ``steps`` communication steps a run (default: the scenario's
+    duration at the campaign's step; a replay campaign's segment at the bundled record's 100 Hz),
+    ``workers`` runs at once (None: unknown, a running scheduler's: one run's memory, time not
+    estimated), a row of each run kept. Checked before any FMU is built or any run starts."""
+    from ..data import budget
+
+    if steps is None:
+        if c.kind == "cosim":
+            steps = c.base_scenario().duration / (c.dt or DEFAULT_DT)
+        else:
+            steps = float(c.replay.get("segment_s", 30.0)) / 0.01
+    n = max(1, min(int(workers or 1), c.runs))
+    budget.check(f"campaign {c.name}: {c.runs} runs of {steps:.3g} steps, {n} at once",
+                 memory=n * steps * RUN_BYTES_PER_STEP + c.runs * ROW_BYTES,
+                 seconds=c.runs * (steps * RUN_SECONDS_PER_STEP + RUN_SECONDS) / n if workers else None)
 
 
 # --------------------------------------------------------------------------------------------

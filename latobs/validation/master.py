@@ -260,6 +260,9 @@ class CoSimulation:
     # ----------------------------------------------------------------------------------------
     def _simulate(self, plant: FmuInstance, observers: dict[str, FmuInstance]) -> SimResult:
         sc, dt = self.scenario, self.dt
+        from .campaign import check_run_resources
+
+        check_run_resources(f"scenario {sc.name!r}", sc.duration, dt)    # before its grid is made
         t = sc.time_grid(dt)
         n = len(t)
         scen = sc.sampled(t, self.vehicle)
@@ -411,16 +414,32 @@ class CoSimulation:
                          inputs={PLANT_LABEL: plant_in, **obs_in}, info=info)
 
 
+#: a run of this many steps or more shows a progress bar on a terminal (a few seconds of stepping)
+PROGRESS_STEPS = 1_000_000
+
+
+def _interactive() -> bool:
+    """Whether this is the command's own process (not a worker: a campaign's runs stay quiet) and
+    its stderr a terminal."""
+    import multiprocessing
+    import sys
+
+    return multiprocessing.parent_process() is None and getattr(sys.stderr, "isatty", lambda: False)()
+
+
 def step_ports(t: np.ndarray, dt: float, ports: list[Port], routes=(), progress: str | None = None) -> str:
     """The stepping loop over ``ports`` (their input matrices filled, row 0 of their outputs set):
     at each t_k every port's inputs set from row k, every FMU stepped by dt, every port's outputs
     got into row k + 1, then ``routes`` (destination matrix, its columns, source matrix, its
     columns, noise or None, Integer/Boolean route or None) fill row k + 1 of routed inputs. In C
     (:mod:`.compiled_loop`) when it can run here: FMI 2.0 FMUs called directly (ports not
-    ``checked``), Real routes; else the same calls in Python. ``progress``: a bar's label (None: no bar). A failed
+    ``checked``), Real routes; else the same calls in Python. ``progress``: a bar's label (None: no bar,
+    but for a run of :data:`PROGRESS_STEPS` or more on a terminal). A failed
     call is :meth:`Port.fail` (CoSimulationError naming the FMU, the call and the time). Returns
     which loop ran: "compiled" or "python"."""
     n = len(t)
+    if progress is None and n - 1 >= PROGRESS_STEPS and _interactive():
+        progress = "stepping"        # a long run shows a bar of its own on a terminal
     sets = [s for port in ports for s in port.sets]
     stepping = [(port.do_step, port.component, port) for port in ports]
     gets = [g for port in ports for g in port.gets]

@@ -79,6 +79,22 @@ def load_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise ReplayError(str(exc)) from None
 
 
+#: bytes a replay holds per sample and value (the record's columns and the FMU's outputs): the
+#: column itself, the master's matrices, the outputs' copies and the scoring's selections (a
+#: lower estimate)
+BYTES_PER_VALUE = 24
+
+
+def check_resources(data: Mapping[str, np.ndarray], n_outputs: int, source: Any = "the record") -> None:
+    """Refuse (ResourceLimitError, naming the estimate and the limit) a replay of ``data`` through
+    an FMU with ``n_outputs`` outputs that would not fit in memory, before the FMU is built or run."""
+    from ..data import budget
+
+    n = len(data["t"]) if "t" in data else 0
+    budget.check(f"replaying {source} ({n} samples of {len(data)} columns, {n_outputs} outputs)",
+                 memory=n * (len(data) + n_outputs) * BYTES_PER_VALUE)
+
+
 def uniform_step(t: np.ndarray, source: Any = "the record") -> float:
     """The time step of ``t`` (s): the mean step, when the record is uniform, by the rule
     ``latobs identify`` shares (:func:`latobs.data.checks.uniform_step`: time relative to the first
@@ -89,13 +105,14 @@ def uniform_step(t: np.ndarray, source: Any = "the record") -> float:
 
 
 def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the record",
-                 who: str = "the observer") -> None:
+                 who: str = "the observer", first_row: int = 0) -> None:
     """Check that the record ``data`` ({column: array}) can drive an FMU whose inputs are
     ``inputs`` (objects with ``name``, ``unit`` and optional ``min``/``max``, SI: an FMU's
     model-description variables or a model file's declared variables), before anything is built or
     run: every input has its column; an angle input (unit rad) stays within +-pi, else the record is
     most likely in degrees; every value lies in the input's declared range. A ReplayError names
-    ``who``, the signals it needs, the missing ones, or the column, row and value out of range."""
+    ``who``, the signals it needs, the missing ones, or the column, row and value out of range
+    (``data`` a block of a record: its first row is the record's data row ``first_row + 1``)."""
     names = [v.name for v in inputs]
     missing = [x for x in names if x not in data]
     if missing:
@@ -108,7 +125,8 @@ def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the reco
         if unit == "rad" and x.size and np.max(np.abs(x)) > math.pi:
             i = int(np.argmax(np.abs(x)))
             raise ReplayError(f"{source}: column {v.name!r} is an angle in rad, but reaches {x[i]:.6g} at data row "
-                              f"{i + 1} (beyond +-pi): the record looks like degrees; give it in SI units (rad)")
+                              f"{first_row + i + 1} (beyond +-pi): the record looks like degrees; give it in SI units "
+                              "(rad)")
         lo, hi = getattr(v, "min", None), getattr(v, "max", None)
         lo = None if lo is None else float(lo)
         hi = None if hi is None else float(hi)
@@ -120,7 +138,7 @@ def check_record(data: Mapping[str, np.ndarray], inputs, source: Any = "the reco
         if out.any():
             i = int(np.argmax(out))
             shown = f"{x[i]:.6g}" + (f" {unit}" if unit and unit != "1" else "")
-            raise ReplayError(f"{source}: column {v.name!r} = {shown} at data row {i + 1} is outside "
+            raise ReplayError(f"{source}: column {v.name!r} = {shown} at data row {first_row + i + 1} is outside "
                               f"the range [{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
                               f" that {who} declares for input {v.name!r} ({int(out.sum())} row(s) outside)")
 
@@ -169,6 +187,39 @@ class ReplayRun:
     design: dict[str, Any] | None = None
 
 
+def start(f, row0: Mapping[str, float], parameters, t0: float, t_end: float) -> dict[str, Any]:
+    """The FMU instance ``f`` initialised with the inputs ``row0`` at ``t0``: its outputs there
+    (a failure is a ReplayError with its last log messages)."""
+    try:
+        return f.start(row0, parameters, t0, t_end)
+    except Exception as exc:
+        raise ReplayError(f"{f.describe()} failed in initialisation at t = {t0:.6g} s: "
+                          f"{str(exc).rstrip('.')}. Last log messages: {f.log_tail()}") from None
+
+
+def step_rows(f, in_names: list[str], t: np.ndarray, dt: float, cols: Mapping[str, np.ndarray],
+              first: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """The started FMU instance ``f`` stepped over the times ``t`` with the master's matrices and
+    stepping loop (compiled where it can run): at t_k the row k of ``cols`` ({input: values}) in,
+    one step, the outputs at t_k+1 out. ``first``: the outputs at t[0]. Returns {output: values at
+    t} (float for Real, int64 for the others)."""
+    from .instance import CoSimulationError, fmi_type
+    from .master import Port, step_ports, store_input
+
+    port = Port(f, in_names, t.size, checked=False)
+    try:
+        for x, (typ, j) in port.columns(port.inputs).items():
+            store_input(port, typ, j, slice(None), cols[x], x, t)
+        oc = port.columns(port.outputs)
+        for x, (typ, j) in oc.items():
+            port.outputs[typ][2][0, j] = first[x]
+        step_ports(t, dt, [port])
+    except CoSimulationError as exc:
+        raise ReplayError(str(exc)) from None
+    return {v.name: port.outputs[oc[v.name][0]][2][:, oc[v.name][1]].astype(
+        float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
+
+
 def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: str | None = None,
           source: Any = "the record", unzipdir: str | None = None,
           parameters: Mapping[str, Any] | None = None) -> ReplayRun:
@@ -177,8 +228,6 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
     ``unzipdir``: the folder the FMU is already extracted to (kept), else a temporary one.
     ``parameters``: FMU parameters set before initialisation (name: value)."""
     from .harness import FmuInstance, WiringError, _unit_of, observer_design
-    from .instance import CoSimulationError, fmi_type
-    from .master import Port, store_input, step_ports
 
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
@@ -199,27 +248,8 @@ def drive(fmu_path: str | os.PathLike, data: Mapping[str, np.ndarray], label: st
         in_names = [v.name for v in f.inputs]
         check_record(data, [InputSpec(v.name, _unit_of(v), v.min, v.max) for v in f.inputs], source, f.describe())
         units = {v.name: u for v in f.md.modelVariables if (u := _unit_of(v)) and v.causality in ("input", "output")}
-        n = t.size
-        row0 = {x: float(cols[x][0]) for x in in_names}
-        try:
-            y0 = f.start(row0, parameters, float(t[0]), float(t[-1]))
-        except Exception as exc:
-            raise ReplayError(f"{f.describe()} failed in initialisation at t = {t[0]:.6g} s: "
-                              f"{str(exc).rstrip('.')}. Last log messages: {f.log_tail()}") from None
-        # the master's matrices and stepping loop (compiled where it can run): at t_k the record's
-        # row k in, one step, the outputs at t_k+1 out
-        port = Port(f, in_names, n, checked=False)
-        try:
-            for x, (typ, j) in port.columns(port.inputs).items():
-                store_input(port, typ, j, slice(None), cols[x], x, t)
-            out_cols = port.columns(port.outputs)
-            for x, (typ, j) in out_cols.items():
-                port.outputs[typ][2][0, j] = y0[x]
-            step_ports(t, dt, [port])
-        except CoSimulationError as exc:
-            raise ReplayError(str(exc)) from None
-        rec = {v.name: port.outputs[out_cols[v.name][0]][2][:, out_cols[v.name][1]].astype(
-            float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
+        y0 = start(f, {x: float(cols[x][0]) for x in in_names}, parameters, float(t[0]), float(t[-1]))
+        rec = step_rows(f, in_names, t, dt, cols, y0)
         logs = list(f.logs)
         if f.dropped_logs:
             logs.append(f"[INFO] replay: {f.dropped_logs} further log messages dropped")
@@ -323,12 +353,8 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
                              "midpoint": {s: _metrics.error_stats(mid[m], x[m]) for s, m in segs.items()}}
         scored.update((q + "_lower", q + "_upper"))
     if all(b in outs for b in FORCE_BOUNDS) and "ay" in cols:
-        entry: dict[str, Any] = {"quantity": "m*ay", "lower": "Fyf_lower + Fyr_lower",
-                                 "upper": "Fyf_upper + Fyr_upper", "reference": "paper 001 eq. (47)",
-                                 "mass_kg": mass, "vehicle": vehicle, "unit": "N"}
-        if mass is None:
-            entry["skipped"] = f"vehicle {vehicle!r} has no mass parameter m"
-        else:
+        entry = force_sum_entry(mass, vehicle)
+        if mass is not None:
             lo = np.asarray(outs["Fyf_lower"], float) + np.asarray(outs["Fyr_lower"], float)
             hi = np.asarray(outs["Fyf_upper"], float) + np.asarray(outs["Fyr_upper"], float)
             x = float(mass) * cols["ay"]
@@ -371,6 +397,15 @@ def score(run: ReplayRun, split: float | None = None, mass: float | None = None,
         "observers": {run.label: o},
     }
     return out
+
+
+def force_sum_entry(mass: float | None, vehicle: str | None) -> dict[str, Any]:
+    """The head of the ``may_in_force_sum`` entry of :func:`score` (its statistics added beside)."""
+    entry: dict[str, Any] = {"quantity": "m*ay", "lower": "Fyf_lower + Fyr_lower", "upper": "Fyf_upper + Fyr_upper",
+                             "reference": "paper 001 eq. (47)", "mass_kg": mass, "vehicle": vehicle, "unit": "N"}
+    if mass is None:
+        entry["skipped"] = f"vehicle {vehicle!r} has no mass parameter m"
+    return entry
 
 
 def _selected(y, x, mask):
