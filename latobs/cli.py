@@ -265,7 +265,6 @@ def _cmd_identify(args) -> int:
     return 0
 
 
-
 def _split(text: str):
     """--split: a time in s, 'none', or 'auto' (the file's default: 425 s for the MBDS record)."""
     if text.lower() in ("auto", "none"):
