@@ -19,7 +19,7 @@ import numpy as np
 
 from . import reference
 
-__all__ = ["CheckError", "Result", "run_host", "platforms", "check"]
+__all__ = ["CheckError", "Result", "run_host", "run_isolated", "platforms", "seal", "check"]
 
 
 class CheckError(ValueError):
@@ -32,21 +32,21 @@ class Result:
     fmu: str
     experiment: str
     platform: str
-    comparison: reference.Comparison | None      # None: the seal's line (no experiment run)
+    comparison: reference.Comparison
     rows: int
     outputs: int
     failure: str = ""           # the run itself failed (a call's error status, the host's crash)
 
     @property
     def passed(self) -> bool:
-        return not self.failure and (self.comparison is None or self.comparison.passed)
+        return not self.failure and self.comparison.passed
 
     def line(self) -> str:
         c = self.comparison
         head = f"{'PASS' if self.passed else 'FAIL'}  {self.fmu}  {self.experiment}  {self.platform}: "
         if self.failure:
             return head + self.failure
-        if c is None:
+        if self.experiment == "seal":
             return head + f"every member ({self.rows}) matches the SHA-256 of its manifest"
         if c.exact:
             return head + f"bit for bit ({self.rows} rows x {self.outputs} outputs)"
@@ -228,6 +228,23 @@ def run_on(fmu: Path, e: reference.Experiment, platform: str, host: str | None) 
     return r.outputs
 
 
+def seal(fmu: str | Path) -> Result:
+    """The FMU's seal against its content (``packaging.manifest_problems``): a Result whose
+    experiment is "seal", failed (saying which members) when a member changed, is missing or was
+    added after the build. ``latobs check`` prints it before the experiments' lines."""
+    from .packaging import MANIFEST_MEMBER, manifest_problems
+
+    fmu = Path(fmu)
+    damaged = manifest_problems(fmu)
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            members = len([n for n in z.namelist() if not n.endswith("/") and n != MANIFEST_MEMBER])
+    except (OSError, zipfile.BadZipFile):
+        members = 0
+    whole = reference.Comparison(not damaged, not damaged, None, f"every member's SHA-256 as {MANIFEST_MEMBER} holds")
+    return Result(fmu.stem, "seal", "all", whole, members, 0, "; ".join(damaged))
+
+
 def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[tuple[str, str]]]:
     """Run every reference experiment of ``fmu`` on ``platform`` ("host", "all" or a platform
     folder): the results (one per experiment and platform) and the platforms skipped (with why).
@@ -240,18 +257,14 @@ def check(fmu: str | Path, platform: str = "host") -> tuple[list[Result], list[t
     with zipfile.ZipFile(fmu) as z:
         if "modelDescription.xml" not in z.namelist():
             raise CheckError(f"{fmu}: not an FMU (no modelDescription.xml)")
-    from .packaging import manifest_problems
-
-    damaged = manifest_problems(fmu)
     try:
         experiments = reference.read(fmu)
     except reference.ReferenceResultsError as exc:
-        raise CheckError(str(exc) + (f" (and its seal: {'; '.join(damaged)})" if damaged else "")) from None
+        damaged = seal(fmu).failure
+        raise CheckError(str(exc) + (f" (and its seal: {damaged})" if damaged else "")) from None
     run, skipped = platforms(fmu, platform)
     host = _vocabulary(fmu)[1]
-    with zipfile.ZipFile(fmu) as z:
-        members = len([n for n in z.namelist() if not n.endswith("/")]) - 1
-    results = [Result(fmu.stem, "seal", "all", None, members, 0, "; ".join(damaged))]
+    results = []
     for p in run:
         for e in experiments:
             try:

@@ -131,9 +131,10 @@ def _build(args) -> int:
 
 
 def _cmd_check(args) -> int:
-    from .check import check
+    from .check import check, seal
 
-    results, skipped = check(args.fmu, args.platform)
+    results, skipped = check(args.fmu, args.platform)      # (user errors first: not a file, not an FMU)
+    results = [seal(args.fmu), *results]
     for r in results:
         print(r.line())
     for platform, why in skipped:

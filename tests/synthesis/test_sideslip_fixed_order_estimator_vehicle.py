@@ -28,8 +28,9 @@ def test_a_vehicle_without_stiffness_ranges_is_a_user_error_naming_the_key(tmp_p
 
 
 def test_a_file_with_a_shipped_name_keeps_its_own_values(tmp_path):
-    """A TOML called mbds_250lm with other numbers: the design file carries the TOML's values
-    (every parameter and range), never the shipped set's."""
+    """A TOML called mbds_250lm with other numbers is refused when it is loaded (its FMUs would take
+    the shipped set's names): the message asks for a name of its own. Renamed, the design file
+    carries the TOML's values (every parameter and range), never the shipped set's."""
     text = (_shipped("mbds_250lm")
             .replace("m  = { value = 982.0,", "m  = { value = 1250.0,")
             .replace("Cf = { value = 70000.0,", "Cf = { value = 61000.0,")
@@ -37,8 +38,11 @@ def test_a_file_with_a_shipped_name_keeps_its_own_values(tmp_path):
             .replace("speed = { min = 15.0, max = 63.0", "speed = { min = 20.0, max = 30.0"))
     path = tmp_path / "mbds_250lm.toml"
     path.write_text(text)
+    with pytest.raises(VehicleParameterError, match="give it a name of its own"):
+        load_vehicle(path)
+    path.write_text(text.replace('name = "mbds_250lm"', 'name = "my_mbds_250lm"', 1))
     mine, shipped = load_vehicle(path), load_vehicle("mbds_250lm")
-    assert mine.name == shipped.name and mine.value("m") != shipped.value("m")
+    assert mine.name == "my_mbds_250lm" and mine.value("m") != shipped.value("m")
     d = designs.run("SideslipFixedOrderEstimator", str(path), **FAST)
     assert d["certified"]
     got = d["vehicle"]["parameters"]

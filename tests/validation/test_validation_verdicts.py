@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from latobs.synthesis.params import load_vehicle
+from latobs.synthesis.params import VehicleParameterError, load_vehicle
 from latobs.validation import baselines as bl
 from latobs.validation import harness, metrics, report
 from latobs.validation.harness import SimResult, design_summary
@@ -181,9 +181,10 @@ def test_replay_says_when_the_bicycle_is_not_computed():
 
 @pytest.mark.slow
 def test_replay_for_a_new_car_named_like_a_shipped_set_never_takes_that_sets_parameters(tmp_path):
-    """A vehicle file named "mbds_250lm" (a shipped set's name) with its own stiffnesses and lr: the
-    replay's bicycle baseline runs on the file's parameters, carried by the design file, or is
-    reported as not computed with no verdict; never on the shipped set's Cf, Cr."""
+    """A vehicle file named "mbds_250lm" (a shipped set's name) with its own stiffnesses and lr is
+    refused (its FMUs would take the shipped set's names). Renamed, the replay's bicycle baseline
+    runs on the file's parameters, carried by the design file, or is reported as not computed with
+    no verdict; never on the shipped set's Cf, Cr."""
     import re
     from importlib import resources
 
@@ -195,8 +196,11 @@ def test_replay_for_a_new_car_named_like_a_shipped_set_never_takes_that_sets_par
         text = re.sub(rf"^{k}\s*=\s*{{\s*value\s*=\s*[0-9.]+", f"{k} = {{ value = {v}", text, count=1, flags=re.M)
     toml = tmp_path / "newcar.toml"
     toml.write_text(text)
+    with pytest.raises(VehicleParameterError, match="give it a name of its own"):
+        load_vehicle(str(toml))
+    toml.write_text(text.replace('name = "mbds_250lm"', 'name = "newcar"', 1))
     veh = load_vehicle(str(toml))
-    assert veh.name == "mbds_250lm" and {k: veh.value(k) for k in own} == own
+    assert veh.name == "newcar" and {k: veh.value(k) for k in own} == own
     t = 10.0 + 0.01 * np.arange(2001)
     delta, vx = 0.01 * np.sin(0.8 * (t - 10)), np.full_like(t, 25.0)
     ref = bl.bicycle(t, delta, vx, {k: veh.value(k) for k in bl.BICYCLE_PARAMETERS}, initial="steady")
