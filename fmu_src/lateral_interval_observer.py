@@ -188,6 +188,17 @@ def _measured_box(y: float, nu: float) -> tuple[float, float]:
     return math.nextafter(y - nu, -math.inf), math.nextafter(y + nu, math.inf)
 
 
+def _one_minus_cos(d: float) -> float:
+    """k >= 1 - cos(d), rounded up: d^2/2 (1 - cos d <= d^2/2 for every real d: exact to the
+    series' first term, over by at most d^2/12 relative, no cancellation, no libm), at most 1 (cos d
+    >= 0 on the input's declared range |d| <= pi/2; a documented clamp beyond it, which the FMI
+    layers refuse and only a direct call of the runtime reaches); exactly 0 for d = 0."""
+    if d == 0.0:
+        return 0.0
+    k = _na(_na(d * d, _INF) * 0.5, _INF)
+    return k if k <= 1.0 else 1.0      # (a NaN steering: 1)
+
+
 def _product_hull(al, au, l, u):
     """The interval product [al, au] [l, u] (contained in the bound of eq. (21), which it tightens
     when both factors change sign), by the signs of the constant factor, rounded outward."""
@@ -268,6 +279,10 @@ class IntervalObserver:
             if not (math.isfinite(nu) and nu >= 0):
                 raise ValueError(f"parameter {k} ({NU_UNITS[k]}) must be finite and >= 0, got {nu}")
         self._max_comm_step = tb["max_communication_step"]
+        # eq. (8) inverted: Fyf = a x3 + b x4 (``_fyf``); lr / L = a / m (``_ay_band``)
+        L = md["lf"] + md["lr"]
+        self._fa, self._fb, self._lr_l = md["m"] * md["lr"] / L, md["Iz"] / L, md["lr"] / L
+        self._d_last = 0.0               # the steering of the last call (held over the step just ended)
         self._cores: dict = {}
         self._sampled: dict = {}
         self.mode = 0
@@ -893,6 +908,46 @@ class IntervalObserver:
                 out[j], out[_N + j] = Y[q], Y[2 + q]
         return out
 
+    # -- the measurement of ay -----------------------------------------------------------------------
+    def _fyf(self, box):
+        """(lower, upper) of Fyf = a x3 + b x4 over the box (eq. 8 inverted), rounded outward
+        (``_outward_sum``): the published bounds, and |Fyf| for ``_ay_nu``."""
+        a, b = self._fa, self._fb
+        return _outward_sum(a * box[2], b * box[3], -1), _outward_sum(a * box[_N + 2], b * box[_N + 3], 1)
+
+    def _ay_nu(self, k: float, fl: float, fu: float) -> float:
+        """The nu of the ay row: ay_error_bound + k |Fyf| / m for Fyf in [fl, fu], k >= 1 - cos(delta),
+        rounded up (ay_error_bound itself when k = 0: delta = 0).
+        DEPARTURE from the measurement equation of paper 001 (y = C x, eq. 9 and 11: ay = x3 =
+        (Fyf + Fyr)/m; eq. 46): the accelerometer of a car whose front wheels are steered by delta
+        measures (Fyf cos(delta) + Fyr)/m (CarPlant's ay), so ay - x3 = -Fyf (1 - cos delta)/m, which
+        the small-angle model leaves out. It jumps with the held steering at every communication
+        point (1e-4 .. 5e-4 m/s2 in a slalom) and a short step exposed it as an inconsistency (issue
+        47: 1 us / 50 ms steps restarted 120 times in 30 s); bounded here, the bounds stay
+        guaranteed for that car too."""
+        nu = self.nu[1]
+        if k == 0.0:
+            return nu
+        F = fu if fu > -fl else -fl                         # max |Fyf| (fl <= fu)
+        e = _na(_na(k * F, _INF) / self.model["m"], _INF)
+        if not e >= 0.0:                                    # (NaN bounds: no bound)
+            e = _INF
+        return _na(nu + e, _INF)
+
+    def _ay_nu_apriori(self, ay: float, k: float, x4l: float, x4u: float) -> float:
+        """``_ay_nu`` without a box of x3 (a restart): |x3| <= |ay| + nu + k |Fyf|/m and
+        |Fyf| <= a |x3| + b max|x4| give |Fyf| <= (a (|ay| + nu) + b max|x4|) / (1 - k lr/L) (a/m =
+        lr/L; k <= 1: the denominator is >= lf/L > 0); x4 in [x4l, x4u],
+        the restart's box. Rounded up (lr/L carries two roundings: the factor 1 + 4u)."""
+        if k == 0.0:
+            return self.nu[1]
+        h = _na(abs(ay) + self.nu[1], _INF)
+        fl, fu = self._fyf([0.0, 0.0, -h, x4l, 0.0, 0.0, h, x4u])
+        F = fu if fu > -fl else -fl
+        den = _na(1.0 - _na(_na(k * self._lr_l, _INF) * (1.0 + 4.0 * _U), _INF), _NINF)
+        F = _na(F / den, _INF) if den > 0.0 else _INF
+        return self._ay_nu(k, -F, F)
+
     # -- modes, restarts, the longest communication step --------------------------------------------
     def _band(self, vx: float) -> int:
         """Eq. (44): mode i on [edges[i], edges[i + 1]); outside the grid the nearest mode, with
@@ -909,17 +964,19 @@ class IntervalObserver:
         i = bisect_right(edges, vx) - 1
         return 0 if i < 0 else min(i, len(self.modes) - 1)
 
-    def _restart(self, y, keep: bool) -> None:
-        """Initial box: measured states y +- nu, the others +-x0_halfwidth (hull with the current
-        bounds if ``keep``); no xi, no pending correction."""
+    def _restart(self, y, keep: bool, k: float) -> None:
+        """Initial box: the unmeasured states +-x0_halfwidth (hull with the current bounds if
+        ``keep``), the measured ones y +- nu, ay's nu widened by ``_ay_nu_apriori`` (k >= 1 - cos
+        delta); no xi, no pending correction."""
         box = self.box
-        for k, j in enumerate(self.meas):
-            box[j], box[_N + j] = _measured_box(y[k], self.nu[k])
         for j in self.unmeas:
             lo, hi = -self.w0[j], self.w0[j]
             if keep:
                 lo, hi = min(lo, box[j]), max(hi, box[_N + j])
             box[j], box[_N + j] = lo, hi
+        nus = (self.nu[0], self._ay_nu_apriori(y[1], k, box[3], box[_N + 3]))
+        for q, j in enumerate(self.meas):
+            box[j], box[_N + j] = _measured_box(y[q], nus[q])
         self._xi = None
         self._xi_mode = -1
         self._pending = None
@@ -1028,7 +1085,8 @@ class IntervalObserver:
         """The bounds at the start: vy in +-x0_halfwidth[0], x4 in +-x0_halfwidth[3], the measured
         yaw rate and ay +-y_error_bound; the mode of the initial speed; outputs published."""
         y = (u["yaw_rate"], u["ay"])
-        self._restart(y, keep=False)
+        self._d_last = u["delta"]
+        self._restart(y, keep=False, k=_one_minus_cos(u["delta"]))
         vx = u["vx"]
         if abs(vx) >= self.vx_hold and abs(vx) > 0:
             self.mode = self._band(vx)
@@ -1059,6 +1117,12 @@ class IntervalObserver:
             self.initialize(u)
         vx, d = u["vx"], u["delta"]
         y = (u["yaw_rate"], u["ay"])
+        # 1 - cos of the steering before and after t (``_ay_nu``): the accelerometer's y(t) may
+        # follow either (CarPlant's, as a master wires it, follows the one held over the step just ended)
+        k, kl = _one_minus_cos(d), _one_minus_cos(self._d_last)
+        if kl > k:
+            k = kl
+        self._d_last = d
         hold = self.vx_hold
         if -hold < vx < hold or vx == 0.0:
             if not self._holding:
@@ -1072,19 +1136,22 @@ class IntervalObserver:
             self.events.append(("warning", f"vx = {vx:.3g} m/s: interval observer resumes; the bounds restart "
                                            "from the measurement and x0_halfwidth"))
             self._holding = False
-            self._restart(y, keep=False)
+            self._restart(y, keep=False, k=k)
         # 1. DEPARTURE (a tightening; the paper does not intersect): the published box of the measured
         #    states intersected with [y - nu, y + nu]; both contain x. Empty: the model does not hold.
+        #    ay's nu covers the small-angle error of the paper's y = C x (``_ay_nu``), with |Fyf|
+        #    bounded over this box (the prediction: it contains x(t))
+        nus = (self.nu[0], self._ay_nu(k, *self._fyf(box)))
         consistent = 1
-        for k, j in enumerate(self.meas):
+        for q, j in enumerate(self.meas):
             lo, hi = box[j], box[_N + j]
-            ml, mu = _measured_box(y[k], self.nu[k])
+            ml, mu = _measured_box(y[q], nus[q])
             if ml > lo:
                 lo = ml
             if mu < hi:
                 hi = mu
             if lo > hi:
-                if lo - hi <= self._tu["consistency_tol"] * (1.0 + abs(y[k])):
+                if lo - hi <= self._tu["consistency_tol"] * (1.0 + abs(y[q])):
                     lo, hi = hi, lo            # rounding: the gap itself
                 else:
                     consistent = 0
@@ -1096,7 +1163,7 @@ class IntervalObserver:
                                                "the box, saturated tires?); bounds restarted from the measurement "
                                                "and x0_halfwidth, consistent = 0"))
             self._inconsistent = True
-            self._restart(y, keep=True)
+            self._restart(y, keep=True, k=k)
         else:
             self._inconsistent = False
         self.y["consistent"] = consistent
@@ -1157,7 +1224,7 @@ class IntervalObserver:
         if not (all(map(math.isfinite, Fb)) and all(map(math.isfinite, B))):
             self.events.append(("warning", "bounds became non-finite: restarted from the measurement and "
                                            "x0_halfwidth"))
-            self._restart(y, keep=False)
+            self._restart(y, keep=False, k=k)
         else:
             xi = self._xi if (self._xi is not None and self._xi_mode == mode) else _NO_XI
             sampled = None
@@ -1192,8 +1259,8 @@ class IntervalObserver:
             out["beta_lower"], out["beta_upper"] = _outward_atan(xu0 / vx, -1), _outward_atan(xl0 / vx, 1)
         out["yaw_rate_lower"], out["yaw_rate_upper"] = xl1, xu1
         L = md["lf"] + md["lr"]
-        a, b, c = md["m"] * md["lr"] / L, md["Iz"] / L, md["m"] * md["lf"] / L
+        b, c = md["Iz"] / L, md["m"] * md["lf"] / L
         # inverse of eq. (8); DEPARTURE from eq. (45) (misprint): Fyr's lower bound uses x4's upper
-        out["Fyf_lower"], out["Fyf_upper"] = _outward_sum(a * xl2, b * xl3, -1), _outward_sum(a * xu2, b * xu3, 1)
+        out["Fyf_lower"], out["Fyf_upper"] = self._fyf(self.box)
         out["Fyr_lower"], out["Fyr_upper"] = _outward_sum(c * xl2, -b * xu3, -1), _outward_sum(c * xu2, -b * xl3, 1)
         out["mode"] = self.mode + 1

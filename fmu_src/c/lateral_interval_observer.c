@@ -13,7 +13,8 @@
  * has the gains N, E, J, H, P = I - E C of eq. (23)/(30)/(33) (model_data.h, IV_*).
  *
  * Co-simulation (the runtime's ``step``; the observer runs ONE STEP BEHIND the published box):
- *  1. measurement intersection of the published box with [y - nu, y + nu]; an empty one (beyond
+ *  1. measurement intersection of the published box with [y - nu, y + nu] (ay's nu widened by the
+ *     small-angle error of the paper's y = C x for a steered car's accelerometer: ``ay_nu``); an empty one (beyond
  *     IV_CONSISTENCY_TOL) sets consistent = 0 and restarts the bounds (one warning per episode);
  *  2. correction of the previous step (eq. 23 exactly discretised with exp(N s) >= 0: ``correct``);
  *  3. mode of vx (eq. 44; nearest mode outside the grid, one warning per excursion); |vx| < vx_hold
@@ -147,6 +148,7 @@ typedef struct {
     double me_xi[NB];              /* model exchange: [xi_lo; xi_up] of eq. (23) */
     double nu[NY];                 /* |measured - true| of [r, ay]: the FMU parameters
                                       yaw_rate_error_bound (rad/s), ay_error_bound (m/s2) */
+    double d_last;                 /* rad: the steering of the last call (held over the step just ended) */
 } State;
 
 struct Model {
@@ -1413,12 +1415,68 @@ static void measured_box(double y, double nu, double *lo, double *hi)
     *hi = nextafter(y + nu, INFINITY);
 }
 
-/* The initial box: measured states y +- nu, the others +-x0_halfwidth (hull with the current bounds
- * if keep); no xi, no pending correction (the runtime's ``_restart``) */
-static void restart(State *s, const double y[NY], int keep)
+/* ------------------------------------------------------------------ the measurement of ay */
+/* The runtime's ``_one_minus_cos``: k >= 1 - cos(d) rounded up: d^2/2 (1 - cos d <= d^2/2 for every
+ * real d; no cancellation, no libm), at most 1 (cos d >= 0 on the input's declared range |d| <= pi/2;
+ * the FMI layers refuse steering beyond it); 0 for d = 0. */
+static double one_minus_cos(double d)
+{
+    if (d == 0.0) return 0.0;
+    double k = up(up(d * d) * 0.5);
+    return k <= 1.0 ? k : 1.0;      /* (a NaN steering: 1) */
+}
+
+/* The runtime's ``_outward_sum``: t1 + t2 rounded outward by 8 u (|t1| + |t2|) + 4 2^-1074 and one ulp. */
+static double outward_sum(double t1, double t2, int side)
+{
+    double err = 8.0 * 0x1p-53 * (fabs(t1) + fabs(t2)) + 4.0 * 0x1p-1074;
+    return nextafter(t1 + t2 + side * err, side * INFINITY);
+}
+
+/* The runtime's ``_fyf``: the bounds of Fyf = a x3 + b x4 over the box X (eq. 8 inverted), rounded outward */
+static void fyf_bounds(const double X[NB], double *lo, double *hi)
+{
+    double L = IV_LF + IV_LR, a = IV_M * IV_LR / L, b = IV_IZ / L;
+    *lo = outward_sum(a * X[2], b * X[3], -1);
+    *hi = outward_sum(a * X[NX + 2], b * X[NX + 3], 1);
+}
+
+/* The runtime's ``_ay_nu``: the nu of the ay row, ay_error_bound + k |Fyf| / m for Fyf in [fl, fu],
+ * k >= 1 - cos(delta), rounded up (ay_error_bound itself when k = 0).
+ * DEPARTURE from paper 001's measurement equation (y = C x, eq. 9 and 11: ay = x3 = (Fyf + Fyr)/m;
+ * eq. 46): a car steered by delta measures ay = (Fyf cos(delta) + Fyr)/m (CarPlant's), so ay - x3 =
+ * -Fyf (1 - cos delta)/m, which the small-angle model leaves out and which jumps with the held steering
+ * at every communication point (issue 47: a 1 us step exposed it as an inconsistency); bounded here. */
+static double ay_nu(const State *s, double k, double fl, double fu)
+{
+    double nu = s->nu[1], F, e;
+    if (k == 0.0) return nu;
+    F = fu > -fl ? fu : -fl;                 /* max |Fyf| (fl <= fu) */
+    e = up(up(k * F) / IV_M);
+    if (!(e >= 0.0)) e = INFINITY;           /* (NaN bounds: no bound) */
+    return up(nu + e);
+}
+
+/* The runtime's ``_ay_nu_apriori`` (a restart: no box of x3): |Fyf| <= (a (|ay| + nu) + b max|x4|) /
+ * (1 - k lr/L), x4 in [x4l, x4u], rounded up (lr/L: two roundings, the factor 1 + 4u). */
+static double ay_nu_apriori(const State *s, double ay, double k, double x4l, double x4u)
+{
+    if (k == 0.0) return s->nu[1];
+    double h = up(fabs(ay) + s->nu[1]), L = IV_LF + IV_LR, fl, fu, F, den;
+    const double X[NB] = {0.0, 0.0, -h, x4l, 0.0, 0.0, h, x4u};
+    fyf_bounds(X, &fl, &fu);
+    F = fu > -fl ? fu : -fl;
+    den = dn(1.0 - up(up(k * (IV_LR / L)) * (1.0 + 4.0 * U_RND)));
+    F = den > 0.0 ? up(F / den) : INFINITY;
+    return ay_nu(s, k, -F, F);
+}
+
+/* The initial box: the unmeasured states +-x0_halfwidth (hull with the current bounds if keep), the
+ * measured ones y +- nu, ay's nu by ``ay_nu_apriori`` (k >= 1 - cos delta); no xi, no pending
+ * correction (the runtime's ``_restart``) */
+static void restart(State *s, const double y[NY], int keep, double k)
 {
     for (int q = 0; q < NY; q++) {
-        measured_box(y[q], s->nu[q], &s->box[MEAS[q]], &s->box[NX + MEAS[q]]);
         int j = UNMEAS[q];
         double lo = -IV_X0_HALFWIDTH[j], hi = IV_X0_HALFWIDTH[j];
         if (keep) {
@@ -1428,6 +1486,8 @@ static void restart(State *s, const double y[NY], int keep)
         s->box[j] = lo;
         s->box[NX + j] = hi;
     }
+    const double nus[NY] = {s->nu[0], ay_nu_apriori(s, y[1], k, s->box[3], s->box[NX + 3])};
+    for (int q = 0; q < NY; q++) measured_box(y[q], nus[q], &s->box[MEAS[q]], &s->box[NX + MEAS[q]]);
     s->xi_mode = -1;
     s->has_pending = 0;
 }
@@ -1456,7 +1516,8 @@ static void start(Model *m, const double *u, const Log *log)
     State *s = &m->s;
     double y[NY], vx = u[IN_vx];
     measurements(u, y);
-    restart(s, y, 0);
+    s->d_last = u[IN_delta];
+    restart(s, y, 0, one_minus_cos(u[IN_delta]));
     if (fabs(vx) >= m->vx_hold && fabs(vx) > 0.0) {
         s->mode = band(s, vx, log);
         s->vx_pub = vx;
@@ -1475,13 +1536,6 @@ static double outward_atan(double q, int side)
     return t;
 }
 
-/* The runtime's ``_outward_sum``: t1 + t2 rounded outward by 8 u (|t1| + |t2|) + 4 2^-1074 and one ulp. */
-static double outward_sum(double t1, double t2, int side)
-{
-    double err = 8.0 * 0x1p-53 * (fabs(t1) + fabs(t2)) + 4.0 * 0x1p-1074;
-    return nextafter(t1 + t2 + side * err, side * INFINITY);
-}
-
 /* The runtime's ``_publish``: vy; beta = atan(vy / vx) (monotone in vy, decreasing when reversing);
  * r; the axle forces Fyf = (m lr x3 + Iz x4)/L, Fyr = (m lf x3 - Iz x4)/L (eq. 8 inverted, eq. 45)
  * by interval arithmetic: the lower bound of Fyr takes the UPPER bound of x4 (eq. 45's misprint).
@@ -1489,15 +1543,14 @@ static double outward_sum(double t1, double t2, int side)
 static void outputs_of(const double X[NB], double vx, int mode, int consistent, double *y, int *yi)
 {
     const double *l = X, *u = X + NX;
-    double L = IV_LF + IV_LR, a = IV_M * IV_LR / L, b = IV_IZ / L, c = IV_M * IV_LF / L;
+    double L = IV_LF + IV_LR, b = IV_IZ / L, c = IV_M * IV_LF / L;
     y[OUT_vy_lower] = l[0];
     y[OUT_vy_upper] = u[0];
     y[OUT_beta_lower] = vx > 0.0 ? outward_atan(l[0] / vx, -1) : outward_atan(u[0] / vx, -1);
     y[OUT_beta_upper] = vx > 0.0 ? outward_atan(u[0] / vx, 1) : outward_atan(l[0] / vx, 1);
     y[OUT_yaw_rate_lower] = l[1];
     y[OUT_yaw_rate_upper] = u[1];
-    y[OUT_Fyf_lower] = outward_sum(a * l[2], b * l[3], -1);
-    y[OUT_Fyf_upper] = outward_sum(a * u[2], b * u[3], 1);
+    fyf_bounds(X, &y[OUT_Fyf_lower], &y[OUT_Fyf_upper]);
     y[OUT_Fyr_lower] = outward_sum(c * l[2], -b * u[3], -1);
     y[OUT_Fyr_upper] = outward_sum(c * u[2], -b * l[3], 1);
     yi[INT_mode] = mode + 1;
@@ -1506,14 +1559,18 @@ static void outputs_of(const double X[NB], double vx, int mode, int consistent, 
 
 /* ------------------------------------------------------------------ co-simulation step */
 /* Step 1: the published box of the measured states intersected with [y - nu, y + nu] (DEPARTURE:
- * a tightening; both sets contain x). 0 if it is empty beyond IV_CONSISTENCY_TOL (1 + |y|). */
-static int intersect_measurement(State *s, const double y[NY])
+ * a tightening; both sets contain x), ay's nu by ``ay_nu`` over this box (k >= 1 - cos delta). 0 if
+ * it is empty beyond IV_CONSISTENCY_TOL (1 + |y|). */
+static int intersect_measurement(State *s, const double y[NY], double k)
 {
     int consistent = 1;
+    double fl, fu;
+    fyf_bounds(s->box, &fl, &fu);
+    const double nus[NY] = {s->nu[0], ay_nu(s, k, fl, fu)};
     for (int q = 0; q < NY; q++) {
         int j = MEAS[q];
         double lo = s->box[j], hi = s->box[NX + j], ml, mu;
-        measured_box(y[q], s->nu[q], &ml, &mu);
+        measured_box(y[q], nus[q], &ml, &mu);
         if (ml > lo) lo = ml;
         if (mu < hi) hi = mu;
         if (lo > hi) {
@@ -1616,6 +1673,10 @@ static int step(Model *m, double h, const double *u, const Log *log)
     }
     if (!s->started) start(m, u, log);
     measurements(u, y);
+    /* 1 - cos of the steering before and after t (``ay_nu``): y(t) may follow either */
+    double kc = one_minus_cos(d), kl = one_minus_cos(s->d_last);
+    if (kl > kc) kc = kl;
+    s->d_last = d;
     if (frozen(vx, hold)) {
         if (!s->holding)
             log_event(log, LOG_WARNING, "|vx| = %.3g m/s < vx_hold = %g m/s: interval observer frozen, bounds held",
@@ -1628,17 +1689,17 @@ static int step(Model *m, double h, const double *u, const Log *log)
         log_event(log, LOG_WARNING, "vx = %.3g m/s: interval observer resumes; the bounds restart from the "
                   "measurement and x0_halfwidth", vx);
         s->holding = 0;
-        restart(s, y, 0);
+        restart(s, y, 0, kc);
     }
     /* 1. measurement intersection */
-    s->consistent = intersect_measurement(s, y);
+    s->consistent = intersect_measurement(s, y, kc);
     if (!s->consistent) {
         if (!s->inconsistent)
             log_event(log, LOG_WARNING, "measurement (yaw_rate = %.4g rad/s, ay = %.4g m/s2) outside the bounds: "
                       "the model does not hold (stiffness outside the box, saturated tires?); bounds restarted "
                       "from the measurement and x0_halfwidth, consistent = 0", y[0], y[1]);
         s->inconsistent = 1;
-        restart(s, y, 1);
+        restart(s, y, 1, kc);
     } else {
         s->inconsistent = 0;
     }
@@ -1659,7 +1720,7 @@ static int step(Model *m, double h, const double *u, const Log *log)
     s->fallback_episode = fallback;
     if (!all_finite(out, 2 * NB)) {
         log_event(log, LOG_WARNING, NON_FINITE);
-        restart(s, y, 0);
+        restart(s, y, 0, kc);
     } else {
         Pending *p = &s->p;
         p->mode = mode;
@@ -1826,7 +1887,7 @@ int model_me_event_update(Model *m, double t, const double *u, const Log *log)
         log_event(log, LOG_WARNING, "vx = %.3g m/s: interval observer resumes; the bounds restart from the "
                   "measurement and x0_halfwidth", vx);
         s->holding = 0;
-        restart(s, y, 0);
+        restart(s, y, 0, one_minus_cos(u[IN_delta]));
         s->mode = band(s, vx, log);
         me_rebase(s, s->box);
         return 1;
