@@ -474,14 +474,10 @@ def check_resources(c: "Campaign", workers: int | None = 1, steps: float | None 
         else:
             steps = float(c.replay.get("segment_s", 30.0)) / 0.01
     n = max(1, min(int(workers or 1), c.runs))
-    held = steps
-    if c.kind == "cosim":
-        from .master import BLOCK_STEPS, stream_steps
-
-        if steps > stream_steps():       # a long run is streamed: a block at a time (master._simulate_blocks)
-            held = BLOCK_STEPS
+    # (a run of more than master.stream_steps() steps is streamed and holds a block, but is still
+    # counted at its whole length: the bound on the steps a campaign's run may have, dt = 1e-9 refused)
     budget.check(f"campaign {c.name}: {c.runs} runs of {steps:.3g} steps, {n} at once",
-                 memory=n * held * RUN_BYTES_PER_STEP + c.runs * ROW_BYTES,
+                 memory=n * steps * RUN_BYTES_PER_STEP + c.runs * ROW_BYTES,
                  seconds=c.runs * (steps * RUN_SECONDS_PER_STEP + RUN_SECONDS) / n if workers else None)
 
 

@@ -8,7 +8,11 @@ whatever the record's length: a 1 h record at 1 ms (3.6 million rows) replays in
 The metrics are those of the whole-array scoring, summed block by block (the same values up to
 the rounding of the sums, ~1e-15 relative); the model baselines, which simulate a model over the
 whole record (and fit one on its tuning part), are not computed for a streamed record: the
-``baselines`` entry says so in ``skipped``. docs/validation.md describes it."""
+``baselines`` entry says so in ``skipped``. docs/validation.md describes it.
+
+A long co-simulation is streamed the same way: :class:`CosimSink` receives its blocks
+(:meth:`latobs.validation.master.CoSimulation._simulate_blocks`), writes ``outputs.parquet`` and
+sums the metrics (:class:`latobs.validation.metrics.StreamedMetrics`)."""
 from __future__ import annotations
 
 import math
