@@ -134,7 +134,7 @@ _RSS = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     from latobs.validation import get_scenario, master, validate
-    master.BLOCK_STEPS = 2000
+    master.BLOCK_STEPS = 10000
     plant, obs, out, above = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), sys.argv[5]
     def status(key):
         for line in open("/proc/self/status"):
@@ -171,4 +171,4 @@ def test_a_streamed_cosimulation_holds_the_same_memory_for_a_run_8_times_longer(
     short, long = growth(20.0, "1000"), growth(160.0, "1000")
     assert long - short < 5, (short, long)
     whole_short, whole_long = growth(20.0, "1e9"), growth(160.0, "1e9")
-    assert whole_long - whole_short > 20, (whole_short, whole_long)      # the control: it does grow
+    assert whole_long - whole_short > 50, (whole_short, whole_long)      # the control: it does grow
