@@ -337,13 +337,15 @@ def rerun(spec: str, run_seed: int, observers: list[str] | None = None, out: Pat
     target = folder / f"rerun_{run_seed}"
     paths = {r.role: Path(r.path) for r in refs}
     if c.kind == "cosim":
-        from .validation import validate
+        from .validation import stream, validate
 
         params = cp.draw(c, run_seed)
         sc, kwargs = cr.cosim_setup(c, params, run_seed)
+        # a long run streamed: its metrics.json and the campaign's flat metrics summed over the blocks
+        sink = stream.CosimSink(target, keep=bool(plots), flat_settle=cr.settle_time(c, sc))
         result, _, written = validate(sc, paths["plant"], {o: paths[o] for o in c.observers}, target, plots=plots,
-                                      **kwargs)
-        metrics = cr.result_metrics(result, cr.settle_time(c, sc))
+                                      sink=sink, **kwargs)
+        metrics = sink.flat(result) if sink.used else cr.result_metrics(result, cr.settle_time(c, sc))
     else:
         from .validation import replay as rp
 

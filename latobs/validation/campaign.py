@@ -441,15 +441,23 @@ ROW_BYTES = 1000
 RUN_SECONDS = 0.01
 
 
-def check_run_resources(what: str, duration: float, dt: float, workers: int = 1) -> None:
+def check_run_resources(what: str, duration: float, dt: float, workers: int = 1,
+                        block_steps: int | None = None) -> None:
     """Refuse (ResourceLimitError) a run of ``duration`` s at step ``dt`` that would not fit
-    in memory (``workers`` of them at once) or in time, before it allocates anything."""
+    in memory (``workers`` of them at once) or in time, before it allocates anything.
+    ``block_steps``: the run is streamed in blocks of that many steps (its memory that of a block
+    and of the figures' samples, :data:`latobs.validation.stream.PLOT_SAMPLES`, whatever its length)."""
     from ..data import budget
 
     steps = duration / dt if dt > 0 else math.inf
+    held = steps
+    if block_steps is not None:
+        from .stream import PLOT_SAMPLES
+
+        held = min(steps, block_steps + PLOT_SAMPLES)
     budget.check(f"{what}: a run of {duration:g} s at dt = {dt:g} s ({steps:.3g} steps"
-                 + (f", {workers} at once" if workers > 1 else "") + ")",
-                 memory=workers * steps * RUN_BYTES_PER_STEP, seconds=steps * RUN_SECONDS_PER_STEP)
+                 + (f", {workers} at once" if workers > 1 else "") + (", streamed" if block_steps else "") + ")",
+                 memory=workers * held * RUN_BYTES_PER_STEP, seconds=steps * RUN_SECONDS_PER_STEP)
 
 
 def check_resources(c: "Campaign", workers: int | None = 1, steps: float | None = None) -> None:
@@ -466,6 +474,8 @@ def check_resources(c: "Campaign", workers: int | None = 1, steps: float | None 
         else:
             steps = float(c.replay.get("segment_s", 30.0)) / 0.01
     n = max(1, min(int(workers or 1), c.runs))
+    # (a run of more than master.stream_steps() steps is streamed and holds a block, but is still
+    # counted at its whole length: the bound on the steps a campaign's run may have, dt = 1e-9 refused)
     budget.check(f"campaign {c.name}: {c.runs} runs of {steps:.3g} steps, {n} at once",
                  memory=n * steps * RUN_BYTES_PER_STEP + c.runs * ROW_BYTES,
                  seconds=c.runs * (steps * RUN_SECONDS_PER_STEP + RUN_SECONDS) / n if workers else None)

@@ -220,17 +220,7 @@ def baseline_metrics(label: str, outputs: Mapping[str, np.ndarray], truth: Mappi
             base_rms = {base: rms((v - xs)[sel]) for base, v in series.items()}
             if not base_rms and not missing:
                 continue
-            v = metrics.baseline_summary(obs if obs is None or math.isfinite(obs) else None, base_rms, "rms",
-                                         what, missing)
-            if pre:
-                row[f"{label}.{key}.valid_rms"] = math.nan if obs is None else obs
-            else:
-                if what == "midpoint":
-                    row[f"{label}.{key}.midpoint_rms"] = math.nan if obs is None else obs
-                for base, r in base_rms.items():
-                    row[f"{label}.{key}.rms_{base}"] = math.nan if r is None else r
-            row[f"{label}.{key}.{pre}ratio"] = math.nan if v["ratio"] is None else v["ratio"]
-            row[f"{label}.{key}.{pre}wins"] = math.nan if v["observer_best"] is None else float(v["observer_best"])
+            metrics.baseline_row(row, label, key, pre, what, obs, base_rms, missing)
     return row
 
 
@@ -370,14 +360,16 @@ def run_cases(c: Campaign, ks: list[int], seeds: list[int], fmus: list[FmuRef],
 
 
 def _cosim_metrics(c, params, seed, fmus, local) -> tuple[dict[str, float], dict[str, list[str]]]:
-    from . import harness
+    from . import harness, stream
 
     sc, kwargs = cosim_setup(c, params, seed)
     plant = local[fmus[0].role]
     observers = {ref.role: local[ref.role] for ref in fmus[1:]}
-    res = harness.run(sc, plant[0], {lab: p for lab, (p, _) in observers.items()},
-                      unzipped={p: d for p, d in [plant, *observers.values()]}, **kwargs)
-    return result_metrics(res, settle_time(c, sc)), res.inputs
+    # a long run is stepped in blocks, its flat metrics summed over them (stream.CosimSink)
+    with stream.CosimSink(None, keep=False, settle_time=settle_time(c, sc)) as sink:
+        res = harness.run(sc, plant[0], {lab: p for lab, (p, _) in observers.items()},
+                          unzipped={p: d for p, d in [plant, *observers.values()]}, sink=sink, **kwargs)
+    return (sink.flat(res) if sink.used else result_metrics(res, settle_time(c, sc))), res.inputs
 
 
 def result_metrics(res, settle: float) -> dict[str, float]:

@@ -65,9 +65,41 @@ class NoiseSpec:
             out[name] = bias + std * g.standard_normal(n)
         return out
 
+    def blocks(self, n: int, default_seed: int = 0) -> "NoiseBlocks":
+        """The draws of :meth:`draw` taken a block at a time (:class:`NoiseBlocks`): the same
+        numbers for the same (seed, signals, n), without holding n of them."""
+        return NoiseBlocks(self, n, default_seed)
+
     def as_dict(self) -> dict:
         return {"signals": {k: {"std": float(v[0]), "bias": float(v[1])} for k, v in self.signals.items()},
                 "seed": self.seed}
+
+
+class NoiseBlocks:
+    """:meth:`NoiseSpec.draw` (n samples per signal, in sorted name order from one generator)
+    taken block by block: ``take(m)`` gives each signal's next m errors. Signal i's numbers start
+    where signal i - 1's n numbers end in the one generator, so its generator's state there is
+    found once by drawing (and dropping) those n numbers a block at a time; numpy's normal draws
+    split into blocks are the same numbers as one draw of their total (the ziggurat keeps no
+    state between calls), so every error equals the whole-run draw's bit for bit."""
+
+    CHUNK = 1 << 16
+
+    def __init__(self, spec: NoiseSpec, n: int, default_seed: int = 0):
+        g = spec.rng(default_seed)
+        self.gens: dict[str, tuple[np.random.Generator, float, float]] = {}
+        names = sorted(spec.signals)
+        for i, name in enumerate(names):
+            h = np.random.Generator(type(g.bit_generator)())
+            h.bit_generator.state = g.bit_generator.state
+            std, bias = (float(x) for x in spec.signals[name])
+            self.gens[name] = (h, std, bias)
+            if i + 1 < len(names):          # the next signal's numbers start after this one's n
+                for k in range(0, n, self.CHUNK):
+                    g.standard_normal(min(self.CHUNK, n - k))
+
+    def take(self, m: int) -> dict[str, np.ndarray]:
+        return {name: bias + std * h.standard_normal(m) for name, (h, std, bias) in self.gens.items()}
 
 
 # --------------------------------------------------------------------------------------------
@@ -199,6 +231,10 @@ class CoSimulation:
     unzipped           {FMU path: folder it is already extracted to}: those FMUs are not extracted
                        again (a campaign's worker extracts each FMU once, not once per run); the
                        caller owns the folders
+    sink               None (every sample returned in memory), or what receives a long run's rows
+                       block by block (more than :func:`stream_steps` steps): ``sink.block(k0,
+                       part)`` for each block, ``sink.finish(result)`` makes the result returned
+                       (:meth:`_simulate_blocks`; :class:`latobs.validation.stream.CosimSink`)
     """
 
     def __init__(self, scenario: Scenario | str, plant_fmu: str | os.PathLike,
@@ -206,8 +242,9 @@ class CoSimulation:
                  noise: NoiseSpec | Mapping | None = None, seed: int = 0,
                  plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
                  progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None,
-                 fast: bool = True, unzipped: Mapping[str | os.PathLike, str] | None = None):
+                 fast: bool = True, unzipped: Mapping[str | os.PathLike, str] | None = None, sink: Any = None):
         self.fast = bool(fast)
+        self.sink = sink
         self.unzipped = {Path(k).resolve(): str(v) for k, v in (unzipped or {}).items()}
         self.scenario = get_scenario(scenario)
         self.plant_path = Path(plant_fmu)
@@ -262,12 +299,69 @@ class CoSimulation:
         sc, dt = self.scenario, self.dt
         from .campaign import check_run_resources
 
+        steps = sc.duration / dt
+        if self.sink is not None and np.isfinite(steps) and round(steps) > stream_steps():
+            # a long run: stepped block by block, its rows handed to the sink (constant memory)
+            check_run_resources(f"scenario {sc.name!r}", sc.duration, dt, block_steps=BLOCK_STEPS)
+            return self._simulate_blocks(plant, observers, int(round(steps)))
         check_run_resources(f"scenario {sc.name!r}", sc.duration, dt)    # before its grid is made
         t = sc.time_grid(dt)
         n = len(t)
         scen = sc.sampled(t, self.vehicle)
+        w = self._wiring(plant, observers, scen)
+        held, plant_in, bus_names, obs_in, measured_names, units = (
+            w["held"], w["plant_in"], w["bus_names"], w["obs_in"], w["measured_names"], w["units"])
+        noise: dict[str, np.ndarray] = {}
+        if self.noise is not None:
+            noise = self.noise.draw(n, self.seed)
 
-        # ---- wiring, checked before anything is instantiated
+        # ---- initialisation: plant first (its outputs at t0 feed the observers)
+        sig = {x: np.empty(n) for x in scen}
+        for x, v in scen.items():
+            sig[x][:] = v
+        y0, obs_y0 = self._start(plant, observers, w, sig, noise, float(t[0]), float(t[-1]))
+
+        # ---- the buffers: a plant input column is the scenario's signal; an observer input column
+        # is its measured signal, computed once for a scenario signal, after each step for a plant
+        # output (a route)
+        p = Port(plant, plant_in, n, not self.fast)
+        for x, (typ, j) in p.columns(p.inputs).items():
+            store_input(p, typ, j, slice(None), sig[x], x, t)
+        p_out = p.columns(p.outputs)
+        for x, (typ, j) in p_out.items():
+            p.outputs[typ][2][0, j] = y0[x]
+        ports = [p]
+        routes = []   # (destination matrix, its columns, source matrix, its columns, noise or None, int store)
+        for lab, f in observers.items():
+            o = Port(f, obs_in[lab], n, not self.fast)
+            ports.append(o)
+            for x, (typ, j) in o.columns(o.outputs).items():
+                o.outputs[typ][2][0, j] = obs_y0[lab][x]
+            for x, (typ, j) in o.columns(o.inputs).items():
+                if x not in p_out:
+                    store_input(o, typ, j, slice(None), sig[x] + noise[x] if x in noise else sig[x], x, t)
+            routes += _routes(o, p, p_out, noise, t)
+
+        _route_row(routes, 0)
+
+        # ---- the stepping loop: at t_k set every FMU's inputs, step every FMU, get the outputs at t_k+1
+        stepping_started = time.perf_counter()
+        loop = step_ports(t, dt, ports, routes, progress=sc.name if self.progress else None)
+
+        stepping_seconds = time.perf_counter() - stepping_started
+
+        # ---- results
+        bus, measured, obs_rec = _rows(observers, ports, sig, noise, bus_names, measured_names, slice(None))
+        return SimResult(time=t, bus=bus, observers=obs_rec, logs=self._logs(plant, observers), scenario=sc.name,
+                         dt=dt, settle_time=float(sc.settle_time), measured=measured, units=units,
+                         inputs={PLANT_LABEL: plant_in, **obs_in},
+                         info=self._info(plant, observers, held, loop, stepping_seconds))
+
+    def _wiring(self, plant: FmuInstance, observers: dict[str, FmuInstance], scen) -> dict[str, Any]:
+        """The wiring of the scenario signals ``scen`` (names), the plant and the observers, checked
+        before anything is instantiated: {"held", "plant_in", "bus_names", "obs_in",
+        "measured_names", "units"}."""
+        sc = self.scenario
         optional = set(getattr(sc, "optional_plant_inputs", ()))
         missing = [v.name for v in plant.inputs if v.name not in scen and v.name not in optional]
         if missing:
@@ -299,13 +393,11 @@ class CoSimulation:
         plant.check_parameters(self.plant_parameters)
         for lab, f in observers.items():
             f.check_parameters(self.observer_parameters.get(lab, {}))
-        noise: dict[str, np.ndarray] = {}
         if self.noise is not None:
             bad = sorted(set(self.noise.signals) - set(bus_names))
             if bad:
                 raise WiringError(f"noise given for signal(s) {', '.join(repr(b) for b in bad)} not on the bus "
                                   f"(bus signals: {', '.join(bus_names)})")
-            noise = self.noise.draw(n, self.seed)
         measured_names = list(dict.fromkeys(x for names in obs_in.values() for x in names))
 
         units: dict[str, str] = {}
@@ -314,84 +406,45 @@ class CoSimulation:
                 u = _unit_of(v)
                 if u and v.causality in ("input", "output"):
                     units.setdefault(v.name, u)
+        return {"held": held, "plant_in": plant_in, "bus_names": bus_names, "obs_in": obs_in,
+                "measured_names": measured_names, "units": units}
 
+    def _start(self, plant: FmuInstance, observers: dict[str, FmuInstance], w: dict[str, Any], sig, noise,
+               t0: float, stop: float) -> tuple[dict, dict]:
+        """Initialise the plant (inputs at row 0 of ``sig``) and then the observers (the plant's
+        outputs at t0, plus row 0 of ``noise``); returns (plant outputs, {label: outputs}) at t0."""
         def call(f: FmuInstance, fn, *args):
             try:
                 return fn(*args)
             except Exception as exc:
                 raise CoSimulationError(
-                    f"{f.describe()} failed in initialisation at t = {t[0]:.6g} s: {str(exc).rstrip('.')}. "
+                    f"{f.describe()} failed in initialisation at t = {t0:.6g} s: {str(exc).rstrip('.')}. "
                     f"Last log messages: {f.log_tail()}") from exc
 
-        # ---- initialisation: plant first (its outputs at t0 feed the observers)
-        sig = {x: np.empty(n) for x in scen}
-        for x, v in scen.items():
-            sig[x][:] = v
-        t0, stop = float(t[0]), float(t[-1])
-        y0 = call(plant, plant.start, {x: sig[x][0] for x in plant_in}, self.plant_parameters, t0, stop)
-        bus0 = {x: float(y0[x]) if x in y0 else sig[x][0] for x in measured_names}
-        at_start = getattr(sc, "initialise_at_start_values", False)   # as fmpy's simulate_ssp (ssp.py)
+        y0 = call(plant, plant.start, {x: sig[x][0] for x in w["plant_in"]}, self.plant_parameters, t0, stop)
+        bus0 = {x: float(y0[x]) if x in y0 else sig[x][0] for x in w["measured_names"]}
+        at_start = getattr(self.scenario, "initialise_at_start_values", False)   # as fmpy's simulate_ssp (ssp.py)
         obs_y0 = {}
         for lab, f in observers.items():
             m0 = ({v.name: float(v.start) for v in f.inputs} if at_start else
-                  {x: bus0[x] + noise[x][0] if x in noise else bus0[x] for x in obs_in[lab]})
+                  {x: bus0[x] + noise[x][0] if x in noise else bus0[x] for x in w["obs_in"][lab]})
             obs_y0[lab] = call(f, f.start, m0, self.observer_parameters.get(lab, {}), t0, stop)
+        return y0, obs_y0
 
-        # ---- the buffers: a plant input column is the scenario's signal; an observer input column
-        # is its measured signal, computed once for a scenario signal, after each step for a plant
-        # output (a route)
-        p = Port(plant, plant_in, n, not self.fast)
-        for x, (typ, j) in p.columns(p.inputs).items():
-            store_input(p, typ, j, slice(None), sig[x], x, t)
-        p_out = p.columns(p.outputs)
-        for x, (typ, j) in p_out.items():
-            p.outputs[typ][2][0, j] = y0[x]
-        ports = [p]
-        routes = []   # (destination matrix, its columns, source matrix, its columns, noise or None, int store)
-        for lab, f in observers.items():
-            o = Port(f, obs_in[lab], n, not self.fast)
-            ports.append(o)
-            for x, (typ, j) in o.columns(o.outputs).items():
-                o.outputs[typ][2][0, j] = obs_y0[lab][x]
-            from_plant: dict[tuple, list] = {}
-            for x, (typ, j) in o.columns(o.inputs).items():
-                if x in p_out:
-                    from_plant.setdefault((typ, p_out[x][0], x in noise), []).append((j, x))
-                else:
-                    store_input(o, typ, j, slice(None), sig[x] + noise[x] if x in noise else sig[x], x, t)
-            for (typ, src_typ, noisy), cols in from_plant.items():
-                names = [x for _, x in cols]
-                src, src_cols = p.outputs[src_typ][2], np.array([p_out[x][1] for x in names], dtype=np.intp)
-                nz = np.column_stack([noise[x] for x in names]) if noisy else None
-                routes.append((o.inputs[typ][2], np.array([j for j, _ in cols], dtype=np.intp), src, src_cols, nz,
-                               None if typ == "Real" else _int_route(o, typ, cols, src, src_cols, nz, t)))
-
-        _route_row(routes, 0)
-
-        # ---- the stepping loop: at t_k set every FMU's inputs, step every FMU, get the outputs at t_k+1
-        stepping_started = time.perf_counter()
-        loop = step_ports(t, dt, ports, routes, progress=sc.name if self.progress else None)
-
-        stepping_seconds = time.perf_counter() - stepping_started
-
-        # ---- results
-        bus = {x: sig[x] if x in sig else np.empty(n) for x in bus_names}
-        for x, (typ, j) in p_out.items():
-            bus[x][:] = p.outputs[typ][2][:, j]
-        measured = {x: bus[x] + noise[x] if x in noise else bus[x].copy() for x in measured_names}
-        obs_rec: dict[str, dict[str, np.ndarray]] = {}
-        for (lab, f), o in zip(observers.items(), ports[1:]):
-            cols = o.columns(o.outputs)
-            obs_rec[lab] = {v.name: o.outputs[cols[v.name][0]][2][:, cols[v.name][1]].astype(
-                float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
-
+    @staticmethod
+    def _logs(plant: FmuInstance, observers: dict[str, FmuInstance]) -> dict[str, list[str]]:
         logs = {}
         for f in [plant, *observers.values()]:
             logs[f.label] = list(f.logs)
             if f.dropped_logs:
                 logs[f.label].append(f"[INFO] harness: {f.dropped_logs} further log messages dropped")
+        return logs
+
+    def _info(self, plant: FmuInstance, observers: dict[str, FmuInstance], held, loop: str,
+              stepping_seconds: float) -> dict[str, Any]:
+        sc = self.scenario
         veh = self.vehicle if isinstance(self.vehicle, str) else getattr(self.vehicle, "name", str(self.vehicle))
-        info = {
+        return {
             "scenario": sc.info(self.vehicle),
             "vehicle": veh,
             "plant_fmu": str(self.plant_path),
@@ -409,9 +462,110 @@ class CoSimulation:
             "master_loop": loop,
             "stepping_seconds": stepping_seconds,
         }
-        return SimResult(time=t, bus=bus, observers=obs_rec, logs=logs, scenario=sc.name, dt=dt,
-                         settle_time=float(sc.settle_time), measured=measured, units=units,
-                         inputs={PLANT_LABEL: plant_in, **obs_in}, info=info)
+
+    def _simulate_blocks(self, plant: FmuInstance, observers: dict[str, FmuInstance], steps: int) -> SimResult:
+        """The co-simulation of a long run (more than :func:`stream_steps` steps) in blocks of
+        :data:`BLOCK_STEPS` steps: per block the scenario's signals on its rows of the grid, the
+        noise's next draws (:class:`NoiseBlocks`: the whole run's numbers), the stepping
+        (:func:`step_ports` on rows 0 .. m of matrices of BLOCK_STEPS + 1 rows: row 0 the previous
+        block's last row), then ``self.sink.block(k0, part)`` with the block's rows k0 .. k0 + m
+        (a SimResult: row 0 is the previous block's last row, already handed over, for the first
+        block the initial row). The same calls on the same values as the whole-run path: every
+        row is bit for bit the same. Returns a SimResult without samples (``time`` and the series
+        empty; ``info["streamed"]`` says how it ran); ``self.sink.finish(result)`` makes the
+        caller's result of it."""
+        sc, dt, sink = self.scenario, self.dt, self.sink
+        block = max(1, int(BLOCK_STEPS))
+
+        def grid(k0: int, k1: int) -> np.ndarray:      # rows k0 .. k1 of Scenario.time_grid(dt)
+            return np.arange(k0, k1 + 1) * dt
+
+        t = grid(0, min(block, steps))
+        scen = {x: np.array(v) for x, v in sc.sampled(t, self.vehicle).items()}
+        w = self._wiring(plant, observers, scen)
+        plant_in, bus_names, obs_in, measured_names = w["plant_in"], w["bus_names"], w["obs_in"], w["measured_names"]
+        draws = self.noise.blocks(steps + 1, self.seed) if self.noise is not None else None
+        noise = draws.take(len(t)) if draws is not None else {}
+        y0, obs_y0 = self._start(plant, observers, w, scen, noise, 0.0, float(grid(steps, steps)[0]))
+        rows = block + 1
+        p = Port(plant, plant_in, rows, not self.fast)
+        p_out = p.columns(p.outputs)
+        for x, (typ, j) in p_out.items():
+            p.outputs[typ][2][0, j] = y0[x]
+        ports = [p]
+        for lab, f in observers.items():
+            o = Port(f, obs_in[lab], rows, not self.fast)
+            ports.append(o)
+            for x, (typ, j) in o.columns(o.outputs).items():
+                o.outputs[typ][2][0, j] = obs_y0[lab][x]
+        bar = None
+        if self.progress or _interactive():
+            from tqdm import tqdm
+
+            bar = tqdm(total=steps, desc=sc.name if self.progress else "stepping", unit="step", leave=False)
+        loop, stepping_seconds, k0, nblocks = "", 0.0, 0, 0
+        units, inputs = w["units"], {PLANT_LABEL: plant_in, **obs_in}
+        part_info = {"steps": steps, "observer_models": {lab: f.model_name for lab, f in observers.items()}}
+        try:
+            while k0 < steps:
+                k1 = min(steps, k0 + block)
+                m = k1 - k0
+                if k0:
+                    t = grid(k0, k1)
+                    scen = {x: np.array(v) for x, v in sc.sampled(t, self.vehicle).items()}
+                    # row 0: the previous block's last row (its noise drawn then, its outputs got then)
+                    fresh = draws.take(m) if draws is not None else {}
+                    noise = {x: np.concatenate([[last_noise[x]], fresh[x]]) for x in fresh}
+                    for port in ports:
+                        for _, _, mat in port.outputs.values():
+                            mat[0] = mat[last]
+                rs = slice(0, m + 1)
+                for x, (typ, j) in p.columns(p.inputs).items():
+                    store_input(p, typ, j, rs, scen[x], x, t)
+                routes = []
+                for o in ports[1:]:
+                    for x, (typ, j) in o.columns(o.inputs).items():
+                        if x not in p_out:
+                            store_input(o, typ, j, rs, scen[x] + noise[x] if x in noise else scen[x], x, t)
+                    routes += _routes(o, p, p_out, noise, t)
+                _route_row(routes, 0)
+                started = time.perf_counter()
+                loop = step_ports(t, dt, ports, routes)
+                stepping_seconds += time.perf_counter() - started
+                bus, measured, obs_rec = _rows(observers, ports, scen, noise, bus_names, measured_names, rs)
+                sink.block(k0, SimResult(time=t, bus=bus, observers=obs_rec, logs={}, scenario=sc.name, dt=dt,
+                                         settle_time=float(sc.settle_time), measured=measured, units=units,
+                                         inputs=inputs, info=part_info))
+                last, last_noise = m, {x: v[m] for x, v in noise.items()}
+                k0, nblocks = k1, nblocks + 1
+                if bar is not None:
+                    bar.update(m)
+        finally:
+            if bar is not None:
+                bar.close()
+        info = self._info(plant, observers, w["held"], loop, stepping_seconds)
+        info["streamed"] = {"steps": steps, "samples": steps + 1, "block_steps": block, "blocks": nblocks}
+        return sink.finish(SimResult(time=np.empty(0), bus={}, observers={}, logs=self._logs(plant, observers),
+                                     scenario=sc.name, dt=dt, settle_time=float(sc.settle_time), units=units,
+                                     inputs=inputs, info=info))
+
+
+STREAM_ENV = "LATOBS_STREAM_ABOVE_STEPS"
+#: a co-simulation of more steps than this is stepped in blocks when its caller streams it (a
+#: sink: ``latobs validate``, campaign runs); $LATOBS_STREAM_ABOVE_STEPS sets it. Every registered
+#: scenario and campaign run at its usual step is far below (a 60 s run at 1 ms: 6e4 steps)
+STREAM_ABOVE_STEPS = 1_000_000
+#: steps of a block of a streamed co-simulation
+BLOCK_STEPS = 100_000
+
+
+def stream_steps() -> int:
+    """The number of steps above which a co-simulation with a sink is streamed (STREAM_ABOVE_STEPS)."""
+    text = os.environ.get(STREAM_ENV, "").strip()
+    try:
+        return int(float(text)) if text else STREAM_ABOVE_STEPS
+    except ValueError:
+        raise ValueError(f"${STREAM_ENV} must be a number of steps, got {text!r}") from None
 
 
 #: a run of this many steps or more shows a progress bar on a terminal (a few seconds of stepping)
@@ -491,6 +645,42 @@ def step_ports(t: np.ndarray, dt: float, ports: list[Port], routes=(), progress:
     return "python"
 
 
+def _routes(o: Port, p: Port, p_out, noise, t) -> list[tuple]:
+    """The routes into observer port ``o``'s inputs that are plant outputs (of ``p``, columns
+    ``p_out``): (destination matrix, its columns, source matrix, its columns, noise matrix or None,
+    Integer/Boolean route or None), one per (input type, output type, noisy) group."""
+    from_plant: dict[tuple, list] = {}
+    for x, (typ, j) in o.columns(o.inputs).items():
+        if x in p_out:
+            from_plant.setdefault((typ, p_out[x][0], x in noise), []).append((j, x))
+    routes = []
+    for (typ, src_typ, noisy), cols in from_plant.items():
+        names = [x for _, x in cols]
+        src, src_cols = p.outputs[src_typ][2], np.array([p_out[x][1] for x in names], dtype=np.intp)
+        nz = np.column_stack([noise[x] for x in names]) if noisy else None
+        routes.append((o.inputs[typ][2], np.array([j for j, _ in cols], dtype=np.intp), src, src_cols, nz,
+                       None if typ == "Real" else _int_route(o, typ, cols, src, src_cols, nz, t)))
+    return routes
+
+
+def _rows(observers: dict[str, FmuInstance], ports: list[Port], sig, noise, bus_names, measured_names, rs):
+    """(bus, measured, {label: outputs}) of rows ``rs`` of the ports' matrices (``ports[0]`` the
+    plant's), beside the scenario signals ``sig`` and the noise on those rows; a plant output
+    overwrites a scenario signal of its name in ``sig``."""
+    p = ports[0]
+    n = len(next(iter(p.outputs.values()))[2][rs]) if p.outputs else len(next(iter(sig.values())))
+    bus = {x: sig[x] if x in sig else np.empty(n) for x in bus_names}
+    for x, (typ, j) in p.columns(p.outputs).items():
+        bus[x][:] = p.outputs[typ][2][rs, j]
+    measured = {x: bus[x] + noise[x] if x in noise else bus[x].copy() for x in measured_names}
+    obs_rec: dict[str, dict[str, np.ndarray]] = {}
+    for (lab, f), o in zip(observers.items(), ports[1:]):
+        cols = o.columns(o.outputs)
+        obs_rec[lab] = {v.name: o.outputs[cols[v.name][0]][2][rs, cols[v.name][1]].astype(
+            float if fmi_type(v) == "Real" else np.int64) for v in f.outputs}
+    return bus, measured, obs_rec
+
+
 def _route_row(routes, k: int) -> None:
     """Routed inputs at row k from their sources at row k (an observer's from the plant's
     outputs, plus their noise)."""
@@ -519,8 +709,8 @@ def run(scenario: Scenario | str, plant_fmu: str | os.PathLike,
         noise: NoiseSpec | Mapping | None = None, seed: int = 0,
         plant_parameters: Mapping[str, Any] | None = None, vehicle: Any = "sedan",
         progress: bool = False, observer_parameters: Mapping[str, Mapping[str, Any]] | None = None,
-        fast: bool = True, unzipped: Mapping[str | os.PathLike, str] | None = None) -> SimResult:
+        fast: bool = True, unzipped: Mapping[str | os.PathLike, str] | None = None, sink: Any = None) -> SimResult:
     """Co-simulate ``plant_fmu`` and ``observer_fmus`` on ``scenario``; see :class:`CoSimulation`."""
     return CoSimulation(scenario, plant_fmu, observer_fmus, dt=dt, noise=noise, seed=seed,
                         plant_parameters=plant_parameters, vehicle=vehicle, progress=progress,
-                        observer_parameters=observer_parameters, fast=fast, unzipped=unzipped).run()
+                        observer_parameters=observer_parameters, fast=fast, unzipped=unzipped, sink=sink).run()

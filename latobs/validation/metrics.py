@@ -508,3 +508,386 @@ def _sanitize(x):
 def write(metrics: dict, out_dir: str | os.PathLike, filename: str = "metrics.json") -> Path:
     """Write ``metrics`` to ``out_dir/metrics.json`` atomically; returns the path."""
     return write_json_atomic(metrics, Path(out_dir) / filename)
+
+
+# --------------------------------------------------------------------------------------------
+# a streamed co-simulation: the metrics summed block by block
+# --------------------------------------------------------------------------------------------
+class _Sum:
+    """Count, sum, sum of squares, max |x| (a NaN kept, as np.max keeps it) and non-finite count
+    of samples given block by block."""
+
+    __slots__ = ("n", "s1", "s2", "mx", "nonfinite")
+
+    def __init__(self):
+        self.n, self.s1, self.s2, self.mx, self.nonfinite = 0, 0.0, 0.0, None, 0
+
+    def add(self, e) -> None:
+        e = np.asarray(e, dtype=float)
+        if not e.size:
+            return
+        self.n += int(e.size)
+        self.s1 += float(np.sum(e))
+        self.s2 += float(np.sum(e ** 2))
+        m = float(np.max(np.abs(e)))
+        self.mx = m if self.mx is None else float(np.maximum(self.mx, m))
+        self.nonfinite += int(np.sum(~np.isfinite(e)))
+
+    def rms(self) -> float | None:
+        """_rms of the samples (None without samples or when not finite)."""
+        return _f(math.sqrt(self.s2 / self.n)) if self.n else None
+
+    def maxabs(self) -> float | None:
+        return _f(self.mx) if self.n else None
+
+    def mean(self) -> float | None:
+        return _f(self.s1 / self.n) if self.n else None
+
+    def raw_rms(self) -> float:
+        """The campaign's RMS (NaN without samples, a non-finite value kept)."""
+        return math.sqrt(self.s2 / self.n) if self.n else math.nan
+
+
+class _Max:
+    """np.nanmax of samples given block by block (None: none finite or NaN-free seen)."""
+
+    __slots__ = ("v", "finite")
+
+    def __init__(self):
+        self.v, self.finite = None, False
+
+    def add(self, x) -> None:
+        x = np.asarray(x, dtype=float)
+        ok = ~np.isnan(x)
+        if ok.any():
+            m = float(np.max(x[ok]))
+            self.v = m if self.v is None else max(self.v, m)
+        self.finite = self.finite or bool(np.any(np.isfinite(x)))
+
+
+class StreamedMetrics:
+    """The metrics of a co-simulation streamed in blocks
+    (:meth:`latobs.validation.master.CoSimulation._simulate_blocks`), summed over the blocks: :meth:`add` each block (its rows k0 .. k0 + m, row 0 the previous
+    block's last row), then :meth:`compute` (the dict of :func:`compute`) or :meth:`flat` (the
+    campaign's flat metrics, :func:`latobs.validation.campaign_run.result_metrics`). The same values
+    as the whole-array functions up to the rounding of the sums (~1e-15 relative): sums of squares,
+    maxima and counts over every sample (or every pair of consecutive samples for what is scored
+    one step behind, mode switches and occupancy). The model baselines (the bicycle, the steady turn),
+    which simulate a model over the whole run, are not computed: ``baselines`` has the zero baseline,
+    and ``not_computed`` names the model baseline in each verdict (so no verdict that the observer
+    is best)."""
+
+    def __init__(self, settle_time: float | None = None):
+        self.settle = settle_time
+        self.obs: dict[str, dict[str, Any]] = {}
+        self.acc: dict[tuple, Any] = {}
+        self.t_first = self.t_last = None
+        self.n = self.n_after = 0
+        self.dt = None
+
+    def _a(self, *key, cls=_Sum):
+        a = self.acc.get(key)
+        if a is None:
+            a = self.acc[key] = cls()
+        return a
+
+    def _setup(self, part: SimResult) -> None:
+        models = (part.info or {}).get("observer_models", {})
+        for label, outs in part.observers.items():
+            model = models.get(label)
+            hats = {n: truth_signal(n[:-4], part.bus, model) for n in outs if n.endswith("_hat")}
+            filt = {n: truth_signal(quantity_of(n), part.bus, model) for n in filtered_outputs(outs)}
+            pairs = {n[:-6]: truth_signal(n[:-6], part.bus, model) for n in outs
+                     if n.endswith("_lower") and n[:-6] + "_upper" in outs}
+            self.obs[label] = {"model": model, "outputs": list(outs),
+                               "hats": {n: x for n, x in hats.items() if x is not None},
+                               "filtered": {n: x for n, x in filt.items() if x is not None},
+                               "pairs": {q: x for q, x in pairs.items() if x is not None},
+                               "flag": next((f for f in ("valid", "consistent") if f in outs), None),
+                               "inputs": list(part.inputs.get(label, ()))}
+
+    def add(self, k0: int, part: SimResult) -> None:
+        t = np.asarray(part.time, dtype=float)
+        if not self.obs and not self.n:
+            self._setup(part)
+            self.dt = float(part.dt)
+            if self.settle is None:
+                self.settle = float(part.settle_time)
+        s0 = 0 if k0 == 0 else 1                        # rows new in this block (row 0: the previous last)
+        new = slice(s0, None)
+        after_all = t >= self.settle - 1e-12
+        after = after_all[new]
+        if self.t_first is None:
+            self.t_first = float(t[0])
+        self.t_last = float(t[-1])
+        self.n += t.size - s0
+        self.n_after += int(np.sum(after))
+        bus = part.bus
+        for label, meta in self.obs.items():
+            outs = part.observers[label]
+            flag = meta["flag"]
+            valid_all = after_all & (np.asarray(outs[flag]) != 0) if flag else None
+            a = self._a
+
+            def est(key, e, x, sel, vsel):
+                a(label, key, "all").add(e)
+                a(label, key, "after").add(e[sel])
+                a(label, key, "truth_after").add(x[sel])
+                if vsel is not None:
+                    a(label, key, "valid").add(e[vsel])
+
+            for name, tr in meta["hats"].items():
+                x = np.asarray(bus[tr], dtype=float)[new]
+                e = np.asarray(outs[name], dtype=float)[new] - x
+                v = valid_all[new] if flag else None
+                est(("est", name), e, x, after, v)
+                est(("zero", name), -x, x, after, v)
+            for name, tr in meta["filtered"].items():
+                if t.size < 2:
+                    continue
+                y, x, sel = one_step_behind(outs[name], bus[tr], after_all)
+                v = valid_all[:-1] if flag else None
+                est(("est", name), y - x, x, sel, v)
+                est(("zero", name), -x, x, sel, v)
+            for q, tr in meta["pairs"].items():
+                lo = np.asarray(outs[q + "_lower"], dtype=float)[new]
+                hi = np.asarray(outs[q + "_upper"], dtype=float)[new]
+                x = np.asarray(bus[tr], dtype=float)[new]
+                viol = (x < lo - ENCLOSURE_TOL) | (x > hi + ENCLOSURE_TOL) | ~np.isfinite(lo) | ~np.isfinite(hi)
+                width = hi - lo
+                over = np.maximum(lo - x, x - hi)
+                a(label, "viol", q, "all", cls=list).append(int(np.sum(viol)))
+                a(label, "viol", q, "after", cls=list).append(int(np.sum(viol[after])))
+                a(label, "over", q, "all", cls=_Max).add(over)
+                a(label, "over", q, "after", cls=_Max).add(over[after])
+                a(label, "width", q, "all").add(width)
+                a(label, "width", q, "after").add(width[after])
+                v = valid_all[new] if flag else None
+                mid = 0.5 * (lo + hi)
+                est(("mid", q), mid - x, x, after, v)
+                est(("zero", q), -x, x, after, v)
+            beta = meta["hats"].get("beta_hat")
+            if beta is not None and "bank_angle" in bus:
+                e = np.asarray(outs["beta_hat"], dtype=float)[new] - np.asarray(bus[beta], dtype=float)[new]
+                phi = np.asarray(bus["bank_angle"], dtype=float)[new]
+                a(label, "l2e", "all").add(e)
+                a(label, "l2e", "after").add(e[after])
+                a(label, "l2phi", "all").add(phi)
+                a(label, "l2phi", "after").add(phi[after])
+            for ax, g in (("Ff", "Gamma_f"), ("Fr", "Gamma_r")):
+                if f"{ax}_hat" in outs and ax in bus and g in bus:
+                    F, G = np.asarray(bus[ax], dtype=float)[new], np.asarray(bus[g], dtype=float)[new]
+                    zone = np.abs(G) > SATURATION_FRACTION * np.maximum(np.abs(F), 1e-9)
+                    e = np.asarray(outs[f"{ax}_hat"], dtype=float)[new] - F
+                    a(label, "sat", ax, "zone").add(e[zone])
+                    a(label, "sat", ax, "out").add(e[~zone])
+                    a(label, "sat", ax, "peak").add(np.abs(G) / np.maximum(np.abs(F), 1e-9))
+            if "residual_norm" in outs:
+                rn = np.asarray(outs["residual_norm"], dtype=float)[new]
+                a(label, "rn", "all").add(rn)
+                a(label, "rn", "after").add(rn[after])
+            if "mode" in outs:
+                m = np.asarray(outs["mode"])
+                occ = a(label, "occ", cls=dict)
+                w = np.diff(t)
+                for mm in np.unique(m[:-1]):
+                    occ[int(mm)] = occ.get(int(mm), 0.0) + float(np.sum(w[m[:-1] == mm]))
+                a(label, "modes", cls=set).update(int(mm) for mm in np.unique(m[new]))
+                a(label, "switches", cls=list).append(int(np.sum(m[1:] != m[:-1])))
+            if "valid" in outs:
+                v = np.asarray(outs["valid"])
+                a(label, "invalid", cls=list).append(int(np.sum(v[new] == 0)))
+                a(label, "episodes", cls=list).append(int(np.sum((v[1:] == 0) & (v[:-1] != 0)))
+                                                      + (1 if k0 == 0 and v.size and v[0] == 0 else 0))
+                a(label, "invalid_pairs", cls=list).append(int(np.sum(v[:-1] == 0)))
+            if flag:
+                a(label, "valid_after", cls=list).append(int(np.sum(valid_all[new])))
+                a(label, "after_n", cls=list).append(int(np.sum(after)))
+
+    def _get(self, *key, cls=_Sum):
+        return self.acc.get(key) or cls()
+
+    def _entry(self, label: str, key, truth: str, unit: str | None) -> dict[str, Any]:
+        """estimate_entry's dict of the sums under ``key``."""
+        al, af, tr = (self._get(label, key, s) for s in ("all", "after", "truth_after"))
+        return {"truth": truth, "unit": unit, "rms": al.rms(), "max_abs": al.maxabs(),
+                "rms_after_settle": af.rms(), "max_abs_after_settle": af.maxabs(),
+                "mean_error_after_settle": af.mean(), "truth_rms_after_settle": tr.rms(),
+                "nonfinite_samples": al.nonfinite}
+
+    def _model_baseline(self, label: str, result: SimResult) -> tuple[str, tuple[str, ...], str]:
+        info = result.info or {}
+        design = (info.get("observer_designs") or {}).get(label)
+        kind = observer_kind(design, self.obs[label]["model"])
+        gives = _bl.BICYCLE_OUTPUTS if kind == "car" else (*_bl.STEADY_TURN_OUTPUTS, *_bl.STEADY_TURN_MODEL_OUTPUTS)
+        why = (f"not computed for a streamed co-simulation ({self.n} samples, stepped block by block): it "
+               "simulates a model over the whole run")
+        return MODEL_BASELINE[kind], gives, why
+
+    def compute(self, result: SimResult) -> dict[str, Any]:
+        """:func:`compute`'s dict of the whole run (``result``: the streamed run's SimResult, its
+        info, logs and units)."""
+        dt, units = self.dt, result.units
+        out: dict[str, Any] = {"scenario": result.scenario, "dt_s": dt, "duration_s": self.t_last - self.t_first,
+                               "settle_time_s": self.settle, "n_samples": self.n, "info": result.info,
+                               "observers": {}}
+        for label, meta in self.obs.items():
+            o: dict[str, Any] = {"estimates": {}, "intervals": {}}
+            scored: set[str] = set()
+            outs = meta["outputs"]
+            for name, tr in meta["hats"].items():
+                o["estimates"][name] = self._entry(label, ("est", name), tr, units.get(name) or units.get(tr))
+                scored.add(name)
+            for name, tr in meta["filtered"].items():
+                if self.n > 1:
+                    o["estimates"][name] = {**self._entry(label, ("est", name), tr, units.get(name) or units.get(tr)),
+                                            "lag_steps": 1}
+                    scored.add(name)
+            for q, tr in meta["pairs"].items():
+                lo, up = q + "_lower", q + "_upper"
+                over = self._get(label, "over", q, "all", cls=_Max)
+                wa, wf = self._get(label, "width", q, "all"), self._get(label, "width", q, "after")
+                o["intervals"][q] = {
+                    "truth": tr, "lower": lo, "upper": up, "unit": units.get(lo) or units.get(tr),
+                    "enclosure_violations": sum(self._get(label, "viol", q, "all", cls=list)),
+                    "enclosure_violations_after_settle": sum(self._get(label, "viol", q, "after", cls=list)),
+                    "max_violation": _f(max(0.0, over.v if over.v is not None else math.nan)) if self.n else None,
+                    "mean_width": wa.mean(), "mean_width_after_settle": wf.mean(),
+                    "nonfinite_samples": wa.nonfinite}
+                scored.update((lo, up))
+            if "beta_hat" in meta["hats"] and self._get(label, "l2phi", "all").n:
+                for key, s in (("beta_error_to_bank_l2_ratio", "all"),
+                               ("beta_error_to_bank_l2_ratio_after_settle", "after")):
+                    den = math.sqrt(self._get(label, "l2phi", s).s2 * dt)
+                    o[key] = _f(math.sqrt(self._get(label, "l2e", s).s2 * dt) / den) if den > 0 else None
+            sat = [ax for ax in ("Ff", "Fr") if (label, "sat", ax, "peak") in self.acc]
+            if sat:
+                o["saturation_zone"] = {}
+                for ax in sat:
+                    z, w, pk = (self._get(label, "sat", ax, s) for s in ("zone", "out", "peak"))
+                    o["saturation_zone"][ax] = {
+                        "samples": z.n, "fraction": _f(z.n / pk.n) if pk.n else None,
+                        "rms": z.rms(), "max_abs": z.maxabs(), "rms_outside": w.rms(),
+                        "peak_gamma_over_force": pk.maxabs()}
+            if "residual_norm" in outs:
+                ra, rf = self._get(label, "rn", "all"), self._get(label, "rn", "after")
+                o["residual_norm"] = {"rms": ra.rms(), "max": ra.maxabs(), "rms_after_settle": rf.rms(),
+                                      "max_after_settle": rf.maxabs()}
+                scored.add("residual_norm")
+            if "mode" in outs:
+                occ = self._get(label, "occ", cls=dict)
+                if self.n < 2:
+                    o["mode_occupancy"] = {str(m): 1.0 for m in sorted(self._get(label, "modes", cls=set))}
+                else:
+                    total = self.t_last - self.t_first
+                    o["mode_occupancy"] = {str(m): float(w / total) for m, w in sorted(occ.items())}
+                o["mode_switches"] = sum(self._get(label, "switches", cls=list))
+                scored.add("mode")
+            if "valid" in outs:
+                inv = sum(self._get(label, "invalid", cls=list))
+                o["valid"] = {"fraction_invalid": _f(inv / self.n) if self.n else None,
+                              "invalid_episodes": sum(self._get(label, "episodes", cls=list)),
+                              "time_invalid_s": _f(sum(self._get(label, "invalid_pairs", cls=list)) * dt)
+                              if self.n else None}
+                scored.add("valid")
+            o["unscored_outputs"] = sorted(set(outs) - scored)
+            o["log_messages"] = len(result.logs.get(label, []))
+            o["baselines"] = self._baselines(label, o, result)
+            out["observers"][label] = o
+        return out
+
+    def _baselines(self, label: str, o: dict[str, Any], result: SimResult) -> dict[str, Any]:
+        model, gives, why = self._model_baseline(label, result)
+        targets = {name: (quantity_of(name), e, "estimate") for name, e in o["estimates"].items()}
+        targets.update({name: (name, e, "interval midpoint") for name, e in o["intervals"].items()})
+        out: dict[str, Any] = {}
+        if targets:
+            out["zero"] = {name: self._entry(label, ("zero", name), e["truth"], e.get("unit"))
+                           for name, (q, e, _) in targets.items()}
+        summary = {}
+        for name, (q, e, what) in targets.items():
+            obs = e if what == "estimate" else self._entry(label, ("mid", name), e["truth"], e.get("unit"))
+            stat = "rms_after_settle" if self.n_after else "rms"    # as compute: after settling when any
+            missing = {model: why} if q in gives else {}
+            summary[name] = baseline_summary(obs.get(stat), {"zero": out["zero"][name][stat]}, stat, what, missing)
+        out["summary"] = summary
+        out["skipped"] = {model: why}
+        out["about"] = {"zero": {"what": "every estimate 0 (beta, vy, bank angle, forces, roll angle, torque ...), "
+                                         "summed over the blocks"}} if targets else {}
+        return out
+
+    def flat(self, result: SimResult) -> dict[str, float]:
+        """The campaign's flat metrics of every observer (``observer_metrics`` and, of
+        ``baseline_metrics``, the zero baseline: the model baseline is not computed, so no ``wins``
+        verdict but 0 when the zero baseline is as good), on the samples after the settle time."""
+        out: dict[str, float] = {}
+        for label, meta in self.obs.items():
+            model, gives, why = self._model_baseline(label, result)
+            nonfinite = 0
+            outs = meta["outputs"]
+            for name in outs:
+                if name in meta["hats"] or name in meta["filtered"]:
+                    if name in meta["filtered"] and self.n < 2:
+                        continue
+                    key = name if name in meta["filtered"] else name[:-4]
+                    s = self._get(label, ("est", name), "after")
+                    nonfinite += s.nonfinite
+                    out[f"{label}.{key}.rms"] = s.raw_rms()
+                    out[f"{label}.{key}.max_abs"] = s.mx if s.n else math.nan
+                elif name.endswith("_lower") and name[:-6] in meta["pairs"]:
+                    q = name[:-6]
+                    over = self._get(label, "over", q, "after", cls=_Max)
+                    w = self._get(label, "width", q, "after")
+                    nonfinite += w.nonfinite
+                    out[f"{label}.{q}.violations"] = float(sum(self._get(label, "viol", q, "after", cls=list)))
+                    mv = _f(max(0.0, over.v)) if w.n and over.finite and over.v is not None else None
+                    out[f"{label}.{q}.max_violation"] = float(mv or 0.0)
+                    out[f"{label}.{q}.mean_width"] = math.nan if w.mean() is None else float(w.mean())
+            out[f"{label}.nonfinite"] = float(nonfinite)
+            # the baselines: X_hat, X_filtered, or an interval's midpoint (when no X_hat), not an input
+            ins = set(meta["inputs"])
+            targets = {}
+            for name in outs:
+                if name in meta["hats"] and name[:-4] not in ins:
+                    targets[name[:-4]] = (("est", name), name[:-4], "estimate")
+                elif name in meta["filtered"] and quantity_of(name) not in ins and self.n > 1:
+                    targets[name] = (("est", name), quantity_of(name), "estimate")
+                elif (name.endswith("_lower") and name[:-6] in meta["pairs"] and name[:-6] + "_hat" not in outs
+                      and name[:-6] not in ins):
+                    targets[name[:-6]] = (("mid", name[:-6]), name[:-6], "midpoint")
+            if not targets:
+                continue
+            flag = meta["flag"]
+            sels = {"": "after"}
+            if flag is not None:
+                sels["valid_"] = "valid"
+                na = sum(self._get(label, "after_n", cls=list))
+                out[f"{label}.valid_fraction"] = sum(self._get(label, "valid_after", cls=list)) / na if na else math.nan
+            for key, (acc_key, q, what) in targets.items():
+                zkey = ("zero", acc_key[1])
+                missing = {model: why} if q in gives else {}
+                for pre, s in sels.items():
+                    obs_s, zero_s = self._get(label, acc_key, s), self._get(label, zkey, s)
+                    obs = math.sqrt(obs_s.s2 / obs_s.n) if obs_s.n else None
+                    zero = math.sqrt(zero_s.s2 / zero_s.n) if zero_s.n else None
+                    baseline_row(out, label, key, pre, what, obs, {"zero": zero}, missing)
+        return out
+
+
+def baseline_row(row: dict[str, float], label: str, key: str, pre: str, what: str, obs: float | None,
+                 base_rms: dict[str, float | None], missing: dict[str, str]) -> None:
+    """The campaign's flat columns of one verdict (``baseline_metrics``), into ``row``: the
+    observer's RMS ``obs`` beside each baseline's ``base_rms`` on the samples after settling
+    (``pre`` "") or, ``pre`` "valid_", those where its validity flag is set; ``missing``: the
+    baselines not computed. ``LABEL.KEY.[valid_]ratio`` and ``[valid_]wins``, ``valid_rms``, and
+    for ``pre`` "": ``rms_B`` per baseline, ``midpoint_rms`` for an interval's midpoint."""
+    v = baseline_summary(obs if obs is None or math.isfinite(obs) else None, base_rms, "rms", what, missing)
+    if pre:
+        row[f"{label}.{key}.valid_rms"] = math.nan if obs is None else obs
+    else:
+        if what == "midpoint":
+            row[f"{label}.{key}.midpoint_rms"] = math.nan if obs is None else obs
+        for base, r in base_rms.items():
+            row[f"{label}.{key}.rms_{base}"] = math.nan if r is None else r
+    row[f"{label}.{key}.{pre}ratio"] = math.nan if v["ratio"] is None else v["ratio"]
+    row[f"{label}.{key}.{pre}wins"] = math.nan if v["observer_best"] is None else float(v["observer_best"])

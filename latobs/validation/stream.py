@@ -8,7 +8,11 @@ whatever the record's length: a 1 h record at 1 ms (3.6 million rows) replays in
 The metrics are those of the whole-array scoring, summed block by block (the same values up to
 the rounding of the sums, ~1e-15 relative); the model baselines, which simulate a model over the
 whole record (and fit one on its tuning part), are not computed for a streamed record: the
-``baselines`` entry says so in ``skipped``. docs/validation.md describes it."""
+``baselines`` entry says so in ``skipped``. docs/validation.md describes it.
+
+A long co-simulation is streamed the same way: :class:`CosimSink` receives its blocks
+(:meth:`latobs.validation.master.CoSimulation._simulate_blocks`), writes ``outputs.parquet`` and
+sums the metrics (:class:`latobs.validation.metrics.StreamedMetrics`)."""
 from __future__ import annotations
 
 import math
@@ -381,3 +385,111 @@ def run(path: str | os.PathLike, fmu_path: str | os.PathLike, out_dir: str | os.
     return metrics, paths
 
 
+
+
+class CosimSink:
+    """What a long co-simulation (:meth:`latobs.validation.master.CoSimulation._simulate_blocks`,
+    more than :func:`latobs.validation.master.stream_steps` steps) hands its rows to, block by
+    block: the metrics summed over the blocks (:class:`latobs.validation.metrics.StreamedMetrics`),
+    with ``out_dir`` every row written to ``out_dir/outputs.parquet`` (columns ``t``, every bus
+    signal by name, ``measured.X`` for what the observers received, ``LABEL.OUTPUT`` for every
+    observer output; written in place when the ``with`` block ends without an error), and with
+    ``keep`` every k-th sample kept for the figures (at most :data:`PLOT_SAMPLES`). A short run
+    never calls it (``used`` stays False): it keeps the whole-array path.
+
+    Use ``with CosimSink(...) as sink: result = master.run(..., sink=sink)``; then
+    ``sink.metrics(result)`` is :func:`latobs.validation.metrics.compute`'s dict of the whole run
+    (``streamed`` says how), ``sink.flat(result)`` the campaign's flat metrics, and ``result``
+    holds the kept samples (none without ``keep``)."""
+
+    def __init__(self, out_dir: str | os.PathLike | None = None, keep: bool = True,
+                 settle_time: float | None = None, flat_settle: float | None = None):
+        self.out_dir = Path(out_dir) if out_dir is not None else None
+        self.keep = keep
+        self.acc = _metrics.StreamedMetrics(settle_time)     # settle_time None: the scenario's
+        # the campaign's flat metrics after its own settle time (a --rerun writes both)
+        self.flat_acc = _metrics.StreamedMetrics(flat_settle) if flat_settle is not None else self.acc
+        self.used = False
+        self.every = 1
+        self.kept: dict[str, list[np.ndarray]] = {}
+        self.writer = None
+        self.schema = None
+        self._stack = None
+
+    def __enter__(self):
+        from contextlib import ExitStack
+
+        self._stack = ExitStack().__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        return self._stack.__exit__(*exc)
+
+    @property
+    def outputs_path(self) -> Path | None:
+        return self.out_dir / "outputs.parquet" if self.out_dir is not None else None
+
+    def _columns(self, part) -> dict[str, np.ndarray]:
+        cols = {"t": part.time, **part.bus, **{f"measured.{x}": v for x, v in part.measured.items()}}
+        for label, outs in part.observers.items():
+            cols.update({f"{label}.{x}": v for x, v in outs.items()})
+        return cols
+
+    def block(self, k0: int, part) -> None:
+        """The rows k0 .. k0 + m of the run (``part``, a SimResult; row 0 the previous block's
+        last row, for k0 > 0 already handed over)."""
+        import pyarrow as pa
+
+        if not self.used:
+            self.used = True
+            steps = int((part.info or {}).get("steps", 0))
+            self.every = max(1, math.ceil((steps + 1) / PLOT_SAMPLES))
+        self.acc.add(k0, part)
+        if self.flat_acc is not self.acc:
+            self.flat_acc.add(k0, part)
+        new = slice(0 if k0 == 0 else 1, None)
+        cols = {k: np.asarray(v)[new] for k, v in self._columns(part).items()}
+        if self.out_dir is not None:
+            if self.writer is None:
+                import pyarrow.parquet as pq
+
+                from ..atomic import atomic_path
+
+                self.out_dir.mkdir(parents=True, exist_ok=True)
+                self.schema = pa.schema([(k, pa.float64() if v.dtype.kind == "f" else pa.int64())
+                                         for k, v in cols.items()])
+                tmp = self._stack.enter_context(atomic_path(self.outputs_path, suffix=".parquet"))
+                self.writer = self._stack.enter_context(pq.ParquetWriter(str(tmp), self.schema))
+            self.writer.write_table(pa.table({k: pa.array(v, type=self.schema.field(k).type)
+                                              for k, v in cols.items()}, schema=self.schema))
+        if self.keep:
+            first = k0 + (0 if k0 == 0 else 1)
+            pick = (first + np.arange(len(cols["t"]))) % self.every == 0
+            for k, v in cols.items():
+                self.kept.setdefault(k, []).append(v[pick])
+
+    def finish(self, result):
+        """The streamed run's SimResult (``result``: info, logs, units) with the kept samples."""
+        if self.keep and self.kept:
+            joined = {k: np.concatenate(v) for k, v in self.kept.items()}
+            self.kept.clear()
+            labels = list((result.info or {}).get("observer_fmus", {}))
+            result.time = joined.pop("t")
+            result.measured = {k[9:]: joined.pop(k) for k in list(joined) if k.startswith("measured.")}
+            result.observers = {lab: {k[len(lab) + 1:]: joined.pop(k) for k in list(joined)
+                                      if k.startswith(lab + ".")} for lab in labels}
+            result.bus = joined
+        result.info["streamed"] = {**result.info.get("streamed", {}),
+                                   "outputs": "outputs.parquet" if self.out_dir is not None else None,
+                                   "figures_every_kth_sample": self.every if self.keep else None}
+        return result
+
+    def metrics(self, result) -> dict[str, Any]:
+        """:func:`latobs.validation.metrics.compute`'s dict of the streamed run."""
+        m = self.acc.compute(result)
+        m["streamed"] = result.info["streamed"]
+        return m
+
+    def flat(self, result) -> dict[str, float]:
+        """The campaign's flat metrics of the streamed run (after ``flat_settle``, else ``settle_time``)."""
+        return self.flat_acc.flat(result)
