@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import re
 import shlex
 import shutil
 import struct
@@ -124,7 +125,8 @@ def test_a_state_of_another_fmu_or_damaged_is_refused_and_the_state_kept(native,
     assert "a state of CarPlant's FMI 2.0 FMU, this is its FMI 3.0 FMU" in msg["msg set CarPlant (FMI 2) -> CarPlant (FMI 3)"]
     assert "fmi2DeSerializeFMUstate: serialised state refused: it is a state of another FMU, CarPlant" in \
         msg["msg deserialize CarPlant (FMI 2) -> LateralIntervalObserver (FMI 2)"]
-    assert "it is truncated (68708 bytes" in msg["msg truncated LateralIntervalObserver (FMI 2)"]
+    truncated = re.search(r"it is truncated \((\d+) bytes, (\d+) expected\)", msg["msg truncated LateralIntervalObserver (FMI 2)"])
+    assert truncated and int(truncated.group(1)) == int(truncated.group(2)) // 2, msg   # the host cuts it in half
     for version in (2, 3):
         for name in NAMES:
             assert "it is corrupted (its checksum does not match" in msg[f"msg ffhalf {name} (FMI {version})"]
