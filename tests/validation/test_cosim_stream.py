@@ -164,7 +164,7 @@ def test_a_streamed_cosimulation_holds_the_same_memory_for_a_run_8_times_longer(
     def growth(seconds: float, above: str) -> float:
         out = subprocess.run([sys.executable, "-c", _RSS, str(plant), str(observers["SideslipBankObserver"]),
                               str(tmp_path), str(seconds), above], capture_output=True, text=True, timeout=600,
-                             env=os.environ.copy())
+                             env=os.environ.copy(), cwd=tmp_path)   # (the checkout's root would shadow latobs)
         assert out.returncode == 0, out.stderr
         return json.loads(out.stdout.strip().splitlines()[-1])["growth_mb"]
 

@@ -237,7 +237,7 @@ def test_sigkill_of_the_main_build_process_leaves_no_latobs_process_alive_after_
     log = (tmp_path / "build.log").open("w")
     p = subprocess.Popen([sys.executable, "-m", "latobs", "build", "SideslipKalmanFilter", "CarPlant",
                           "--platforms", "host", "--out", str(tmp_path / "out")], env=env, stdout=log,
-                         stderr=subprocess.STDOUT, start_new_session=True)
+                         stderr=subprocess.STDOUT, start_new_session=True, cwd=tmp_path)
     try:
         # the two workers are the main process's children that run a multiprocessing spawn
         def workers():
@@ -265,7 +265,7 @@ def test_sigterm_of_the_main_build_process_ends_its_workers_and_removes_every_te
     env = {**os.environ, "LATOBS_CACHE_DIR": str(tmp_path / "cache"), "TMPDIR": str(tmp), "LATOBS_JOBS": "2"}
     p = subprocess.Popen([sys.executable, "-m", "latobs", "build", "SideslipKalmanFilter", "CarPlant",
                           "--platforms", "host", "--out", str(tmp_path / "out")], env=env, stdout=subprocess.DEVNULL,
-                         stderr=subprocess.DEVNULL, start_new_session=True)
+                         stderr=subprocess.DEVNULL, start_new_session=True, cwd=tmp_path)
     try:
         # the workers' scratch folders (latobs-part-PID-*) beside the shared one: the workers at work
         assert _wait_for(lambda: len(list(tmp.glob("latobs-part-*"))) == 2, 120)
@@ -284,7 +284,8 @@ def test_sigkill_of_a_campaign_leaves_no_dask_worker_alive_after_10_s(fmu_dir, t
     log = log_path.open("w")
     p = subprocess.Popen([sys.executable, "-m", "latobs", "campaign", "double-lane-change", "--runs", "400",
                           "--workers", "2", "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out"), "--no-plots",
-                          "--no-progress"], stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+                          "--no-progress"], stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+                         cwd=tmp_path)
     try:
         # the local cluster's two worker processes at work (beside this process and its resource tracker)
         assert _wait_for(lambda: "400 runs (" in log_path.read_text() and len(_group(p.pid)) >= 4, 180), \
@@ -309,7 +310,7 @@ def test_sigterm_or_ctrl_c_of_a_parallel_map_ends_its_workers_and_removes_its_fo
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     p = subprocess.Popen([sys.executable, "-c", _SLOW_MAP], env={**os.environ, "TMPDIR": str(tmp), "LATOBS_JOBS": "2"},
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, cwd=tmp_path)
     try:
         assert _wait_for(lambda: len([c for c in _children(p.pid) if b"resource_tracker" not in
                                       Path(f"/proc/{c}/cmdline").read_bytes()]) >= 2, 60)
@@ -444,7 +445,7 @@ def test_a_streamed_replay_holds_the_same_memory_for_a_record_8_times_longer(fmu
         rec = _drive(tmp_path / f"d{rows}.csv", rows)
         out = subprocess.run([sys.executable, "-c", _STREAM_RSS, str(warm), "replay", str(rec), "--observer",
                               "SideslipBankObserver", "--fmu-dir", str(fmu_dir), "--out", str(tmp_path / "out"),
-                              "--no-plots"], capture_output=True, text=True, timeout=300,
+                              "--no-plots"], capture_output=True, text=True, timeout=300, cwd=tmp_path,
                              env={**os.environ, "LATOBS_STREAM_ABOVE_MB": stream_above_mb})
         r = json.loads(out.stdout.strip().splitlines()[-1])
         assert r["rc"] == 0, out.stderr
